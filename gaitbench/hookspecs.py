@@ -1,0 +1,104 @@
+"""Every hook a gaitbench plugin can implement, declared in one place.
+
+A plugin is a module (or object) with functions decorated by ``gaitbench.hookimpl`` whose names match the
+specifications below. Each hook takes no arguments and returns a list of :class:`gaitbench.Registration`,
+one per thing the plugin provides; the registration's ``factory`` builds the object on demand, so listing
+plugins never pays for building them.
+
+Plugins are found through the ``gaitbench`` entry-point group (built-in plugins use it too) and through
+plugin directories (``--plugins-dir`` or ``GAITBENCH_PLUGINS_DIR``). Names are unique per kind: two
+registrations of the same kind and name are reported as a conflict and neither is used.
+"""
+
+from __future__ import annotations
+
+import pluggy
+
+hookspec = pluggy.HookspecMarker("gaitbench")
+
+
+@hookspec
+def register_experiments():
+    """Walking experiments: a robot, a terrain, an initial state and per-step timing.
+
+    ``factory()`` takes no arguments and returns a :class:`gaitbench.experiment.Experiment`. The built-in
+    experiments are ``forward``, ``downward-slope``, ``upward-slope``, ``stairs`` (the thesis's chapter 5)
+    and ``compass-gait`` (the passive walker of Goswami, Thuilot and Espiau, 1996).
+    """
+
+
+@hookspec
+def register_models():
+    """Biped dynamic models.
+
+    ``factory(robot)`` takes :class:`gaitbench.robot.RobotParameters` and returns a
+    :class:`gaitbench.mechanics.BipedModel`-compatible object (mass matrix, Coriolis and gravity terms,
+    input map, ground reaction, push-off and heel-strike maps, both stance cases). Built-in: ``biped-2dof``
+    (stance foot pinned, the First Phase model) and ``biped-4dof`` (stance-foot coordinates q3, q4, the Second
+    Phase model).
+    """
+
+
+@hookspec
+def register_transcriptions():
+    """Transcriptions: turn a per-step gait problem into a finite-dimensional NLP.
+
+    ``factory(**options)`` returns an object that builds the NLP of a gait problem for a given number of
+    nodes N and maps an NLP solution back to a trajectory with its own interpolant (for example direct
+    collocation or discrete mechanics).
+    """
+
+
+@hookspec
+def register_solvers():
+    """NLP solvers.
+
+    ``factory(**options)`` returns an object with ``solve(nlp, parameters, initial_guess)`` that returns the
+    shared solver result (status, objective, constraint violation, iterations, timings). A failure is reported
+    as a status with a message, never raised.
+    """
+
+
+@hookspec
+def register_strategies():
+    """Gait-generation strategies: how the per-step problems of a walk are posed and combined.
+
+    ``factory(**options)`` returns an object that, given an experiment, a transcription and a solver, produces
+    the walk's trajectory step by step (for example one-phase or decrease-and-conquer).
+    """
+
+
+@hookspec
+def register_controllers():
+    """Tracking controllers for closed-loop simulation of a generated gait.
+
+    ``factory(model, reference, **options)`` returns a control law mapping (time, state estimate, step) to
+    joint torques and the push-off impulse (for example computed torque or partial feedback linearization).
+    """
+
+
+@hookspec
+def register_observers():
+    """State and disturbance observers used by tracking controllers.
+
+    ``factory(model, **options)`` returns an observer that estimates velocities (and disturbances) from
+    measured positions and applied torques, and that can be reset at impacts.
+    """
+
+
+@hookspec
+def register_disturbances():
+    """Disturbances acting on the robot during closed-loop simulation.
+
+    ``factory(experiment, **options)`` returns a callable giving generalized disturbance forces from
+    (time, state, step), for example joint friction or an external push.
+    """
+
+
+@hookspec
+def register_reporters():
+    """Report writers.
+
+    ``factory(**options)`` returns an object that renders stored benchmark results into files (HTML, CSV) in
+    an output directory.
+    """
