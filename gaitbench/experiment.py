@@ -1,0 +1,281 @@
+"""A walking experiment: robot, terrain, initial state, step timing, friction disturbance and actuator limits.
+
+Leg labels are fixed and roles alternate (DECISIONS §1): in step i (1-based) Leg 1 is the stance leg when i is
+odd and Leg 2 when i is even, so Leg 2 swings first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from rich import box
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from gaitbench.robot import InvalidParameterError, RobotParameters
+from gaitbench.terrain import (
+    THESIS_ANGLE_BOUNDS,
+    StepCheck,
+    Terrain,
+    check_feasibility,
+    heel_strike_configuration,
+)
+
+STATE_NAMES = ("q1", "q2", "q3", "q4", "dq1", "dq2", "dq3", "dq4")
+"""Order of the 8-vector state: leg angles, stance-foot position, and their rates (leg-labelled)."""
+
+
+@dataclass(frozen=True)
+class FrictionParameters:
+    """Steady-state joint friction, the disturbance of the thesis's tracking runs (L12098–12150).
+
+    D(q̇) = [F_c + (F_s − F_c) exp(−|q̇/v_s|^n)] sgn(q̇) + f_v q̇ per joint (DECISIONS §9). The rotational
+    hip joints 1 and 2 share ``Fc`` (Nm), ``Fs`` (Nm), ``fv`` (Nm/(rad/s)) and ``vs`` (rad/s). For the linear
+    stance-foot joints 3 and 4 the thesis gives F_c, F_s and f_v as multiples of the step's time step h^(i)
+    ("Fc3 = Fc4 = 5h(i) Ns"); ``Fc_lin``, ``Fs_lin`` and ``fv_lin`` are those multipliers, ``vs_lin`` (m/s)
+    is used as printed. The Stribeck exponent ``n`` was lost with Fig. 5.1; n = 2 is the gaitbench choice.
+    """
+
+    Fc: float
+    Fs: float
+    fv: float
+    vs: float
+    Fc_lin: float
+    Fs_lin: float
+    fv_lin: float
+    vs_lin: float
+    n: float = 2.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            _require_finite(f"friction {f.name}", value)
+            if value < 0:
+                raise InvalidParameterError(f"friction {f.name} = {value}: cannot be negative")
+        for name in ("vs", "vs_lin", "n"):
+            if getattr(self, name) == 0:
+                raise InvalidParameterError(f"friction {name} = 0: must be positive")
+
+    def joint_coefficients(self, h: float) -> dict[str, np.ndarray]:
+        """Per-joint (j = 1..4) Fc, Fs, fv, vs for a step with time step ``h`` (linear ones scaled by h)."""
+        return {
+            "Fc": np.array([self.Fc, self.Fc, self.Fc_lin * h, self.Fc_lin * h]),
+            "Fs": np.array([self.Fs, self.Fs, self.Fs_lin * h, self.Fs_lin * h]),
+            "fv": np.array([self.fv, self.fv, self.fv_lin * h, self.fv_lin * h]),
+            "vs": np.array([self.vs, self.vs, self.vs_lin, self.vs_lin]),
+        }
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Actuator and joint limits of the gait problems (thesis constraints (9)–(12), L9514–9537).
+
+    The thesis's torque, velocity and push-off limits were in the lost Fig. 5.1 (DECISIONS §8). The defaults
+    are gaitbench choices, generous enough not to bind at an energy optimum yet physically plausible:
+
+    - ``tau_max`` = 300 Nm (|τ| ≤ tau_max): above the largest gravity moment of a horizontal thesis leg
+      (downward slope: 30 kg with its CoM 0.75 m from the hip, 221 Nm).
+    - ``dq_max`` = 20 rad/s: about nine times the largest initial leg rate in chapter 5 (2.162 rad/s).
+    - ``push_off_max`` = 500 N·s: more than the heaviest thesis robot's (140 kg) momentum at 3 m/s, far above
+      the impulse that restores a heel-strike loss at walking speed.
+
+    Whether a bound is active is reported with every result. ``angle_bounds`` are the thesis's −π/2 ≤ q ≤ π,
+    kept as printed.
+    """
+
+    tau_max: float = 300.0
+    dq_max: float = 20.0
+    push_off_max: float = 500.0
+    angle_bounds: tuple[float, float] = THESIS_ANGLE_BOUNDS
+
+    def __post_init__(self) -> None:
+        for name in ("tau_max", "dq_max", "push_off_max"):
+            value = getattr(self, name)
+            _require_finite(f"limit {name}", value)
+            if value <= 0:
+                raise InvalidParameterError(f"limit {name} = {value}: must be positive")
+        bounds = tuple(self.angle_bounds)
+        if len(bounds) != 2:
+            raise InvalidParameterError(f"limit angle_bounds = {self.angle_bounds!r}: expected (low, high)")
+        for value in bounds:
+            _require_finite("limit angle_bounds", value)
+        if not bounds[0] < bounds[1]:
+            raise InvalidParameterError(f"limit angle_bounds = {bounds}: lower must be below upper")
+        object.__setattr__(self, "angle_bounds", (float(bounds[0]), float(bounds[1])))
+
+
+GAITBENCH_LIMIT_CHOICES = {"tau_max": "Nm", "dq_max": "rad/s", "push_off_max": "N·s"}
+"""Limits (with units) whose default values are gaitbench choices, not thesis values (DECISIONS §8)."""
+
+GAITBENCH_CHOICE = "gaitbench choice, not thesis"
+"""Marks a rendered value the thesis does not give (DECISIONS §8, §9)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Experiment:
+    """Everything that defines a walk, independent of the method that generates its gait.
+
+    ``initial_state`` is (q1, q2, q3, q4, dq1, dq2, dq3, dq4) at the start of step 1, leg-labelled; it is
+    stored as a read-only float array. Equality is identity (the array field has no plain ``==``).
+    """
+
+    name: str
+    description: str
+    robot: RobotParameters
+    terrain: Terrain
+    initial_state: np.ndarray
+    step_duration: float
+    friction: FrictionParameters | None = None
+    limits: Limits = field(default_factory=Limits)
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise InvalidParameterError(f"experiment name = {self.name!r}: expected a non-empty string")
+        if not isinstance(self.robot, RobotParameters):
+            raise InvalidParameterError(f"experiment robot: expected RobotParameters, got {type(self.robot)}")
+        if not isinstance(self.terrain, Terrain):
+            raise InvalidParameterError(f"experiment terrain: expected Terrain, got {type(self.terrain)}")
+        if self.friction is not None and not isinstance(self.friction, FrictionParameters):
+            raise InvalidParameterError("experiment friction: expected FrictionParameters or None")
+        if not isinstance(self.limits, Limits):
+            raise InvalidParameterError(f"experiment limits: expected Limits, got {type(self.limits)}")
+        _require_finite("experiment step_duration", self.step_duration)
+        if self.step_duration <= 0:
+            raise InvalidParameterError(f"experiment step_duration = {self.step_duration}: must be positive")
+        try:
+            state = np.array(self.initial_state, dtype=float).ravel()
+        except (TypeError, ValueError) as error:
+            raise InvalidParameterError(f"experiment initial_state: not numeric ({error})") from error
+        if state.size != len(STATE_NAMES):
+            raise InvalidParameterError(
+                f"experiment initial_state has {state.size} entries: expected 8 ({', '.join(STATE_NAMES)})"
+            )
+        bad = [name for name, value in zip(STATE_NAMES, state, strict=True) if not math.isfinite(value)]
+        if bad:
+            raise InvalidParameterError(f"experiment initial_state: {', '.join(bad)} not finite")
+        state.flags.writeable = False
+        object.__setattr__(self, "initial_state", state)
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.terrain)
+
+    def stance_leg(self, step: int) -> int:
+        """The stance leg's label in ``step`` (1-based): 1 for odd steps, 2 for even steps."""
+        self._require_step(step)
+        return 1 if step % 2 == 1 else 2
+
+    def time_step(self, n_nodes: int) -> float:
+        """h = T / (N − 1) for N nodes per step (DECISIONS §6)."""
+        if n_nodes < 2:
+            raise ValueError(f"n_nodes = {n_nodes}: a step needs at least 2 nodes")
+        return self.step_duration / (n_nodes - 1)
+
+    def heel_strike_configuration(self, step: int) -> tuple[float, float]:
+        """Leg-labelled (q1, q2) at the end of ``step``; raises ValueError if the chord exceeds 2l."""
+        geometry = self.terrain.steps[self._require_step(step) - 1]
+        q_st, q_sw = heel_strike_configuration(geometry.D, geometry.theta, self.robot.l)
+        return (q_st, q_sw) if self.stance_leg(step) == 1 else (q_sw, q_st)
+
+    def feasibility(self) -> list[StepCheck]:
+        return check_feasibility(self.terrain, self.robot.l, self.limits.angle_bounds)
+
+    def _require_step(self, step: int) -> int:
+        if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or not 1 <= step <= self.n_steps:
+            raise ValueError(f"step = {step!r}: expected an integer in 1..{self.n_steps}")
+        return int(step)
+
+
+def render_experiment(experiment: Experiment, console: Console) -> None:
+    """Print an experiment's parameters, its per-step geometry with feasibility, and a one-line summary."""
+    console.print(f"[bold]{escape(experiment.name)}[/bold]: {escape(experiment.description)}")
+    if experiment.source:
+        console.print(f"Source: {escape(experiment.source)}")
+    console.print(_parameter_table(experiment))
+    checks = experiment.feasibility()
+    console.print(_step_table(experiment, checks))
+    for check in checks:
+        for problem in check.problems:
+            console.print(f"✗ {escape(problem)}", style="red", highlight=False)
+    console.print(feasibility_summary(checks))
+
+
+def feasibility_summary(checks: list[StepCheck]) -> str:
+    """E.g. "11 steps, 9 feasible, 2 infeasible: steps 1, 2"."""
+    bad = [str(check.step) for check in checks if not check.ok]
+    text = f"{len(checks)} steps, {len(checks) - len(bad)} feasible, {len(bad)} infeasible"
+    if bad:
+        text += f": step{'s' if len(bad) > 1 else ''} {', '.join(bad)}"
+    return text
+
+
+def _parameter_table(experiment: Experiment) -> Table:
+    table = Table(title="Parameters", box=box.SIMPLE_HEAD, pad_edge=False)
+    table.add_column("Parameter")
+    table.add_column("Value", justify="right")
+    table.add_column("Note")
+    robot = experiment.robot
+    for name, value, unit in (
+        ("M (hip)", robot.M, "kg"), ("m1", robot.m1, "kg"), ("m2", robot.m2, "kg"),
+        ("l", robot.l, "m"), ("a (foot to leg CoM)", robot.a, "m"), ("b (hip to leg CoM)", robot.b, "m"),
+    ):
+        table.add_row(name, f"{value:g} {unit}", "")
+    for name, given, value in (("I1", robot.I1, robot.inertia1), ("I2", robot.I2, robot.inertia2)):
+        table.add_row(name, f"{value:.4g} kg m²", "m l²/12 (uniform-rod default)" if given is None else "")
+    table.add_row("step duration", f"{experiment.step_duration:g} s", "")
+    units = ("rad", "rad", "m", "m", "rad/s", "rad/s", "m/s", "m/s")
+    for name, value, unit in zip(STATE_NAMES, experiment.initial_state, units, strict=True):
+        table.add_row(f"{name}(0)", f"{value:g} {unit}", "initial state")
+    friction = experiment.friction
+    if friction is None:
+        table.add_row("friction", "none", "")
+    else:
+        table.add_row("Fc1 = Fc2", f"{friction.Fc:g} Nm", "")
+        table.add_row("Fs1 = Fs2", f"{friction.Fs:g} Nm", "")
+        table.add_row("fv1 = fv2", f"{friction.fv:g} Nm/(rad/s)", "")
+        table.add_row("vs1 = vs2", f"{friction.vs:g} rad/s", "")
+        table.add_row("Fc3 = Fc4", f"{friction.Fc_lin:g} h N·s", "times the step's time step h")
+        table.add_row("Fs3 = Fs4", f"{friction.Fs_lin:g} h N·s", "times h")
+        table.add_row("fv3 = fv4", f"{friction.fv_lin:g} h N·s/(m/s)", "times h")
+        table.add_row("vs3 = vs4", f"{friction.vs_lin:g} m/s", "")
+        table.add_row("Stribeck exponent n", f"{friction.n:g}", GAITBENCH_CHOICE)
+    limits = experiment.limits
+    defaults = Limits()
+    for name, unit in GAITBENCH_LIMIT_CHOICES.items():
+        value = getattr(limits, name)
+        note = GAITBENCH_CHOICE if value == getattr(defaults, name) else ""
+        table.add_row(name, f"{value:g} {unit}", note)
+    lower, upper = limits.angle_bounds
+    note = "thesis (10), as printed" if limits.angle_bounds == THESIS_ANGLE_BOUNDS else ""
+    table.add_row("angle bounds", f"[{lower:.4f}, {upper:.4f}] rad", note)
+    return table
+
+
+def _step_table(experiment: Experiment, checks: list[StepCheck]) -> Table:
+    table = Table(
+        title="Steps: landing foothold (x, y) and heel-strike angles (rad)",
+        box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True,  # fits an 80-column terminal
+    )
+    for header in ("step", "stance", "D (m)", "θ (rad)", "θ (°)", "x (m)", "y (m)", "q_st", "q_sw", "ok"):
+        table.add_column(header, justify="right")
+    footholds = experiment.terrain.footholds()
+    for check in checks:
+        x, y = footholds[check.step]
+        angles = ("—", "—") if check.q_st is None else (f"{check.q_st:.4f}", f"{check.q_sw:.4f}")
+        table.add_row(
+            str(check.step), f"Leg {experiment.stance_leg(check.step)}", f"{check.D:.4f}",
+            f"{check.theta:.4f}", f"{math.degrees(check.theta):.2f}", f"{x:.3f}", f"{y:.3f}", *angles,
+            "✓" if check.ok else "✗",
+        )
+    return table
+
+
+def _require_finite(name: str, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise InvalidParameterError(f"{name} = {value!r}: expected a finite number")
+    if not math.isfinite(value):
+        raise InvalidParameterError(f"{name} = {value!r}: expected a finite number")

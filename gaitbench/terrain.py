@@ -1,0 +1,186 @@
+"""Walking terrain as a sequence of footholds, and the step geometry every gait problem shares.
+
+Step i moves the foothold by the chord D_i at inclination θ_i, Δ = D_i (cos θ_i, sin θ_i), with θ > 0 uphill
+(thesis §2.4, L3423–3439; DECISIONS §4). The heel-strike configuration and the clearance below are written in
+that convention; the thesis's own formulas treat θ > 0 as downhill (see docs/deviations.md, H1).
+
+Leg angles are absolute from the vertical, counter-clockwise positive, in "Convention A":
+hip = stance foot + l(−sin q_st, cos q_st), swing foot = hip + l(sin q_sw, −cos q_sw).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from gaitbench.robot import InvalidParameterError
+
+THESIS_ANGLE_BOUNDS = (-math.pi / 2, math.pi)
+"""Leg-angle bounds −π/2 ≤ q1, q2 ≤ π as printed (thesis (10), L9516–9525; kept as printed, DECISIONS §8)."""
+
+
+@dataclass(frozen=True)
+class StepGeometry:
+    """One step's foothold displacement: chord ``D`` (m) at inclination ``theta`` (rad, > 0 uphill)."""
+
+    D: float
+    theta: float
+
+    def __post_init__(self) -> None:
+        for name in ("D", "theta"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise InvalidParameterError(f"step {name} = {value!r}: expected a finite number")
+        if self.D <= 0:
+            raise InvalidParameterError(f"step chord D = {self.D}: must be positive")
+        if not -math.pi / 2 < self.theta < math.pi / 2:
+            raise InvalidParameterError(
+                f"step inclination theta = {self.theta}: must lie in (-pi/2, pi/2), the robot walks along +x"
+            )
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """Foothold displacement D (cos θ, sin θ) in metres."""
+        return self.D * np.array([math.cos(self.theta), math.sin(self.theta)])
+
+
+@dataclass(frozen=True)
+class Terrain:
+    """The footholds of a walk, one :class:`StepGeometry` per step, starting from the origin."""
+
+    steps: tuple[StepGeometry, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "steps", tuple(self.steps))
+        if not self.steps:
+            raise InvalidParameterError("terrain steps: a terrain needs at least one step")
+        for step in self.steps:
+            if not isinstance(step, StepGeometry):
+                raise InvalidParameterError(f"terrain steps: expected StepGeometry, got {step!r}")
+
+    @classmethod
+    def flat(cls, chords: Iterable[float]) -> Terrain:
+        return cls.slope(chords, 0.0)
+
+    @classmethod
+    def slope(cls, chords: Iterable[float], theta: float) -> Terrain:
+        """A uniform slope; each chord is measured along the slope."""
+        return cls(tuple(StepGeometry(float(D), float(theta)) for D in chords))
+
+    @classmethod
+    def stairs(cls, run_rise_pairs: Iterable[tuple[float, float]]) -> Terrain:
+        """Stairs from (run L_i, rise H_i) pairs: D = √(L² + H²), θ = atan2(H, L) (thesis L3441–3449)."""
+        steps = []
+        for i, (run, rise) in enumerate(run_rise_pairs, start=1):
+            if not (math.isfinite(run) and math.isfinite(rise)) or run <= 0:
+                raise InvalidParameterError(
+                    f"stair {i} (run, rise) = ({run!r}, {rise!r}): run must be positive and both finite"
+                )
+            steps.append(StepGeometry(math.hypot(run, rise), math.atan2(rise, run)))
+        return cls(tuple(steps))
+
+    def __len__(self) -> int:
+        return len(self.steps)
+
+    def footholds(self) -> np.ndarray:
+        """(H+1, 2) foothold positions: row 0 is the start (0, 0), row i where step i lands."""
+        displacements = np.array([step.displacement for step in self.steps])
+        return np.vstack([np.zeros((1, 2)), np.cumsum(displacements, axis=0)])
+
+
+def heel_strike_configuration(D: float, theta: float, l: float) -> tuple[float, float]:  # noqa: E741
+    """Stance and swing angles (q_st, q_sw) at heel strike of a step with chord D and inclination θ.
+
+    The legs are symmetric about the normal of the chord: α = asin(D / 2l), q_st = θ − α, q_sw = θ + α.
+    """
+    if l <= 0:
+        raise ValueError(f"leg length l = {l}: must be positive")
+    if D > 2 * l:
+        raise ValueError(f"chord {D:g} m exceeds twice the leg length {2 * l:g} m: the feet cannot reach")
+    alpha = math.asin(D / (2 * l))
+    return theta - alpha, theta + alpha
+
+
+def clearance(q_st: Any, q_sw: Any, theta: Any) -> Any:
+    """Swing-foot height above the chord line, divided by l: cos(q_st − θ) − cos(q_sw − θ).
+
+    Zero at heel strike; the gait problem requires it > 0 (optionally > a margin) at interior nodes.
+    Works on floats, numpy arrays and casadi expressions.
+    """
+    ns = _namespace(q_st, q_sw, theta)
+    return ns.cos(q_st - theta) - ns.cos(q_sw - theta)
+
+
+def swing_foot_advance(q_st: Any, q_sw: Any, theta: Any) -> Any:
+    """Swing-foot position along the chord direction, relative to the stance foot, divided by l.
+
+    sin(q_sw − θ) − sin(q_st − θ); equals D / l at heel strike. Works on floats, numpy arrays and casadi.
+    """
+    ns = _namespace(q_st, q_sw, theta)
+    return ns.sin(q_sw - theta) - ns.sin(q_st - theta)
+
+
+def _namespace(*values: Any) -> ModuleType:
+    """casadi for casadi inputs (numpy ufuncs do not handle SX/MX cleanly), else numpy.
+
+    casadi is imported only when a casadi value arrives, so experiments load without it.
+    """
+    if any(type(v).__module__.startswith("casadi") for v in values):
+        import casadi
+
+        return casadi
+    return np
+
+
+@dataclass(frozen=True)
+class StepCheck:
+    """Geometric feasibility of one step, before any solve. ``q_st``/``q_sw`` are None when D > 2l."""
+
+    step: int
+    D: float
+    theta: float
+    q_st: float | None
+    q_sw: float | None
+    problems: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def check_feasibility(
+    terrain: Terrain, l: float, angle_bounds: tuple[float, float] = THESIS_ANGLE_BOUNDS  # noqa: E741
+) -> list[StepCheck]:
+    """Check every step's heel-strike configuration against reach (D ≤ 2l) and the leg-angle bounds.
+
+    The heel-strike angles of step i are also the initial angles of step i+1, so both legs are checked once
+    per step. Each problem names the step, the violated bound and the numbers behind it.
+    """
+    lower, upper = angle_bounds
+    checks = []
+    for i, step in enumerate(terrain.steps, start=1):
+        context = f"(D = {step.D:g} m, θ = {step.theta:.3f} rad, l = {l:g} m)"
+        if step.D > 2 * l:
+            problem = f"step {i}: chord {step.D:g} m exceeds twice the leg length {2 * l:g} m"
+            checks.append(StepCheck(i, step.D, step.theta, None, None, [problem]))
+            continue
+        q_st, q_sw = heel_strike_configuration(step.D, step.theta, l)
+        problems = []
+        for role, angle in (("stance", q_st), ("swing", q_sw)):
+            if angle < lower:
+                problems.append(
+                    f"step {i}: {role} angle at heel strike {angle:.3f} rad is below the lower angle bound "
+                    f"{lower:.3f} rad {context}"
+                )
+            if angle > upper:
+                problems.append(
+                    f"step {i}: {role} angle at heel strike {angle:.3f} rad is above the upper angle bound "
+                    f"{upper:.3f} rad {context}"
+                )
+        checks.append(StepCheck(i, step.D, step.theta, q_st, q_sw, problems))
+    return checks
