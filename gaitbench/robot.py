@@ -42,10 +42,14 @@ class RobotParameters:
             if value is not None:
                 _require_finite(name, value)
                 if value < 0:
-                    raise InvalidParameterError(f"robot parameter {name} = {value}: an inertia cannot be negative")
+                    raise InvalidParameterError(
+                        f"robot parameter {name} = {value}: an inertia cannot be negative"
+                    )
         if self.m1 <= 0 or self.m2 <= 0:
             bad = "m1" if self.m1 <= 0 else "m2"
-            raise InvalidParameterError(f"robot parameter {bad} = {getattr(self, bad)}: leg mass must be positive")
+            raise InvalidParameterError(
+                f"robot parameter {bad} = {getattr(self, bad)}: leg mass must be positive"
+            )
         if self.M < 0:
             raise InvalidParameterError(f"robot parameter M = {self.M}: hip mass cannot be negative")
         if self.l <= 0:
@@ -86,8 +90,15 @@ class RobotParameters:
 
     def as_dict(self) -> dict[str, float]:
         return {
-            "m1": self.m1, "m2": self.m2, "M": self.M, "l": self.l, "a": self.a, "b": self.b,
-            "I1": self.inertia1, "I2": self.inertia2, "g": self.g,
+            "m1": self.m1,
+            "m2": self.m2,
+            "M": self.M,
+            "l": self.l,
+            "a": self.a,
+            "b": self.b,
+            "I1": self.inertia1,
+            "I2": self.inertia2,
+            "g": self.g,
         }
 
 

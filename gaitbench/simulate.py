@@ -98,11 +98,24 @@ class HybridTrajectory:
                 continue
             t = float(step.t[-1])
             if self.dof == 4:
-                events.append({"time": t, "step": step.step, "kind": "push-off",
-                               "impulse": step.push_off_impulse, "energy": step.push_off_energy})
-            events.append({"time": t, "step": step.step, "kind": "heel-strike",
-                           "impulse": step.heel_strike.impulse.tolist(),
-                           "lift_off_velocity": step.heel_strike.lift_off_velocity})
+                events.append(
+                    {
+                        "time": t,
+                        "step": step.step,
+                        "kind": "push-off",
+                        "impulse": step.push_off_impulse,
+                        "energy": step.push_off_energy,
+                    }
+                )
+            events.append(
+                {
+                    "time": t,
+                    "step": step.step,
+                    "kind": "heel-strike",
+                    "impulse": step.heel_strike.impulse.tolist(),
+                    "lift_off_velocity": step.heel_strike.lift_off_velocity,
+                }
+            )
         return events
 
 
@@ -133,7 +146,18 @@ def simulate(
     stance, t0 = first_stance, 0.0
     for index, slope in enumerate(slopes, start=1):
         step, failure = _simulate_step(
-            model, control, index, stance, float(slope), t0, q, dq, max_step_duration, rtol, atol, max_solver_step
+            model,
+            control,
+            index,
+            stance,
+            float(slope),
+            t0,
+            q,
+            dq,
+            max_step_duration,
+            rtol,
+            atol,
+            max_solver_step,
         )
         trajectory.steps.append(step)
         if failure:
@@ -157,7 +181,9 @@ def simulate(
     return trajectory
 
 
-def _simulate_step(model, control, index, stance, slope, t0, q, dq, max_duration, rtol, atol, max_solver_step):
+def _simulate_step(
+    model, control, index, stance, slope, t0, q, dq, max_duration, rtol, atol, max_solver_step
+):
     n = model.dof
     functions = model.functions(stance)
     parameters = model.parameters
@@ -191,16 +217,19 @@ def _simulate_step(model, control, index, stance, slope, t0, q, dq, max_duration
             else:
                 continue
         event.terminal, event.direction = True, direction
-        solution = solve_ivp(rhs, (t, t_end), x, method="DOP853", events=event, rtol=rtol, atol=atol,
-                             max_step=max_solver_step)
+        solution = solve_ivp(
+            rhs, (t, t_end), x, method="DOP853", events=event, rtol=rtol, atol=atol, max_step=max_solver_step
+        )
         times.append(solution.t[1:])
         states.append(solution.y[:, 1:].T)
         if solution.status == -1:
             return _record(model, control, index, stance, slope, times, states, scuffed), (
-                f"step {index}: integration failed ({solution.message})")
+                f"step {index}: integration failed ({solution.message})"
+            )
         if solution.status == 0:
             return _record(model, control, index, stance, slope, times, states, scuffed), (
-                f"step {index}: no heel strike within {max_duration} s of the step's start")
+                f"step {index}: no heel strike within {max_duration} s of the step's start"
+            )
         t, x = float(solution.t_events[0][0]), solution.y_events[0][0]
         times[-1][-1], states[-1][-1] = t, x
     return _record(model, control, index, stance, slope, times, states, scuffed), None
@@ -211,13 +240,24 @@ def _record(model, control, index, stance, slope, times, states, scuffed) -> Sim
     t = np.concatenate(times)
     x = np.vstack(states)
     t0 = t[0]
-    tau = np.array([control.torque(ti - t0, xi[:n], xi[n:], index) for ti, xi in zip(t, x)])
+    tau = np.array([control.torque(ti - t0, xi[:n], xi[n:], index) for ti, xi in zip(t, x, strict=True)])
     reaction = None
     if n == 4:
         functions = model.functions(stance)
-        reaction = np.array([
-            np.asarray(functions.forward_dynamics(xi[:n], xi[n:], ui, model.parameters)[1]).ravel()
-            for xi, ui in zip(x, tau)
-        ])
-    return SimulatedStep(step=index, stance=stance, slope=slope, t=t, q=x[:, :n], dq=x[:, n:], tau=tau,
-                         ground_reaction=reaction, scuffed=scuffed)
+        reaction = np.array(
+            [
+                np.asarray(functions.forward_dynamics(xi[:n], xi[n:], ui, model.parameters)[1]).ravel()
+                for xi, ui in zip(x, tau, strict=True)
+            ]
+        )
+    return SimulatedStep(
+        step=index,
+        stance=stance,
+        slope=slope,
+        t=t,
+        q=x[:, :n],
+        dq=x[:, n:],
+        tau=tau,
+        ground_reaction=reaction,
+        scuffed=scuffed,
+    )

@@ -17,8 +17,13 @@ def _build(dof: int):
 @hookimpl
 def register_models():
     return [
-        Registration("biped-2dof", "Planar 2-leg biped, stance foot pinned: leg angles q1, q2 (First Phase)",
-                     _build(2)),
-        Registration("biped-4dof", "Planar 2-leg biped with stance-foot coordinates q3, q4, exact ground "
-                     "reaction, push-off and heel-strike maps (Second Phase)", _build(4)),
+        Registration(
+            "biped-2dof", "Planar 2-leg biped, stance foot pinned: leg angles q1, q2 (First Phase)", _build(2)
+        ),
+        Registration(
+            "biped-4dof",
+            "Planar 2-leg biped with stance-foot coordinates q3, q4, exact ground "
+            "reaction, push-off and heel-strike maps (Second Phase)",
+            _build(4),
+        ),
     ]

@@ -71,8 +71,12 @@ def passive_limit_cycle(tolerance: float = 1e-10) -> LimitCycle:
     image, period = one_step(solution.x)
     half_angle, dq_stance, dq_swing = solution.x
     return LimitCycle(
-        q_stance=float(SLOPE + half_angle), q_swing=float(SLOPE - half_angle), dq_stance=float(dq_stance),
-        dq_swing=float(dq_swing), period=float(period), residual=float(np.max(np.abs(image - solution.x))),
+        q_stance=float(SLOPE + half_angle),
+        q_swing=float(SLOPE - half_angle),
+        dq_stance=float(dq_stance),
+        dq_swing=float(dq_swing),
+        period=float(period),
+        residual=float(np.max(np.abs(image - solution.x))),
     )
 
 

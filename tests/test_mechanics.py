@@ -149,21 +149,25 @@ def test_push_off_adds_exactly_the_reported_energy(robot, stance):
 def test_stance_cases_are_mirror_images_under_leg_relabelling(dof):
     """Case 2 of a robot equals case 1 of the robot with its legs' labels swapped, coordinates permuted."""
     robot = LOPSIDED
-    swapped = RobotParameters(m1=robot.m2, m2=robot.m1, M=robot.M, l=robot.l, a=robot.a,
-                              I1=robot.inertia2, I2=robot.inertia1)
+    swapped = RobotParameters(
+        m1=robot.m2, m2=robot.m1, M=robot.M, l=robot.l, a=robot.a, I1=robot.inertia2, I2=robot.inertia1
+    )
     case2, case1 = BipedModel(robot, dof), BipedModel(swapped, dof)
     perm = np.eye(dof)
     perm[[0, 1]] = perm[[1, 0]]
     for _ in range(5):
         q, dq = random_state(dof)
         tau = rng.uniform(-20, 20, 2)
-        np.testing.assert_allclose(case2.mass_matrix(q, 2), perm @ case1.mass_matrix(perm @ q, 1) @ perm, atol=1e-12)
+        np.testing.assert_allclose(
+            case2.mass_matrix(q, 2), perm @ case1.mass_matrix(perm @ q, 1) @ perm, atol=1e-12
+        )
         ddq2, f2 = case2.forward_dynamics(q, dq, tau, 2)
         ddq1, f1 = case1.forward_dynamics(perm @ q, perm @ dq, tau[::-1], 1)
         np.testing.assert_allclose(ddq2, perm @ ddq1, atol=1e-9)
         np.testing.assert_allclose(f2, f1, atol=1e-9)
-        np.testing.assert_allclose(case2.heel_strike(q, dq, 2).dq, perm @ case1.heel_strike(perm @ q, perm @ dq, 1).dq,
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            case2.heel_strike(q, dq, 2).dq, perm @ case1.heel_strike(perm @ q, perm @ dq, 1).dq, atol=1e-9
+        )
 
 
 def test_model_functions_accept_symbols():

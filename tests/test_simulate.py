@@ -46,7 +46,7 @@ def test_unforced_swing_conserves_energy(dof):
     dq0 = np.r_[-1.2, 0.8, np.zeros(dof - 2)]
     walk = simulate(model, [0.0], q0, dq0, max_step_duration=1.0, max_solver_step=0.01)
     step = walk.steps[0]
-    energy = np.array([model.total_energy(q, dq, step.stance) for q, dq in zip(step.q, step.dq)])
+    energy = np.array([model.total_energy(q, dq, step.stance) for q, dq in zip(step.q, step.dq, strict=True)])
     assert len(energy) > 50
     assert np.ptp(energy) < 1e-7 * np.abs(energy).max()
 
@@ -58,25 +58,35 @@ def test_four_dof_walk_reproduces_two_dof_walk_and_feet_behave():
     two = simulate(BipedModel(robot, 2), [SLOPE] * 3, q0, dq0)
     four = simulate(BipedModel(robot, 4), [SLOPE] * 3, q0 + [0, 0], dq0 + [0, 0])
     assert two.completed and four.completed
-    for step2, step4 in zip(two.steps, four.steps):
+    for step2, step4 in zip(two.steps, four.steps, strict=True):
         assert step4.duration == pytest.approx(step2.duration, abs=1e-8)
         np.testing.assert_allclose(step4.heel_strike.dq[:2], step2.heel_strike.dq, atol=1e-8)
         assert step4.heel_strike.lift_off_velocity > 0  # the old stance foot leaves the ground
         assert step4.ground_reaction[:, 1].min() > 0  # the stance foot is pressed on the ground
     # The stance foot of step k+1 is where the swing foot of step k landed: one chord further down the slope.
     footholds = np.array([step.q[0, 2:] for step in four.steps])
-    np.testing.assert_allclose(np.diff(footholds, axis=0), [[cycle.chord * np.cos(SLOPE), cycle.chord * np.sin(SLOPE)]] * 2,
-                               atol=1e-8)
+    np.testing.assert_allclose(
+        np.diff(footholds, axis=0),
+        [[cycle.chord * np.cos(SLOPE), cycle.chord * np.sin(SLOPE)]] * 2,
+        atol=1e-8,
+    )
 
 
 def test_push_off_energy_is_recorded_and_feeds_the_heel_strike():
     robot = compass_gait_robot()
     cycle = passive_limit_cycle()
-    walk = simulate(BipedModel(robot, 4), [SLOPE], [cycle.q_stance, cycle.q_swing, 0, 0],
-                    [cycle.dq_stance, cycle.dq_swing, 0, 0], OpenLoop(lambda t, step: [0.0, 0.0], [4.0]))
+    walk = simulate(
+        BipedModel(robot, 4),
+        [SLOPE],
+        [cycle.q_stance, cycle.q_swing, 0, 0],
+        [cycle.dq_stance, cycle.dq_swing, 0, 0],
+        OpenLoop(lambda t, step: [0.0, 0.0], [4.0]),
+    )
     step = walk.steps[0]
     model = BipedModel(robot, 4)
-    gain = model.kinetic_energy(step.q[-1], step.dq_after_push_off, 1) - model.kinetic_energy(step.q[-1], step.dq[-1], 1)
+    gain = model.kinetic_energy(step.q[-1], step.dq_after_push_off, 1) - model.kinetic_energy(
+        step.q[-1], step.dq[-1], 1
+    )
     assert step.push_off_energy == pytest.approx(gain) and gain > 0
     kinds = [event["kind"] for event in walk.events]
     assert kinds == ["push-off", "heel-strike"]
@@ -89,8 +99,14 @@ def test_a_step_without_heel_strike_fails_with_its_number_and_keeps_earlier_step
     def torques(t, step):  # 60 N·m on Leg 1, the swing leg of step 2, spins it past any heel strike
         return [0.0, 0.0] if step == 1 else [60.0, 0.0]
 
-    walk = simulate(BipedModel(robot, 2), [SLOPE] * 3, [cycle.q_stance, cycle.q_swing],
-                    [cycle.dq_stance, cycle.dq_swing], OpenLoop(torques), max_step_duration=1.5)
+    walk = simulate(
+        BipedModel(robot, 2),
+        [SLOPE] * 3,
+        [cycle.q_stance, cycle.q_swing],
+        [cycle.dq_stance, cycle.dq_swing],
+        OpenLoop(torques),
+        max_step_duration=1.5,
+    )
     assert not walk.completed
     assert walk.failure.startswith("step 2:")
     assert len(walk.steps) == 2 and walk.steps[0].heel_strike is not None

@@ -13,7 +13,7 @@ call the same functions on symbolic arguments.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import casadi as ca
 
@@ -50,13 +50,15 @@ class BipedFunctions:
     hip: ca.Function  # (q, p) -> (x, y)
     swing_foot: ca.Function  # (q, p) -> (x, y)
     swing_foot_jacobian: ca.Function  # (q, p) -> ∂Y/∂q
-    forward_dynamics: ca.Function  # (q, dq, tau, p) -> (ddq, ground reaction (f_t, f_n)) ; 2-DOF: ground reaction = 0
+    forward_dynamics: (
+        ca.Function
+    )  # (q, dq, tau, p) -> (ddq, ground reaction (f_t, f_n)) ; 2-DOF: ground reaction = 0
     heel_strike: ca.Function  # (q, dq, p) -> (dq⁺, impact impulse at the swing foot (x, y))
     angular_momentum_about_swing_foot: ca.Function  # (q, dq, p) -> scalar
     push_off: ca.Function | None  # (q, dq, impulse, p) -> dq⁺ ; 4-DOF only
 
 
-@lru_cache(maxsize=None)
+@cache
 def biped_functions(dof: int, stance: int) -> BipedFunctions:
     """Build (once per process) the symbolic model for ``dof`` in {2, 4} with leg ``stance`` in {1, 2} on the ground."""
     if dof not in (2, 4):
@@ -119,7 +121,9 @@ def biped_functions(dof: int, stance: int) -> BipedFunctions:
         # Scalar impulse along the stance leg, from the foot towards the hip: J_PO = [0, 0, −sin q_st, cos q_st].
         direction = ca.vertcat(0, 0, up_st)
         dq_push = dq + ca.solve(eom.mass, direction * impulse)
-        push_off = ca.Function("push_off", [q, dq, impulse, p], [dq_push], ["q", "dq", "impulse", "p"], ["dq_plus"])
+        push_off = ca.Function(
+            "push_off", [q, dq, impulse, p], [dq_push], ["q", "dq", "impulse", "p"], ["dq_plus"]
+        )
 
     def fn(name: str, args: list, outs: list, arg_names: list[str], out_names: list[str]) -> ca.Function:
         return ca.Function(name, args, outs, arg_names, out_names)
@@ -137,9 +141,15 @@ def biped_functions(dof: int, stance: int) -> BipedFunctions:
         swing_foot=fn("swing_foot", [q, p], [swing_foot], ["q", "p"], ["Y"]),
         swing_foot_jacobian=fn("swing_foot_jacobian", [q, p], [jac], ["q", "p"], ["E"]),
         forward_dynamics=fn(
-            "forward_dynamics", [q, dq, tau, p], [ddq, reaction], ["q", "dq", "tau", "p"], ["ddq", "ground_reaction"]
+            "forward_dynamics",
+            [q, dq, tau, p],
+            [ddq, reaction],
+            ["q", "dq", "tau", "p"],
+            ["ddq", "ground_reaction"],
         ),
-        heel_strike=fn("heel_strike", [q, dq, p], [dq_plus, impact_impulse], ["q", "dq", "p"], ["dq_plus", "impulse"]),
+        heel_strike=fn(
+            "heel_strike", [q, dq, p], [dq_plus, impact_impulse], ["q", "dq", "p"], ["dq_plus", "impulse"]
+        ),
         angular_momentum_about_swing_foot=fn(
             "angular_momentum_about_swing_foot", [q, dq, p], [momentum], ["q", "dq", "p"], ["H"]
         ),

@@ -18,7 +18,9 @@ class HeelStrike:
     q: np.ndarray  # configuration at the start of the next step
     dq: np.ndarray  # velocities just after impact, new stance foot at rest
     impulse: np.ndarray  # impact impulse on the striking foot (x, y), N·s
-    lift_off_velocity: float  # vertical velocity of the old stance foot after impact (4-DOF); > 0 means it lifts off
+    lift_off_velocity: (
+        float  # vertical velocity of the old stance foot after impact (4-DOF); > 0 means it lifts off
+    )
 
 
 def other_leg(stance: int) -> int:

@@ -1,0 +1,150 @@
+"""The ``gaitbench`` command line: list plugins and inspect experiments.
+
+The plugin registry is loaded only when a command needs it, so ``--help`` and ``--version`` stay instant and
+never trip over a broken plugin. Plugin problems are warnings on stderr; stdout carries only the answer, so
+``gaitbench plugins --json`` can be piped.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from gaitbench import __version__
+from gaitbench.plugins import (
+    KINDS,
+    PLUGINS_DIR_ENV,
+    PluginConflictError,
+    PluginDirectoryError,
+    PluginRegistry,
+    UnknownPluginError,
+    load_registry,
+)
+
+
+class _State:
+    """What the root command hands its subcommands: the plugin directories and, once loaded, the registry."""
+
+    def __init__(self, plugin_dirs: tuple[Path, ...]) -> None:
+        self.plugin_dirs = plugin_dirs
+        self._registry: PluginRegistry | None = None
+
+    @property
+    def registry(self) -> PluginRegistry:
+        if self._registry is None:
+            try:
+                self._registry = load_registry(self.plugin_dirs)
+            except PluginDirectoryError as exc:
+                raise click.UsageError(str(exc)) from None
+            stderr = Console(stderr=True)
+            for problem in self._registry.problems:
+                _print(stderr, f"warning: {problem.source}: {problem.message}", "yellow")
+        return self._registry
+
+
+def _print(console: Console, message: str, style: str) -> None:
+    """Print plain text: no markup parsing (paths and messages may contain brackets), no hard line wraps."""
+    console.print(Text(message, style=style), soft_wrap=True)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option(
+    "--plugins-dir",
+    "plugin_dirs",
+    multiple=True,
+    metavar="DIR",
+    type=click.Path(path_type=Path),
+    help=f"Also load every *.py file in DIR as a plugin (repeatable; see also ${PLUGINS_DIR_ENV}).",
+)
+@click.version_option(__version__, "--version", prog_name="gaitbench")
+@click.pass_context
+def main(ctx: click.Context, plugin_dirs: tuple[Path, ...]) -> None:
+    """Benchmark energy-optimal walking gaits of a planar two-leg biped on shared, reproducible problems.
+
+    Experiments, models, solvers and every other method are plugins, so a new method is compared with the
+    thesis's methods on exactly the same problems.
+    """
+    ctx.obj = _State(plugin_dirs)
+
+
+@main.command("plugins")
+@click.option("--kind", type=click.Choice(sorted(KINDS)), help="Only list plugins of this kind.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON list (kind, name, module, description).")
+@click.pass_obj
+def plugins_command(state: _State, kind: str | None, as_json: bool) -> None:
+    """List the loaded plugins and the module or file each comes from.
+
+    Plugins that failed to load, and names registered twice, are reported as warnings on stderr.
+    """
+    found = state.registry.plugins(kind)
+    if as_json:
+        rows = [
+            {"kind": p.kind, "name": p.name, "module": p.module, "description": p.description} for p in found
+        ]
+        click.echo(json.dumps(rows, indent=2))
+        return
+    console = Console()
+    if not found:
+        _print(console, "No plugins found.", "")
+        return
+    table = Table("kind", "name")
+    table.add_column("module", overflow="fold")  # a path cut short with an ellipsis would be useless
+    table.add_column("description")
+    for index, plugin in enumerate(found):
+        first_of_kind = index == 0 or found[index - 1].kind != plugin.kind
+        if first_of_kind and index:
+            table.add_section()
+        table.add_row(
+            Text(plugin.kind if first_of_kind else "", style="bold"),
+            Text(plugin.name, style="cyan"),
+            Text(plugin.module),
+            Text(plugin.description),
+        )
+    console.print(table)
+
+
+@main.group()
+def experiments() -> None:
+    """Walking experiments: a robot, a terrain, an initial state and per-step timing."""
+
+
+@experiments.command("list")
+@click.pass_obj
+def experiments_list(state: _State) -> None:
+    """List the registered experiments."""
+    found = state.registry.plugins("experiment")
+    console = Console()
+    if not found:
+        _print(console, "No experiments registered.", "")
+        return
+    table = Table("name", "description")
+    for plugin in found:
+        table.add_row(Text(plugin.name, style="cyan"), Text(plugin.description))
+    console.print(table)
+
+
+@experiments.command("show")
+@click.argument("name")
+@click.pass_context
+def experiments_show(ctx: click.Context, name: str) -> None:
+    """Build experiment NAME and print its parameters, footholds and per-step feasibility."""
+    state: _State = ctx.obj
+    stderr = Console(stderr=True)
+    try:
+        plugin = state.registry.get("experiment", name)
+    except (UnknownPluginError, PluginConflictError) as exc:
+        _print(stderr, f"error: {exc}", "red")
+        ctx.exit(2)
+    try:
+        experiment = plugin.factory()
+    except ValueError as exc:  # includes InvalidParameterError: a bad experiment definition, not a crash
+        _print(stderr, f"error: experiment {name!r} is invalid: {exc}", "red")
+        ctx.exit(1)
+    from gaitbench.experiment import render_experiment  # pulls in the numerics; only this command needs it
+
+    render_experiment(experiment, Console())

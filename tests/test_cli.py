@@ -1,0 +1,149 @@
+"""The command line, driven through click's test runner with fake plugins only."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+
+import pytest
+from click.testing import CliRunner
+from rich.console import Console
+
+from gaitbench import __version__
+from gaitbench.cli import main
+
+BROKEN_PLUGIN = "raise ImportError('half-finished plugin')\n"
+
+
+@pytest.fixture
+def invoke():
+    def run(*args: str, **kwargs):
+        return CliRunner().invoke(main, list(args), **kwargs)
+
+    return run
+
+
+def test_plugins_json_lists_every_plugin_with_the_required_keys(invoke, fake_entry_points, experiment_plugin):
+    fake_entry_points("ep_walks", experiment_plugin("flat", "hill"))
+    fake_entry_points("ep_broken", BROKEN_PLUGIN)
+
+    result = invoke("plugins", "--json")
+
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)  # problems must not leak into stdout
+    assert rows == [
+        {"kind": "experiment", "name": "flat", "module": "ep_walks", "description": "test experiment flat"},
+        {"kind": "experiment", "name": "hill", "module": "ep_walks", "description": "test experiment hill"},
+    ]
+    assert "warning: entry point 'ep_broken' (ep_broken)" in result.stderr
+    assert "half-finished plugin" in result.stderr
+
+
+def test_plugins_dir_adds_a_plugin_visible_in_json(invoke, fake_entry_points, plugin_file, experiment_plugin):
+    path = plugin_file("mine", experiment_plugin("my-walk"))
+
+    result = invoke("--plugins-dir", str(path.parent), "plugins", "--json")
+
+    assert result.exit_code == 0, result.output
+    assert {"kind": "experiment", "name": "my-walk", "module": str(path.resolve()),
+            "description": "test experiment my-walk"} in json.loads(result.stdout)
+
+
+def test_plugins_kind_filters(invoke, fake_entry_points, experiment_plugin):
+    fake_entry_points("ep_walks", experiment_plugin("flat"))
+
+    solvers = json.loads(invoke("plugins", "--kind", "solver", "--json").stdout)
+    experiments = json.loads(invoke("plugins", "--kind", "experiment", "--json").stdout)
+
+    assert solvers == []
+    assert [row["name"] for row in experiments] == ["flat"]
+
+
+def test_plugins_table_shows_name_module_and_description(invoke, fake_entry_points, experiment_plugin):
+    fake_entry_points("ep_walks", experiment_plugin("flat"))
+
+    result = invoke("plugins")
+
+    assert result.exit_code == 0, result.output
+    for text in ("experiment", "flat", "ep_walks", "test experiment flat"):
+        assert text in result.stdout
+
+
+def test_missing_plugins_dir_is_a_usage_error_naming_it(invoke, fake_entry_points, tmp_path):
+    result = invoke("--plugins-dir", str(tmp_path / "nowhere"), "plugins")
+
+    assert result.exit_code == 2
+    assert "nowhere" in result.stderr
+
+
+def test_experiments_list(invoke, fake_entry_points, experiment_plugin):
+    fake_entry_points("ep_walks", experiment_plugin("flat", "hill"))
+
+    result = invoke("experiments", "list")
+
+    assert result.exit_code == 0, result.output
+    assert "flat" in result.stdout and "test experiment hill" in result.stdout
+
+
+def test_unknown_experiment_exits_2_listing_the_available_ones(
+    invoke, fake_entry_points, plugin_file, experiment_plugin
+):
+    path = plugin_file("walks", experiment_plugin("flat", "hill"))
+
+    result = invoke("--plugins-dir", str(path.parent), "experiments", "show", "fwd")
+
+    assert result.exit_code == 2
+    assert "unknown experiment 'fwd'; available: flat, hill" in result.output
+    assert "Traceback" not in result.output
+    assert isinstance(result.exception, SystemExit)
+
+
+def test_show_renders_the_experiment_built_by_the_plugin(
+    invoke, fake_entry_points, plugin_file, experiment_plugin, monkeypatch
+):
+    path = plugin_file("walks", experiment_plugin("flat"))
+    rendered = []
+    fake_module = types.ModuleType("gaitbench.experiment")
+    fake_module.render_experiment = lambda experiment, console: rendered.append((experiment, console))
+    monkeypatch.setitem(sys.modules, "gaitbench.experiment", fake_module)
+
+    result = invoke("--plugins-dir", str(path.parent), "experiments", "show", "flat")
+
+    assert result.exit_code == 0, result.output
+    [(experiment, console)] = rendered
+    assert experiment == "flat"  # what the fake plugin's factory returns
+    assert isinstance(console, Console)
+
+
+def test_invalid_experiment_exits_1_with_the_message(invoke, fake_entry_points, plugin_file):
+    path = plugin_file(
+        "bad",
+        """
+        from gaitbench import Registration, hookimpl
+        from gaitbench.robot import RobotParameters
+
+        @hookimpl
+        def register_experiments():
+            build = lambda: RobotParameters(m1=1, m2=1, M=1, l=-1, a=0.5)  # raises InvalidParameterError
+            return [Registration("bad", "negative leg", build)]
+        """,
+    )
+
+    result = invoke("--plugins-dir", str(path.parent), "experiments", "show", "bad")
+
+    assert result.exit_code == 1
+    assert "leg length must be positive" in result.stderr
+    assert "Traceback" not in result.output
+
+
+def test_help_and_version_do_not_load_plugins(invoke, fake_entry_points):
+    fake_entry_points("ep_broken", BROKEN_PLUGIN)
+
+    for args in (["--help"], ["plugins", "-h"], ["experiments", "--help"], ["experiments", "show", "--help"]):
+        result = invoke(*args)
+        assert result.exit_code == 0, args
+        assert "Usage:" in result.stdout
+        assert "warning" not in result.stderr
+    version = invoke("--version")
+    assert version.exit_code == 0 and __version__ in version.stdout
