@@ -1,0 +1,106 @@
+"""The per-step gait problem: what is fixed by its structure, and what changes from solve to solve.
+
+A step is posed in *role* coordinates (stance leg first, swing leg second) with the stance-1 equations of the
+robot whose legs are relabelled accordingly. This is exact — the two stance cases are mirror images under
+relabelling (tested in ``tests/test_mechanics.py``) — and it lets one built NLP serve odd and even steps.
+
+Phases (DECISIONS §3, §5): ``first`` is the 2-DOF First-Phase problem (stance foot pinned, no push-off);
+``second`` adds the 4-DOF quantities: the push-off impulse and its energy, and the exact stance-foot ground
+reaction with optional unilateral-contact and friction-cone constraints. During swing the stance foot is held,
+so the swing dynamics of both phases are the pinned model's (identical to the 2-DOF model, tested).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gaitbench.experiment import Limits
+from gaitbench.robot import RobotParameters
+
+PHASES = ("first", "second")
+ABSOLUTE_VALUE_FORMS = ("slack", "smooth")
+
+
+@dataclass(frozen=True)
+class ProblemOptions:
+    """Modelling options of a step problem; part of the NLP's structure (changing them rebuilds)."""
+
+    limits: Limits = field(default_factory=Limits)
+    absolute_value: str = "slack"  # |hip power| in the objective: "slack" (exact split) or "smooth" (thesis)
+    smoothing_eps: float = 0.1  # ε of the thesis's √(x² + ε²), used with absolute_value = "smooth" (DECISIONS §5)
+    # Swing-foot height over l above the chord line at interior nodes. The legs must cross, and at the crossing the
+    # height is exactly 0 (digest ch2 C1), so any positive margin makes fine grids infeasible.
+    clearance_margin: float = 0.0
+    approach_rate: float = 1e-3  # the swing foot nears the chord line at the last node at least this fast (l/s)
+    unilateral_contact: bool = False  # f_n ≥ 0 at every node (second phase)
+    friction_coefficient: float | None = None  # |f_t| ≤ μ f_n at every node (second phase)
+
+
+@dataclass(frozen=True)
+class StepStructure:
+    """Everything that fixes the NLP's shape: a built NLP is cached under this key."""
+
+    phase: str
+    n_nodes: int
+    options: ProblemOptions = field(default_factory=ProblemOptions)
+
+    def __post_init__(self) -> None:
+        if self.options.absolute_value not in ABSOLUTE_VALUE_FORMS:
+            raise ValueError(
+                f"absolute_value must be one of {ABSOLUTE_VALUE_FORMS}, got {self.options.absolute_value!r}"
+            )
+        if self.phase not in PHASES:
+            raise ValueError(f"phase must be one of {PHASES}, got {self.phase!r}")
+        if self.n_nodes < 3:
+            raise ValueError(f"a step needs at least 3 nodes, got N = {self.n_nodes}")
+
+
+@dataclass(frozen=True)
+class StepData:
+    """The numbers of one solve: robot, stance leg, initial state (leg order q1, q2, q̇1, q̇2), chord, slope, h."""
+
+    robot: RobotParameters
+    stance: int
+    initial_state: np.ndarray
+    chord: float
+    slope: float
+    time_step: float
+
+    def parameter_vector(self) -> np.ndarray:
+        """Parameters in the order of :data:`PARAMETER_LAYOUT`, in role coordinates."""
+        return np.concatenate([
+            role_robot_vector(self.robot, self.stance),
+            legs_to_roles(self.initial_state, self.stance),
+            [self.chord, self.slope, self.time_step],
+        ])
+
+
+PARAMETER_LAYOUT = {"robot": slice(0, 8), "initial_state": slice(8, 12), "chord": 12, "slope": 13, "time_step": 14}
+N_STEP_PARAMETERS = 15
+
+
+def role_robot_vector(robot: RobotParameters, stance: int) -> np.ndarray:
+    """The robot's parameter vector with the stance leg's mass and inertia in Leg 1's place."""
+    vector = robot.vector()
+    if stance == 2:
+        vector[[0, 1]] = vector[[1, 0]]
+        vector[[5, 6]] = vector[[6, 5]]
+    return vector
+
+
+def legs_to_roles(values: np.ndarray, stance: int) -> np.ndarray:
+    """Reorder (leg 1, leg 2) pairs — in a vector of pairs, or the last axis of (…, 2) arrays — to (stance, swing).
+
+    The map is its own inverse, so it also takes role order back to leg order.
+    """
+    values = np.asarray(values, dtype=float)
+    if stance == 1:
+        return values.copy()
+    if values.ndim == 1:
+        return values.reshape(-1, 2)[:, ::-1].ravel()
+    return values[..., ::-1].copy()
+
+
+roles_to_legs = legs_to_roles

@@ -1,0 +1,247 @@
+"""Transcriptions turn a per-step gait problem into an :class:`~gaitbench.nlp.NLP`.
+
+A transcription plugin subclasses :class:`Transcription` and implements :meth:`Transcription.discretize`:
+its decision variables, its dynamics constraints, the initial-state constraint, the hip energy quadrature and
+the interpolant of its solution. Everything else about a step — the heel-strike configuration, clearance, the
+approach to the ground, push-off and ground reactions, and the objective — is added here, identically for every
+transcription, so that methods are compared on the same problem.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from gaitbench.energetics import smooth_abs
+from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, StepStructure, roles_to_legs
+from gaitbench.mechanics import BipedFunctions, biped_functions
+from gaitbench.nlp import NLP, NLPBuilder
+
+
+@dataclass(frozen=True)
+class StepSymbols:
+    """Symbolic parameters of a step problem, in role coordinates (stance leg first)."""
+
+    vector: ca.SX
+    robot: ca.SX
+    initial_state: ca.SX
+    chord: ca.SX
+    slope: ca.SX
+    time_step: ca.SX
+
+    @classmethod
+    def create(cls) -> StepSymbols:
+        p = ca.SX.sym("p", N_STEP_PARAMETERS)
+        layout = PARAMETER_LAYOUT
+        return cls(vector=p, robot=p[layout["robot"]], initial_state=p[layout["initial_state"]],
+                   chord=p[layout["chord"]], slope=p[layout["slope"]], time_step=p[layout["time_step"]])
+
+    @property
+    def leg_length(self) -> ca.SX:
+        return self.robot[3]
+
+    @property
+    def total_mass(self) -> ca.SX:
+        return self.robot[0] + self.robot[1] + self.robot[2]
+
+    @property
+    def gravity(self) -> ca.SX:
+        return self.robot[7]
+
+
+@dataclass
+class Interpolant:
+    """Continuous-time state and control of a solved step, in role order, from the transcription's own scheme."""
+
+    state: Callable[[float], tuple[np.ndarray, np.ndarray]]  # t -> (q, dq)
+    control: Callable[[float], np.ndarray]  # t -> tau
+
+
+@dataclass(frozen=True)
+class Discretization:
+    """What a transcription hands back: nodal quantities as SX (2 × N, role order) and its pieces of the step.
+
+    ``accelerations`` may hold ``None`` columns where the scheme has none (ground reactions are then not
+    evaluated there). The callables work on the solution split into named variable blocks:
+    ``decode(blocks, p)`` returns (q, dq, tau, control_times) in role order, ``interpolant(blocks, p)`` the
+    continuous reconstruction, and ``guess(p)`` initial values per block (blocks left out start at 0).
+    """
+
+    positions: ca.SX
+    velocities: ca.SX
+    accelerations: list[ca.SX | None]
+    hip_energy: ca.SX
+    decode: Callable[[dict[str, np.ndarray], np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    interpolant: Callable[[dict[str, np.ndarray], np.ndarray], Interpolant]
+    guess: Callable[[np.ndarray], dict[str, np.ndarray]]
+
+
+@dataclass
+class StepTrajectory:
+    """A solved step in leg order: nodal states, controls (at ``control_times``) and the push-off impulse."""
+
+    times: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    tau: np.ndarray
+    control_times: np.ndarray
+    push_off: float
+    stance: int
+    _interpolant: Interpolant
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        q, dq = self._interpolant.state(t)
+        return roles_to_legs(q, self.stance), roles_to_legs(dq, self.stance)
+
+    def control(self, t: float) -> np.ndarray:
+        return roles_to_legs(self._interpolant.control(t), self.stance)
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1] - self.times[0])
+
+
+@dataclass
+class TranscribedStep:
+    """A built step NLP with the maps between its variables and a trajectory."""
+
+    structure: StepStructure
+    nlp: NLP
+    discretization: Discretization
+
+    def initial_guess(self, data: StepData) -> np.ndarray:
+        guess = np.zeros(self.nlp.n_variables)
+        for name, values in self.discretization.guess(data.parameter_vector()).items():
+            guess[self.nlp.variable_blocks[name]] = values
+        return guess
+
+    def blocks(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """The solution vector split into its named variable blocks."""
+        return {name: np.asarray(x)[block] for name, block in self.nlp.variable_blocks.items()}
+
+    def trajectory(self, x: np.ndarray, data: StepData) -> StepTrajectory:
+        p = data.parameter_vector()
+        blocks = self.blocks(x)
+        q, dq, tau, control_times = self.discretization.decode(blocks, p)
+        push_off = float(blocks["push_off"][0]) if "push_off" in blocks else 0.0
+        times = np.arange(self.structure.n_nodes) * data.time_step
+        return StepTrajectory(
+            times=times, q=roles_to_legs(q, data.stance), dq=roles_to_legs(dq, data.stance),
+            tau=roles_to_legs(tau, data.stance), control_times=control_times, push_off=push_off,
+            stance=data.stance, _interpolant=self.discretization.interpolant(blocks, p),
+        )
+
+
+class Transcription(ABC):
+    """Base class of transcription plugins; builds are cached per structure, so a structure is built once."""
+
+    name: str = ""
+
+    def __init__(self) -> None:
+        self._built: dict[StepStructure, TranscribedStep] = {}
+
+    def build(self, structure: StepStructure) -> TranscribedStep:
+        if structure not in self._built:
+            self._built[structure] = self._build(structure)
+        return self._built[structure]
+
+    @abstractmethod
+    def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
+                   model: BipedFunctions) -> Discretization:
+        """Declare variables (with the limits' bounds), dynamics and initial-state constraints; return the pieces."""
+
+    def _build(self, structure: StepStructure) -> TranscribedStep:
+        symbols = StepSymbols.create()
+        builder = NLPBuilder()
+        swing_model = biped_functions(2, 1)  # role coordinates: the stance leg is "Leg 1"
+        discretization = self.discretize(structure, builder, symbols, swing_model)
+        push_off_energy = _add_step_constraints(structure, builder, symbols, discretization)
+        cot = (discretization.hip_energy + push_off_energy) / (symbols.total_mass * symbols.gravity * symbols.chord)
+        return TranscribedStep(structure=structure, nlp=builder.build(symbols.vector, cot),
+                               discretization=discretization)
+
+
+def heel_strike_angles(symbols: StepSymbols) -> tuple[ca.SX, ca.SX]:
+    """(q_st, q_sw) at heel strike: θ ∓ asin(D / 2l) (DECISIONS §4)."""
+    alpha = ca.asin(symbols.chord / (2 * symbols.leg_length))
+    return symbols.slope - alpha, symbols.slope + alpha
+
+
+def _add_step_constraints(structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
+                          discretization: Discretization) -> ca.SX:
+    """Constraints common to all transcriptions; returns the push-off energy (0 in the first phase)."""
+    options = structure.options
+    q, dq = discretization.positions, discretization.velocities
+    theta = symbols.slope
+    q_st_end, q_sw_end = heel_strike_angles(symbols)
+    builder.constrain("heel_strike_configuration", q[:, -1] - ca.vertcat(q_st_end, q_sw_end))
+    interior = q[:, 1:-1]
+    clearance = ca.cos(interior[0, :] - theta) - ca.cos(interior[1, :] - theta)
+    builder.constrain("clearance", clearance, options.clearance_margin, np.inf)
+    # Replaces the thesis's infeasible "monotonically descending swing foot" (DECISIONS §4): d/dt of the
+    # clearance at the last node is negative, i.e. the swing foot comes down onto the ground.
+    approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]
+    builder.constrain("approach", approach, -np.inf, -options.approach_rate)
+    if structure.phase == "first":
+        return ca.SX(0)
+
+    model4 = biped_functions(4, 1)
+    impulse = builder.variable("push_off", (1, 1), 0.0, options.limits.push_off_max)
+    q_end4 = ca.vertcat(q[:, -1], 0, 0)
+    dq_end4 = ca.vertcat(dq[:, -1], 0, 0)
+    dq_plus = model4.push_off(q_end4, dq_end4, impulse, symbols.robot)
+    push_off_energy = (model4.kinetic_energy(q_end4, dq_plus, symbols.robot)
+                       - model4.kinetic_energy(q_end4, dq_end4, symbols.robot))
+
+    reactions = []
+    for k, ddq in enumerate(discretization.accelerations):
+        if ddq is None:
+            continue
+        qk, dqk = ca.vertcat(q[:, k], 0, 0), ca.vertcat(dq[:, k], 0, 0)
+        mass = model4.mass(qk, symbols.robot)
+        bias = ca.mtimes(model4.coriolis(qk, dqk, symbols.robot), dqk) + model4.gravity(qk, symbols.robot)
+        # Rows 3–4 of M q̈ + C q̇ + G with the foot held: the exact stance-foot reaction (friction, normal).
+        reactions.append(ca.mtimes(mass[2:4, 0:2], ddq) + bias[2:4])
+    reaction = ca.horzcat(*reactions)
+    if options.unilateral_contact:
+        builder.constrain("unilateral_contact", reaction[1, :], 0.0, np.inf)
+    if options.friction_coefficient is not None:
+        mu = options.friction_coefficient
+        builder.constrain("friction_cone", ca.vertcat(reaction[0, :] - mu * reaction[1, :],
+                                                      -reaction[0, :] - mu * reaction[1, :]), -np.inf, 0.0)
+    return push_off_energy
+
+
+def absolute_power(builder: NLPBuilder, structure: StepStructure, name: str, tau: ca.SX, dq: ca.SX) -> ca.SX:
+    """|τ·q̇| column by column (a 1 × n row) as the objective sees it.
+
+    ``slack`` (default): P = s⁺ − s⁻ with s± ≥ 0 as new variables and |P| = s⁺ + s⁻, exact at any optimum and
+    smooth for the solver. ``smooth``: the thesis's √(P² + ε²) (DECISIONS §5), whose kink of curvature 1/ε
+    makes interior-point solvers crawl; kept to reproduce the thesis.
+    """
+    power = ca.sum1(tau * dq)
+    if structure.options.absolute_value == "smooth":
+        return smooth_abs(power, structure.options.smoothing_eps)
+    n = power.numel()
+    positive = builder.variable(f"{name}_positive", (1, n), 0.0, np.inf)
+    negative = builder.variable(f"{name}_negative", (1, n), 0.0, np.inf)
+    builder.constrain(f"{name}_split", power - positive + negative)
+    return positive + negative
+
+
+def blended_guess(p: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """DECISIONS §7: angles blend linearly from the initial state to the heel-strike configuration, with the
+    matching constant rates; the same guess for every solver. Returns role-order (q, dq), each 2 × N."""
+    layout = PARAMETER_LAYOUT
+    x0 = p[layout["initial_state"]]
+    chord, slope, h, leg = p[layout["chord"]], p[layout["slope"]], p[layout["time_step"]], p[3]
+    alpha = np.arcsin(min(chord / (2 * leg), 1.0))
+    q_end = np.array([slope - alpha, slope + alpha])
+    s = np.linspace(0.0, 1.0, n_nodes)
+    q = x0[:2, None] + (q_end - x0[:2])[:, None] * s[None, :]
+    dq = np.repeat(((q_end - x0[:2]) / (h * (n_nodes - 1)))[:, None], n_nodes, axis=1)
+    return q, dq

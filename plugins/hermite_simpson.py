@@ -1,0 +1,97 @@
+"""Hermite–Simpson direct collocation: the thesis's DC transcription (App. A (8.71)–(8.94)).
+
+States are C¹ piecewise-cubic Hermite polynomials through the nodes with the dynamics' slopes there; controls are
+piecewise linear. The only dynamic constraints are the Simpson defects, equivalent to collocation at interval
+midpoints. The hip energy uses Simpson's rule on each interval with its midpoint, the quadrature the scheme itself
+implies (fourth order, any N).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from gaitbench import Registration, hookimpl
+from gaitbench.transcription import Discretization, Interpolant, Transcription, absolute_power, blended_guess
+
+
+class HermiteSimpson(Transcription):
+    name = "hermite-simpson"
+
+    def discretize(self, structure, builder, symbols, model):
+        n = structure.n_nodes
+        limits = structure.options.limits
+        lower = [limits.angle_bounds[0]] * 2 + [-limits.dq_max] * 2
+        upper = [limits.angle_bounds[1]] * 2 + [limits.dq_max] * 2
+        states = builder.variable("states", (4, n), lower, upper)
+        controls = builder.variable("torques", (2, n), -limits.tau_max, limits.tau_max)
+        h = symbols.time_step
+        dynamics = _state_derivative(model)
+        slopes = dynamics.map(n)(states, controls, ca.repmat(symbols.robot, 1, n))
+        left, right = states[:, :-1], states[:, 1:]
+        f_left, f_right = slopes[:, :-1], slopes[:, 1:]
+        mid_states = 0.5 * (left + right) + h / 8 * (f_left - f_right)
+        mid_controls = 0.5 * (controls[:, :-1] + controls[:, 1:])
+        f_mid = dynamics.map(n - 1)(mid_states, mid_controls, ca.repmat(symbols.robot, 1, n - 1))
+        builder.constrain("dynamics", right - left - h / 6 * (f_left + 4 * f_mid + f_right))
+        builder.constrain("initial_state", states[:, 0] - symbols.initial_state)
+
+        power_nodes = absolute_power(builder, structure, "power_nodes", controls, states[2:4, :])
+        power_mid = absolute_power(builder, structure, "power_midpoints", mid_controls, mid_states[2:4, :])
+        hip_energy = h / 6 * (ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:]) + 4 * ca.sum2(power_mid))
+
+        def unpack(blocks):
+            return (np.reshape(blocks["states"], (4, n), order="F"),
+                    np.reshape(blocks["torques"], (2, n), order="F"))
+
+        def decode(blocks, p):
+            xs, us = unpack(blocks)
+            return xs[:2].T, xs[2:].T, us.T, np.arange(n) * p[14]
+
+        def interpolant(blocks, p):
+            xs, us = unpack(blocks)
+            fs = np.asarray(dynamics.map(n)(xs, us, np.repeat(p[0:8, None], n, axis=1)))
+            return hermite_interpolant(xs, fs, us, p[14])
+
+        def guess(p):
+            q, dq = blended_guess(p, n)
+            return {"states": np.vstack([q, dq]).flatten(order="F")}
+
+        accelerations = [slopes[2:4, k] for k in range(n)]
+        return Discretization(positions=states[:2, :], velocities=states[2:4, :], accelerations=accelerations,
+                              hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
+
+
+def _state_derivative(model) -> ca.Function:
+    x, u, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("p", 8)
+    ddq = model.forward_dynamics(x[:2], x[2:], u, p)[0]
+    return ca.Function("state_derivative", [x, u, p], [ca.vertcat(x[2:], ddq)])
+
+
+def hermite_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:
+    """Cubic Hermite states through (x_k, f_k) and piecewise-linear controls (8.73)–(8.78)."""
+    n = states.shape[1]
+
+    def locate(t):
+        k = int(np.clip(np.floor(t / h), 0, n - 2))
+        return k, float(np.clip(t / h - k, 0.0, 1.0))
+
+    def state(t):
+        k, s = locate(t)
+        x0, x1, f0, f1 = states[:, k], states[:, k + 1], h * slopes[:, k], h * slopes[:, k + 1]
+        c2 = -3 * x0 - 2 * f0 + 3 * x1 - f1
+        c3 = 2 * x0 + f0 - 2 * x1 + f1
+        x = x0 + f0 * s + c2 * s**2 + c3 * s**3
+        return x[:2], x[2:]
+
+    def control(t):
+        k, s = locate(t)
+        return (1 - s) * controls[:, k] + s * controls[:, k + 1]
+
+    return Interpolant(state=state, control=control)
+
+
+@hookimpl
+def register_transcriptions():
+    return [Registration("hermite-simpson", "Hermite–Simpson direct collocation: cubic states, linear controls, "
+                         "midpoint defects (the thesis's DC)", HermiteSimpson)]
