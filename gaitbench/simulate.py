@@ -131,9 +131,13 @@ def simulate(
     rtol: float = 1e-10,
     atol: float = 1e-10,
     max_solver_step: float = np.inf,
+    step_times: Sequence[Sequence[float]] | None = None,
 ) -> HybridTrajectory:
     """Simulate ``len(slopes)`` steps; ``slopes[i]`` is the inclination θ of step i+1's chord line (rad, uphill > 0).
 
+    By default heel strike is located by event detection. With ``step_times`` (local times per step, starting at
+    0) each step instead ends by the clock at its last time and its states are reported at exactly those times:
+    this is how an optimized gait is re-simulated, since its heel strike happens at the step's end by construction.
     A step that finds no heel strike within ``max_step_duration`` seconds, or whose integration fails, ends the
     walk with ``failure`` set; everything simulated up to then is returned.
     """
@@ -145,20 +149,14 @@ def simulate(
     trajectory = HybridTrajectory(dof=model.dof)
     stance, t0 = first_stance, 0.0
     for index, slope in enumerate(slopes, start=1):
-        step, failure = _simulate_step(
-            model,
-            control,
-            index,
-            stance,
-            float(slope),
-            t0,
-            q,
-            dq,
-            max_step_duration,
-            rtol,
-            atol,
-            max_solver_step,
-        )
+        if step_times is not None:
+            step, failure = _simulate_clocked_step(
+                model, control, index, stance, float(slope), t0, q, dq, np.asarray(step_times[index - 1]), rtol, atol
+            )
+        else:
+            step, failure = _simulate_step(
+                model, control, index, stance, float(slope), t0, q, dq, max_step_duration, rtol, atol, max_solver_step
+            )
         trajectory.steps.append(step)
         if failure:
             trajectory.failure = failure
@@ -181,18 +179,38 @@ def simulate(
     return trajectory
 
 
-def _simulate_step(
-    model, control, index, stance, slope, t0, q, dq, max_duration, rtol, atol, max_solver_step
-):
+def _swing_rhs(model, control, index, stance, t0):
     n = model.dof
     functions = model.functions(stance)
-    parameters = model.parameters
-    st, sw = (0, 1) if stance == 1 else (1, 0)
 
     def rhs(t, x):
         tau = control.torque(t - t0, x[:n], x[n:], index)
-        ddq = functions.forward_dynamics(x[:n], x[n:], tau, parameters)[0]
+        ddq = functions.forward_dynamics(x[:n], x[n:], tau, model.parameters)[0]
         return np.concatenate([x[n:], np.asarray(ddq).ravel()])
+
+    return rhs
+
+
+def _simulate_clocked_step(model, control, index, stance, slope, t0, q, dq, local_times, rtol, atol):
+    times = t0 + local_times
+    solution = solve_ivp(
+        _swing_rhs(model, control, index, stance, t0),
+        (times[0], times[-1]),
+        np.concatenate([q, dq]),
+        method="DOP853",
+        t_eval=times,
+        rtol=rtol,
+        atol=atol,
+    )
+    step = _record(model, control, index, stance, slope, [solution.t], [solution.y.T], False)
+    if solution.status != 0:
+        return step, f"step {index}: integration failed ({solution.message})"
+    return step, None
+
+
+def _simulate_step(model, control, index, stance, slope, t0, q, dq, max_duration, rtol, atol, max_solver_step):
+    st, sw = (0, 1) if stance == 1 else (1, 0)
+    rhs = _swing_rhs(model, control, index, stance, t0)
 
     def advance(t, x):  # along-chord position of the swing foot ahead of the stance foot, over l
         return np.sin(x[sw] - slope) - np.sin(x[st] - slope)
