@@ -74,11 +74,13 @@ class Limits:
     """Actuator and joint limits of the gait problems (thesis constraints (9)–(12), L9514–9537).
 
     The thesis's torque, velocity and push-off limits were in the lost Fig. 5.1 (DECISIONS §8). The defaults
-    are gaitbench choices, generous enough not to bind at an energy optimum yet physically plausible:
+    are gaitbench choices, generous enough for every thesis step to be feasible:
 
-    - ``tau_max`` = 300 Nm (|τ| ≤ tau_max): above the largest gravity moment of a horizontal thesis leg
-      (downward slope: 30 kg with its CoM 0.75 m from the hip, 221 Nm).
-    - ``dq_max`` = 20 rad/s: about nine times the largest initial leg rate in chapter 5 (2.162 rad/s).
+    - ``tau_max`` = 3000 Nm (|τ| ≤ tau_max). The thesis's long steps must swing the legs by up to 2.5 rad in the
+      fixed 0.7343 s: with 300 Nm the forward walk is infeasible from step 4, with 1000 Nm from step 5 (measured
+      with Hermite–Simpson at N = 51). The bound is nevertheless active at the optimum, because the thesis's cost
+      (net hip power, i.e. the total variation of mechanical energy) does not penalize torque at all.
+    - ``dq_max`` = 50 rad/s: the forward walk's optima reach 16 rad/s at N = 51.
     - ``push_off_max`` = 500 N·s: more than the heaviest thesis robot's (140 kg) momentum at 3 m/s, far above
       the impulse that restores a heel-strike loss at walking speed.
 
@@ -86,8 +88,8 @@ class Limits:
     kept as printed.
     """
 
-    tau_max: float = 300.0
-    dq_max: float = 20.0
+    tau_max: float = 3000.0
+    dq_max: float = 50.0
     push_off_max: float = 500.0
     angle_bounds: tuple[float, float] = THESIS_ANGLE_BOUNDS
 

@@ -34,6 +34,10 @@ class ProblemOptions:
     # height is exactly 0 (digest ch2 C1), so any positive margin makes fine grids infeasible.
     clearance_margin: float = 0.0
     approach_rate: float = 1e-3  # the swing foot nears the chord line at the last node at least this fast (l/s)
+    # ρ in ρ·∫|τ|² dt added to the energy. The thesis's cost ∫|τ·q̇| dt is the total variation of the robot's
+    # mechanical energy (τ·q̇ = dE/dt with torques on absolute angles), blind to torque: without a tie-break the
+    # optimum is a continuum and solvers end at arbitrary, limit-saturating torques. Reported COTs exclude it.
+    torque_regularization: float = 0.0
     unilateral_contact: bool = False  # f_n ≥ 0 at every node (second phase)
     friction_coefficient: float | None = None  # |f_t| ≤ μ f_n at every node (second phase)
 

@@ -100,6 +100,10 @@ class NLPBuilder:
         self._variables.append((name, symbol, _expand(lower, shape), _expand(upper, shape)))
         return symbol
 
+    def variables(self, name: str) -> ca.SX:
+        """A block declared earlier, by name."""
+        return next(symbol for block, symbol, _, _ in self._variables if block == name)
+
     def constrain(self, name: str, expression, lower=0.0, upper=0.0) -> None:
         expression = ca.vec(ca.SX(expression))
         n = expression.numel()
@@ -123,6 +127,8 @@ def _expand(bound, shape: tuple[int, int]) -> np.ndarray:
 
 
 def _stack(blocks):
+    if not blocks:
+        return ca.SX(0, 1), np.zeros(0), np.zeros(0), {}
     expressions, lower, upper, names, start = [], [], [], {}, 0
     for name, expression, lo, hi in blocks:
         flat = ca.vec(expression)

@@ -160,7 +160,12 @@ class Transcription(ABC):
         swing_model = biped_functions(2, 1)  # role coordinates: the stance leg is "Leg 1"
         discretization = self.discretize(structure, builder, symbols, swing_model)
         push_off_energy = _add_step_constraints(structure, builder, symbols, discretization)
-        cot = (discretization.hip_energy + push_off_energy) / (symbols.total_mass * symbols.gravity * symbols.chord)
+        energy = discretization.hip_energy + push_off_energy
+        rho = structure.options.torque_regularization
+        if rho:
+            torques = builder.variables("torques")
+            energy += rho * symbols.time_step * ca.sumsqr(torques)
+        cot = energy / (symbols.total_mass * symbols.gravity * symbols.chord)
         return TranscribedStep(structure=structure, nlp=builder.build(symbols.vector, cot),
                                discretization=discretization)
 

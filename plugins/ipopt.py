@@ -1,0 +1,105 @@
+"""IPOPT (interior point, filter line search) through CasADi's ``nlpsol``, with CasADi's exact sparse Hessian.
+
+The built ``nlpsol`` is kept in ``nlp.solver_cache`` under its options, so the steps of a walk — one NLP structure
+re-solved with new parameters — pay for building (and differentiating) the problem only once.
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from gaitbench import Registration, hookimpl
+from gaitbench.nlp import NLP
+from gaitbench.solver import SolverResult, SolverStatus
+
+_STATUSES = {
+    "Solve_Succeeded": SolverStatus.CONVERGED,
+    "Solved_To_Acceptable_Level": SolverStatus.CONVERGED,
+    "Infeasible_Problem_Detected": SolverStatus.INFEASIBLE,
+    "Maximum_Iterations_Exceeded": SolverStatus.ITERATION_LIMIT,
+    "Maximum_CpuTime_Exceeded": SolverStatus.TIME_LIMIT,
+    "Maximum_WallTime_Exceeded": SolverStatus.TIME_LIMIT,
+}
+"""IPOPT return statuses with a shared meaning; every other one (Restoration_Failed, Invalid_Number_Detected,
+Diverging_Iterates, ...) is an error."""
+
+_FUNCTIONS = ("f", "g", "grad_f", "jac_g", "hess_l")
+"""The NLP callbacks IPOPT evaluates, named as in :class:`gaitbench.nlp.NLPFunctions`."""
+
+
+class Ipopt:
+    """IPOPT with the exact Hessian of the Lagrangian.
+
+    ``max_iterations``, ``time_limit_s`` (IPOPT's ``max_wall_time``; ``None`` for no limit), ``tolerance``
+    (``tol``) and ``print_level`` (0 silences IPOPT and CasADi's timing table) are the options every gaitbench
+    solver shares. Any other keyword is passed to IPOPT unchanged, for example ``linear_solver="ma57"``,
+    ``mu_strategy="adaptive"``, ``acceptable_tol=1e-6`` or ``hessian_approximation="limited-memory"``; see
+    https://coin-or.github.io/Ipopt/OPTIONS.html. An option IPOPT rejects makes every solve return ERROR.
+    """
+
+    name = "ipopt"
+
+    def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
+                 print_level: int = 0, **ipopt_options) -> None:
+        ipopt = {"max_iter": max_iterations, "tol": tolerance, "print_level": print_level}
+        if time_limit_s is not None:
+            ipopt["max_wall_time"] = time_limit_s
+        if print_level == 0:
+            ipopt["sb"] = "yes"  # the banner, which print_level 0 alone still prints
+        ipopt.update(ipopt_options)
+        self.options: dict = {"ipopt": ipopt, "print_time": print_level > 0, "record_time": True,
+                              "error_on_fail": False}
+        """The ``casadi.nlpsol`` options this solver builds with."""
+
+    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
+        """Solve from ``initial_guess``; every failure, including exceptions inside CasADi, becomes a status."""
+        p = np.asarray(parameters, dtype=float).ravel()
+        x0 = np.asarray(initial_guess, dtype=float).ravel()
+        start = time.perf_counter()
+        try:
+            solver = self._solver(nlp)
+            solution = solver(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+            stats = solver.stats()
+            x = np.asarray(solution["x"], dtype=float).ravel()
+            # Evaluated here rather than taken from IPOPT, which reports f = 0 when it fails at the initial point.
+            objective = float(nlp.functions.objective(x, p))
+            violation = nlp.violation(x, p)
+        except Exception as error:  # the Solver protocol reports failures, it never raises them
+            return SolverResult(status=SolverStatus.ERROR, message=f"{type(error).__name__}: {error}", x=x0,
+                                objective=float("nan"), constraint_violation=float("nan"), iterations=0,
+                                wall_time_s=time.perf_counter() - start, function_time_s=0.0)
+        return_status = stats["return_status"]
+        return SolverResult(
+            status=_STATUSES.get(return_status, SolverStatus.ERROR),
+            message=f"IPOPT: {return_status}",
+            x=x,
+            objective=objective,
+            constraint_violation=violation,
+            iterations=int(stats["iter_count"]),
+            wall_time_s=float(stats["t_wall_total"]),
+            function_time_s=float(sum(stats.get(f"t_wall_nlp_{name}", 0.0) for name in _FUNCTIONS)),
+            evaluations={name: int(stats[f"n_call_nlp_{name}"]) for name in _FUNCTIONS
+                         if f"n_call_nlp_{name}" in stats},
+            multipliers=np.asarray(solution["lam_g"], dtype=float).ravel(),
+        )
+
+    def _solver(self, nlp: NLP) -> ca.Function:
+        key = ("ipopt", _freeze(self.options))
+        if key not in nlp.solver_cache:
+            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.casadi_problem(), self.options)
+        return nlp.solver_cache[key]
+
+
+def _freeze(options):
+    """Nested option dictionaries as a hashable, order-independent cache key."""
+    if isinstance(options, dict):
+        return tuple(sorted((key, _freeze(value)) for key, value in options.items()))
+    return options
+
+
+@hookimpl
+def register_solvers():
+    return [Registration("ipopt", "IPOPT interior point through CasADi nlpsol, exact Hessian", Ipopt)]
