@@ -83,9 +83,7 @@ def plugins_command(state: _State, kind: str | None, as_json: bool) -> None:
     """
     found = state.registry.plugins(kind)
     if as_json:
-        rows = [
-            {"kind": p.kind, "name": p.name, "module": p.module, "description": p.description} for p in found
-        ]
+        rows = [{"kind": p.kind, "name": p.name, "module": p.module, "description": p.description} for p in found]
         click.echo(json.dumps(rows, indent=2))
         return
     console = Console()
@@ -148,3 +146,169 @@ def experiments_show(ctx: click.Context, name: str) -> None:
     from gaitbench.experiment import render_experiment  # pulls in the numerics; only this command needs it
 
     render_experiment(experiment, Console())
+
+
+def _parse_options(pairs: tuple[str, ...]) -> dict[str, object]:
+    """KEY=VALUE pairs with numbers and true/false converted, for plugin factories."""
+    options: dict[str, object] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key:
+            raise click.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint="--solver-option")
+        value: object = text
+        for convert in (int, float):
+            try:
+                value = convert(text)
+                break
+            except ValueError:
+                continue
+        if text.lower() in ("true", "false"):
+            value = text.lower() == "true"
+        options[key.replace("-", "_")] = value
+    return options
+
+
+def _create(ctx: click.Context, kind: str, name: str, **options):
+    """Build a plugin or exit with a message that names what is available or what was wrong."""
+    stderr = Console(stderr=True)
+    try:
+        return ctx.obj.registry.create(kind, name, **options)
+    except (UnknownPluginError, PluginConflictError) as exc:
+        _print(stderr, f"error: {exc}", "red")
+        ctx.exit(2)
+    except (TypeError, ValueError) as exc:
+        _print(stderr, f"error: cannot build {kind} {name!r} with options {options}: {exc}", "red")
+        ctx.exit(2)
+
+
+@main.command("solve")
+@click.option("--experiment", "-e", "experiment_name", required=True, help="Experiment plugin, e.g. forward.")
+@click.option("--transcription", "-t", default="hermite-simpson", show_default=True, help="Transcription plugin.")
+@click.option("--solver", "-s", "solver_name", default="ipopt", show_default=True, help="Solver plugin.")
+@click.option(
+    "--N",
+    "n_nodes",
+    type=click.IntRange(min=3),
+    default=50,
+    show_default=True,
+    help="Nodes (points) per step; h = step duration / (N - 1).",
+)
+@click.option("--steps", type=click.IntRange(min=1), default=None, help="Solve only the first K steps.")
+@click.option(
+    "--phase",
+    type=click.Choice(["second", "first"]),
+    default="second",
+    show_default=True,
+    help="second: the full 4-DOF problem with push-off (One Phase); first: the 2-DOF First Phase problem.",
+)
+@click.option(
+    "--solver-option",
+    "-o",
+    "solver_options",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Passed to the solver, e.g. -o max_iterations=500 -o linear_solver=mumps (repeatable).",
+)
+@click.option(
+    "--abs",
+    "absolute_value",
+    type=click.Choice(["slack", "smooth"]),
+    default="slack",
+    show_default=True,
+    help="|hip power| in the NLP: exact slack split, or the thesis's sqrt(x^2 + eps^2).",
+)
+@click.option(
+    "--torque-regularization",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Tie-break rho * integral of |tau|^2 added to the energy (never to the reported COT).",
+)
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Write the result as JSON (trajectories beside it as .npz).",
+)
+@click.pass_context
+def solve(
+    ctx: click.Context,
+    experiment_name: str,
+    transcription: str,
+    solver_name: str,
+    n_nodes: int,
+    steps: int | None,
+    phase: str,
+    solver_options: tuple[str, ...],
+    absolute_value: str,
+    torque_regularization: float,
+    out: Path | None,
+) -> None:
+    """Solve an experiment's walk one phase, step by step, and verify every step.
+
+    Each step's NLP is solved from the heel-strike state of the previous one. Every solved step is checked: its
+    largest dynamic defect, its re-simulation error, and its COT recomputed from the trajectory itself. The walk
+    stops at the first step that fails, keeping what was solved. Exit status 1 if the walk is incomplete.
+    """
+    from dataclasses import replace
+
+    from gaitbench.gait_problem import ProblemOptions
+    from gaitbench.walk import solve_walk
+
+    experiment = _create(ctx, "experiment", experiment_name)
+    transcriber = _create(ctx, "transcription", transcription)
+    solver = _create(ctx, "solver", solver_name, **_parse_options(solver_options))
+    if steps is not None and steps > experiment.n_steps:
+        raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
+    options = replace(
+        ProblemOptions(limits=experiment.limits),
+        absolute_value=absolute_value,
+        torque_regularization=torque_regularization,
+    )
+    console = Console()
+    total = steps or experiment.n_steps
+    with console.status(f"solving step 1 of {total}") as status:
+        walk = solve_walk(
+            experiment,
+            transcriber,
+            solver,
+            n_nodes,
+            steps=steps,
+            phase=phase,
+            options=options,
+            on_step=lambda outcome: status.update(f"solving step {outcome.index + 1} of {total}"),
+        )
+    _print_walk(console, walk)
+    if out is not None:
+        path = walk.save(out)
+        console.print(f"wrote {path}")
+    if not walk.complete:
+        ctx.exit(1)
+
+
+def _print_walk(console: Console, walk) -> None:
+    table = Table(title=f"{walk.experiment}: {walk.strategy}, {walk.transcription} + {walk.solver}, N = {walk.N}")
+    for column in ("step", "stance", "status", "COT", "time (s)", "iterations", "max defect", "resim error"):
+        table.add_column(column, justify="right" if column not in ("status",) else "left")
+    for step in walk.steps:
+        row = step.as_dict()
+        cells = [
+            _fmt(row[key], spec)
+            for key, spec in (
+                ("cot", ".4f"),
+                ("solve_time_s", ".2f"),
+                ("iterations", "d"),
+                ("max_defect", ".1e"),
+                ("resim_error", ".1e"),
+            )
+        ]
+        table.add_row(str(step.index), f"Leg {step.stance}", step.status, *cells)
+    console.print(table)
+    if walk.complete:
+        console.print(f"ACOT = {walk.acot:.4f} over {len(walk.steps)} steps ({walk.wall_time_s:.1f} s)")
+    else:
+        _print(console, f"incomplete walk: {walk.failure}", "red")
+
+
+def _fmt(value, spec: str) -> str:
+    return "—" if value is None else format(value, spec)
