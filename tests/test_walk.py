@@ -1,0 +1,136 @@
+"""Per-step gait problems solved and verified, multi-step chaining, and the solve command."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gaitbench.cli import main
+from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.mechanics import BipedModel
+from gaitbench.plugins import load_registry
+from gaitbench.verify import verify_step
+from gaitbench.walk import next_step_state, solve_walk
+from plugins.hermite_simpson import HermiteSimpson
+from plugins.ipopt import Ipopt
+
+REGISTRY = load_registry()
+
+
+def forward_step_data(n_nodes, step=1, state=None):
+    experiment = REGISTRY.create("experiment", "forward")
+    geometry = experiment.terrain.steps[step - 1]
+    state = np.asarray(experiment.initial_state)[[0, 1, 4, 5]] if state is None else state
+    return experiment, StepData(experiment.robot, experiment.stance_leg(step), state, geometry.D, geometry.theta,
+                                experiment.time_step(n_nodes))
+
+
+def solve_step(transcription, phase, n_nodes, options=None, **data_kwargs):
+    experiment, data = forward_step_data(n_nodes, **data_kwargs)
+    structure = StepStructure(phase, n_nodes, options or ProblemOptions(limits=experiment.limits))
+    built = transcription.build(structure)
+    result = Ipopt().solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+    return experiment, data, built, result
+
+
+def test_resimulation_error_falls_as_the_grid_is_refined():
+    """The same smooth step (a torque tie-break makes the optimum unique) at growing N re-simulates ever better."""
+    options = ProblemOptions(torque_regularization=1e-3)
+    errors = []
+    for n_nodes in (11, 21, 41):
+        experiment, data, built, result = solve_step(HermiteSimpson(), "first", n_nodes, options)
+        assert result.converged, result.message
+        trajectory = built.trajectory(result.x, data)
+        errors.append(verify_step(built, result.x, data, trajectory, BipedModel(experiment.robot, 2)).resim_max_error)
+    assert errors[0] > errors[1] > errors[2], errors
+    assert errors[2] < 1e-4
+
+
+def test_four_dof_step_tracks_the_two_dof_optimum_up_to_the_push_off():
+    """Ground reactions unconstrained: the second phase differs only by the push-off, which costs energy."""
+    transcription = HermiteSimpson()
+    options = ProblemOptions(torque_regularization=1e-3)
+    _, _, built1, first = solve_step(transcription, "first", 21, options)
+    experiment, data, built2, second = solve_step(transcription, "second", 21, options)
+    assert first.converged and second.converged
+    # Nothing within one step rewards a push-off, so its energy (quadratic in the impulse from a foot at rest)
+    # vanishes; the impulse itself only sits at the interior-point barrier's distance from its bound.
+    trajectory = built2.trajectory(second.x, data)
+    energy = verify_step(built2, second.x, data, trajectory, BipedModel(experiment.robot, 4)).push_off_energy
+    assert 0 <= energy < 1e-5
+    assert second.objective == pytest.approx(first.objective, rel=1e-4)
+    states1 = first.x[built1.nlp.variable_blocks["states"]]
+    states2 = second.x[built2.nlp.variable_blocks["states"]]
+    np.testing.assert_allclose(states2, states1, atol=1e-4)
+
+
+def test_enforced_ground_reaction_constraints_hold_at_the_solution():
+    options = ProblemOptions(torque_regularization=1e-3, unilateral_contact=True, friction_coefficient=0.6)
+    _, data, built, result = solve_step(HermiteSimpson(), "second", 21, options)
+    assert result.converged, result.message
+    violations = built.nlp.block_violations(result.x, data.parameter_vector())
+    assert violations["unilateral_contact"] < 1e-7 and violations["friction_cone"] < 1e-7
+
+
+@pytest.mark.parametrize("n_nodes", [20, 50, 100])
+def test_a_flat_step_converges_and_lands_on_its_heel_strike_configuration(n_nodes):
+    experiment, data, built, result = solve_step(HermiteSimpson(), "second", n_nodes)
+    assert result.converged, result.message
+    trajectory = built.trajectory(result.x, data)
+    alpha = np.arcsin(data.chord / (2 * experiment.robot.l))
+    np.testing.assert_allclose(trajectory.q[-1], [-alpha, alpha], atol=1e-8)  # Leg 1 stance on step 1
+
+
+def test_even_steps_are_solved_in_mirrored_role_coordinates():
+    """Step 2 (Leg 2 stance) lands with Leg 2 behind and Leg 1 in front, in leg-labelled output."""
+    experiment = REGISTRY.create("experiment", "forward")
+    walk = solve_walk(experiment, HermiteSimpson(), Ipopt(), 21, steps=2)
+    assert walk.complete, walk.failure
+    step2 = walk.steps[1].trajectory
+    alpha = np.arcsin(experiment.terrain.steps[1].D / (2 * experiment.robot.l))
+    np.testing.assert_allclose(step2.q[-1], [alpha, -alpha], atol=1e-8)
+    # Step 2 starts from step 1's heel-strike map.
+    model = BipedModel(experiment.robot, 4)
+    np.testing.assert_allclose(np.r_[step2.q[0], step2.dq[0]], next_step_state(model, walk.steps[0].trajectory),
+                               atol=1e-8)
+    for step in walk.steps:
+        assert step.verification.max_defect < 1e-8
+        assert step.verification.resim_error < 1e-2
+
+
+def test_a_failed_step_ends_the_walk_keeping_the_solved_steps():
+    experiment = REGISTRY.create("experiment", "forward")
+    walk = solve_walk(experiment, HermiteSimpson(), Ipopt(max_iterations=5), 21, steps=2)
+    assert not walk.complete and walk.acot is None
+    assert walk.failure.startswith("step 1: iteration_limit")
+
+
+def test_infeasible_geometry_is_reported_before_solving():
+    experiment = REGISTRY.create("experiment", "downward-slope")
+    walk = solve_walk(experiment, HermiteSimpson(), Ipopt(), 21, steps=2)
+    assert walk.steps[0].status == "infeasible_geometry"
+    assert "below the lower angle bound" in walk.failure and walk.steps[0].solver_result is None
+
+
+def test_solve_command_writes_the_documented_json(tmp_path):
+    out = tmp_path / "result.json"
+    result = CliRunner().invoke(main, ["solve", "--experiment", "forward", "--N", "15", "--steps", "2",
+                                       "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    for key in ("experiment", "transcription", "solver", "strategy", "N", "acot", "steps"):
+        assert key in data
+    assert data["N"] == 15 and len(data["steps"]) == 2
+    for step in data["steps"]:
+        for key in ("index", "status", "cot", "solve_time_s", "iterations", "max_defect", "resim_error"):
+            assert step[key] is not None
+    assert data["acot"] == pytest.approx(np.mean([step["cot"] for step in data["steps"]]))
+    trajectories = np.load(tmp_path / data["trajectories"])
+    assert trajectories["step02_q"].shape == (15, 2)
+
+
+def test_solve_command_names_the_available_plugins_for_a_typo():
+    result = CliRunner().invoke(main, ["solve", "--experiment", "forward", "--solver", "ipopd"])
+    assert result.exit_code == 2
+    assert "ipopt" in result.output + result.stderr
