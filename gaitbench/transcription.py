@@ -250,3 +250,27 @@ def blended_guess(p: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
     q = x0[:2, None] + (q_end - x0[:2])[:, None] * s[None, :]
     dq = np.repeat(((q_end - x0[:2]) / (h * (n_nodes - 1)))[:, None], n_nodes, axis=1)
     return q, dq
+
+
+def state_derivative(model: BipedFunctions) -> ca.Function:
+    """ẋ = (q̇, q̈) of the swing model as a CasADi function of (x, u, p): the ODE that collocation schemes discretize."""
+    x, u, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("p", 8)
+    ddq = model.forward_dynamics(x[:2], x[2:], u, p)[0]
+    return ca.Function("state_derivative", [x, u, p], [ca.vertcat(x[2:], ddq)])
+
+
+def locate_interval(t: float, h: float, n_nodes: int) -> tuple[int, float]:
+    """Interval k (0-based) holding time t on a uniform grid, and the fraction s ∈ [0, 1] of it elapsed.
+
+    A time equal to a node opens the interval starting there, which matters for piecewise-constant controls.
+    """
+    times = np.arange(n_nodes) * h
+    k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, n_nodes - 2))
+    return k, float(np.clip((t - times[k]) / h, 0.0, 1.0))
+
+
+def cubic_hermite(y0: np.ndarray, y1: np.ndarray, m0: np.ndarray, m1: np.ndarray, s: float):
+    """The cubic with values y0, y1 and slopes m0, m1 (per unit s) at s = 0, 1: its value and d/ds at s."""
+    c2 = -3 * y0 - 2 * m0 + 3 * y1 - m1
+    c3 = 2 * y0 + m0 - 2 * y1 + m1
+    return y0 + m0 * s + c2 * s**2 + c3 * s**3, m0 + 2 * c2 * s + 3 * c3 * s**2

@@ -12,7 +12,16 @@ import casadi as ca
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.transcription import Discretization, Interpolant, Transcription, absolute_power, blended_guess
+from gaitbench.transcription import (
+    Discretization,
+    Interpolant,
+    Transcription,
+    absolute_power,
+    blended_guess,
+    cubic_hermite,
+    locate_interval,
+    state_derivative,
+)
 
 
 class HermiteSimpson(Transcription):
@@ -26,7 +35,7 @@ class HermiteSimpson(Transcription):
         states = builder.variable("states", (4, n), lower, upper)
         controls = builder.variable("torques", (2, n), -limits.tau_max, limits.tau_max)
         h = symbols.time_step
-        dynamics = _state_derivative(model)
+        dynamics = state_derivative(model)
         slopes = dynamics.map(n)(states, controls, ca.repmat(symbols.robot, 1, n))
         left, right = states[:, :-1], states[:, 1:]
         f_left, f_right = slopes[:, :-1], slopes[:, 1:]
@@ -62,30 +71,17 @@ class HermiteSimpson(Transcription):
                               hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
 
 
-def _state_derivative(model) -> ca.Function:
-    x, u, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("p", 8)
-    ddq = model.forward_dynamics(x[:2], x[2:], u, p)[0]
-    return ca.Function("state_derivative", [x, u, p], [ca.vertcat(x[2:], ddq)])
-
-
 def hermite_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:
     """Cubic Hermite states through (x_k, f_k) and piecewise-linear controls (8.73)–(8.78)."""
     n = states.shape[1]
 
-    def locate(t):
-        k = int(np.clip(np.floor(t / h), 0, n - 2))
-        return k, float(np.clip(t / h - k, 0.0, 1.0))
-
     def state(t):
-        k, s = locate(t)
-        x0, x1, f0, f1 = states[:, k], states[:, k + 1], h * slopes[:, k], h * slopes[:, k + 1]
-        c2 = -3 * x0 - 2 * f0 + 3 * x1 - f1
-        c3 = 2 * x0 + f0 - 2 * x1 + f1
-        x = x0 + f0 * s + c2 * s**2 + c3 * s**3
+        k, s = locate_interval(t, h, n)
+        x, _ = cubic_hermite(states[:, k], states[:, k + 1], h * slopes[:, k], h * slopes[:, k + 1], s)
         return x[:2], x[2:]
 
     def control(t):
-        k, s = locate(t)
+        k, s = locate_interval(t, h, n)
         return (1 - s) * controls[:, k] + s * controls[:, k + 1]
 
     return Interpolant(state=state, control=control)

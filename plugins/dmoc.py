@@ -1,0 +1,132 @@
+"""Discrete mechanics and optimal control (DMOC): the thesis's DM transcription in its consistent form.
+
+The configuration is discretized, not the state: positions q_k at the nodes, the midpoint discrete Lagrangian
+L_d(q_k, q_{k+1}) = h L((q_k + q_{k+1})/2, (q_{k+1} − q_k)/h) on each interval, and one constant torque τ_k per
+interval whose discrete forces are f_k^± = (h/2) τ_k (DECISIONS §6; digest ch2 §4.6, App. A §2.3–2.5 with the
+corrected "+" sign of (8.49)). The dynamics are a momentum balance at every node: the momentum arriving from the
+interval before (the forced discrete Legendre transform p_k⁺ = D2 L_d(q_{k−1}, q_k) + (h/2) τ_{k−1}) equals the
+momentum leaving into the interval after (p_k⁻ = −D1 L_d(q_k, q_{k+1}) − (h/2) τ_k). At the two ends the
+continuous momenta M(q) q̇ of the boundary velocities take their place ((8.58), (8.60) corrected), so the
+heel-strike and push-off maps act on true velocities. The hip energy is Σ h |τ_k·v_k|, the discrete Lagrangian's
+own midpoint rule.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from gaitbench import Registration, hookimpl
+from gaitbench.gait_problem import PARAMETER_LAYOUT, StepStructure
+from gaitbench.mechanics import BipedFunctions
+from gaitbench.nlp import NLPBuilder
+from gaitbench.transcription import (
+    Discretization,
+    Interpolant,
+    StepSymbols,
+    Transcription,
+    absolute_power,
+    blended_guess,
+    cubic_hermite,
+    locate_interval,
+)
+
+TIME_STEP = PARAMETER_LAYOUT["time_step"]
+
+
+class DiscreteMechanics(Transcription):
+    name = "dmoc"
+
+    def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
+                   model: BipedFunctions) -> Discretization:
+        n = structure.n_nodes
+        limits = structure.options.limits
+        q = builder.variable("positions", (2, n), *limits.angle_bounds)
+        dq_start = builder.variable("start_velocity", (2, 1), -limits.dq_max, limits.dq_max)
+        dq_end = builder.variable("end_velocity", (2, 1), -limits.dq_max, limits.dq_max)
+        tau = builder.variable("torques", (2, n - 1), -limits.tau_max, limits.tau_max)
+        h, robot = symbols.time_step, symbols.robot
+
+        slopes = _discrete_lagrangian_slopes(model).map(n - 1)
+        d1, d2 = slopes(q[:, :-1], q[:, 1:], ca.repmat(h, 1, n - 1), ca.repmat(robot, 1, n - 1))
+        momentum = _momentum(model)
+        arriving = ca.horzcat(momentum(q[:, 0], dq_start, robot), d2 + h / 2 * tau)
+        leaving = ca.horzcat(-d1 - h / 2 * tau, momentum(q[:, -1], dq_end, robot))
+        builder.constrain("dynamics", arriving - leaving)
+        builder.constrain("initial_state", ca.vertcat(q[:, 0], dq_start) - symbols.initial_state)
+
+        # DMOC velocities live on the intervals (App. A §3.2); the thesis bounds these finite differences.
+        v = (q[:, 1:] - q[:, :-1]) / h
+        builder.constrain("velocity_bounds", v, -limits.dq_max, limits.dq_max)
+        hip_energy = h * ca.sum2(absolute_power(builder, structure, "power_intervals", tau, v))
+
+        # Node velocities M(q_k)⁻¹ p_k⁺ (App. A §2.4); the boundary velocities themselves at the two ends.
+        interior = _velocity(model).map(n - 2)(q[:, 1:-1], arriving[:, 1:-1], ca.repmat(robot, 1, n - 2))
+        velocities = ca.horzcat(dq_start, interior, dq_end)
+        nodal_velocities = ca.Function("nodal_velocities", [q, dq_start, dq_end, tau, symbols.vector], [velocities])
+        # Central second differences at the interior nodes; none at the two ends, which lack a neighbour.
+        accelerations = [None] + [(v[:, k] - v[:, k - 1]) / h for k in range(1, n - 1)] + [None]
+
+        def nodes(blocks, p):
+            qs = np.reshape(blocks["positions"], (2, n), order="F")
+            taus = np.reshape(blocks["torques"], (2, n - 1), order="F")
+            dqs = np.asarray(nodal_velocities(qs, blocks["start_velocity"], blocks["end_velocity"], taus, p))
+            return qs, dqs, taus
+
+        def decode(blocks, p):
+            qs, dqs, taus = nodes(blocks, p)
+            return qs.T, dqs.T, taus.T, np.arange(n - 1) * p[TIME_STEP]
+
+        def interpolant(blocks, p):
+            return dmoc_interpolant(*nodes(blocks, p), p[TIME_STEP])
+
+        def guess(p):
+            q_guess, dq_guess = blended_guess(p, n)
+            return {"positions": q_guess.flatten(order="F"), "start_velocity": dq_guess[:, 0],
+                    "end_velocity": dq_guess[:, -1]}
+
+        return Discretization(positions=q, velocities=velocities, accelerations=accelerations,
+                              hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
+
+
+def _discrete_lagrangian_slopes(model: BipedFunctions) -> ca.Function:
+    """(q_a, q_b, h, p) -> (D1 L_d, D2 L_d) of the midpoint discrete Lagrangian (App. A (8.44), α = ½)."""
+    q_a, q_b, h, p = ca.SX.sym("q_a", 2), ca.SX.sym("q_b", 2), ca.SX.sym("h"), ca.SX.sym("p", 8)
+    q_mid, v = (q_a + q_b) / 2, (q_b - q_a) / h
+    discrete_lagrangian = h * (model.kinetic_energy(q_mid, v, p) - model.potential_energy(q_mid, p))
+    return ca.Function("discrete_lagrangian_slopes", [q_a, q_b, h, p],
+                       [ca.gradient(discrete_lagrangian, q_a), ca.gradient(discrete_lagrangian, q_b)])
+
+
+def _momentum(model: BipedFunctions) -> ca.Function:
+    """(q, q̇, p) -> ∂L/∂q̇ = M(q) q̇, the continuous Legendre transform."""
+    q, dq, p = ca.SX.sym("q", 2), ca.SX.sym("dq", 2), ca.SX.sym("p", 8)
+    return ca.Function("momentum", [q, dq, p], [ca.mtimes(model.mass(q, p), dq)])
+
+
+def _velocity(model: BipedFunctions) -> ca.Function:
+    """(q, p_k, p) -> M(q)⁻¹ p_k, the velocity of a node momentum."""
+    q, momentum, p = ca.SX.sym("q", 2), ca.SX.sym("momentum", 2), ca.SX.sym("p", 8)
+    return ca.Function("velocity", [q, momentum, p], [ca.solve(model.mass(q, p), momentum)])
+
+
+def dmoc_interpolant(positions: np.ndarray, velocities: np.ndarray, torques: np.ndarray, h: float) -> Interpolant:
+    """Cubic Hermite positions through (q_k, q̇_k) with their derivative as velocity; piecewise-constant torques."""
+    n = positions.shape[1]
+
+    def state(t):
+        k, s = locate_interval(t, h, n)
+        slopes = h * velocities[:, k], h * velocities[:, k + 1]
+        q, dq_ds = cubic_hermite(positions[:, k], positions[:, k + 1], *slopes, s)
+        return q, dq_ds / h
+
+    def control(t):
+        return torques[:, locate_interval(t, h, n)[0]]
+
+    return Interpolant(state=state, control=control)
+
+
+@hookimpl
+def register_transcriptions():
+    return [Registration("dmoc", "Discrete mechanics (DMOC): midpoint discrete Lagrangian, forced discrete "
+                         "Euler–Lagrange equations, constant torque per interval (second order)", DiscreteMechanics)]
