@@ -274,3 +274,13 @@ def cubic_hermite(y0: np.ndarray, y1: np.ndarray, m0: np.ndarray, m1: np.ndarray
     c2 = -3 * y0 - 2 * m0 + 3 * y1 - m1
     c3 = 2 * y0 + m0 - 2 * y1 + m1
     return y0 + m0 * s + c2 * s**2 + c3 * s**3, m0 + 2 * c2 * s + 3 * c3 * s**2
+
+
+def collocation_variables(structure: StepStructure, builder: NLPBuilder) -> tuple[ca.SX, ca.SX]:
+    """Node states (q_st, q_sw, q̇_st, q̇_sw; 4 × N) and node torques (2 × N) with the limits as bounds."""
+    n, limits = structure.n_nodes, structure.options.limits
+    lower = [limits.angle_bounds[0]] * 2 + [-limits.dq_max] * 2
+    upper = [limits.angle_bounds[1]] * 2 + [limits.dq_max] * 2
+    states = builder.variable("states", (4, n), lower, upper)
+    torques = builder.variable("torques", (2, n), -limits.tau_max, limits.tau_max)
+    return states, torques

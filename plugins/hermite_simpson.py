@@ -18,6 +18,7 @@ from gaitbench.transcription import (
     Transcription,
     absolute_power,
     blended_guess,
+    collocation_variables,
     cubic_hermite,
     locate_interval,
     state_derivative,
@@ -29,11 +30,7 @@ class HermiteSimpson(Transcription):
 
     def discretize(self, structure, builder, symbols, model):
         n = structure.n_nodes
-        limits = structure.options.limits
-        lower = [limits.angle_bounds[0]] * 2 + [-limits.dq_max] * 2
-        upper = [limits.angle_bounds[1]] * 2 + [limits.dq_max] * 2
-        states = builder.variable("states", (4, n), lower, upper)
-        controls = builder.variable("torques", (2, n), -limits.tau_max, limits.tau_max)
+        states, controls = collocation_variables(structure, builder)
         h = symbols.time_step
         dynamics = state_derivative(model)
         slopes = dynamics.map(n)(states, controls, ca.repmat(symbols.robot, 1, n))

@@ -23,6 +23,7 @@ from gaitbench.transcription import (
     Transcription,
     absolute_power,
     blended_guess,
+    collocation_variables,
     locate_interval,
     state_derivative,
 )
@@ -36,11 +37,7 @@ class Trapezoidal(Transcription):
     def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
                    model: BipedFunctions) -> Discretization:
         n = structure.n_nodes
-        limits = structure.options.limits
-        lower = [limits.angle_bounds[0]] * 2 + [-limits.dq_max] * 2
-        upper = [limits.angle_bounds[1]] * 2 + [limits.dq_max] * 2
-        states = builder.variable("states", (4, n), lower, upper)
-        controls = builder.variable("torques", (2, n), -limits.tau_max, limits.tau_max)
+        states, controls = collocation_variables(structure, builder)
         h = symbols.time_step
         dynamics = state_derivative(model)
         slopes = dynamics.map(n)(states, controls, ca.repmat(symbols.robot, 1, n))

@@ -32,6 +32,25 @@ def _direction_up(angle: ca.SX) -> ca.SX:
 
 
 @dataclass(frozen=True)
+class _Geometry:
+    """Positions in Convention A for a stance case: the three masses and the swing foot."""
+
+    com_stance: ca.SX
+    hip: ca.SX
+    com_swing: ca.SX
+    swing_foot: ca.SX
+
+
+def _geometry(q: ca.SX, foot: ca.SX, stance: int, l: ca.SX, a: ca.SX) -> _Geometry:
+    st, sw = (0, 1) if stance == 1 else (1, 0)
+    up_st = _direction_up(q[st])
+    down_sw = -_direction_up(q[sw])
+    hip = foot + l * up_st
+    return _Geometry(com_stance=foot + a * up_st, hip=hip, com_swing=hip + (l - a) * down_sw,
+                     swing_foot=hip + l * down_sw)
+
+
+@dataclass(frozen=True)
 class BipedFunctions:
     """CasADi functions of one model (2 or 4 DOF) in one stance case.
 
@@ -68,21 +87,14 @@ def biped_functions(dof: int, stance: int) -> BipedFunctions:
 
     p = ca.SX.sym("p", N_PARAMETERS)
     m1, m2, hip_mass, l, a, inertia1, inertia2, g = (p[i] for i in range(N_PARAMETERS))
-    b = l - a
     q = ca.SX.sym("q", dof)
     dq = ca.SX.sym("dq", dof)
     tau = ca.SX.sym("tau", 2)
 
-    st, sw = (0, 1) if stance == 1 else (1, 0)
     m_st, m_sw = (m1, m2) if stance == 1 else (m2, m1)
-    foot = q[2:4] if dof == 4 else ca.SX.zeros(2)
-    up_st = _direction_up(q[st])
-    down_sw = -_direction_up(q[sw])
-    com_st = foot + a * up_st
-    hip = foot + l * up_st
-    com_sw = hip + b * down_sw
-    swing_foot = hip + l * down_sw
-    points = ((m_st, com_st), (hip_mass, hip), (m_sw, com_sw))
+    geometry = _geometry(q, q[2:4] if dof == 4 else ca.SX.zeros(2), stance, l, a)
+    hip, swing_foot = geometry.hip, geometry.swing_foot
+    points = ((m_st, geometry.com_stance), (hip_mass, hip), (m_sw, geometry.com_swing))
 
     def velocity(point: ca.SX) -> ca.SX:
         return ca.jtimes(point, q, dq)
@@ -119,7 +131,7 @@ def biped_functions(dof: int, stance: int) -> BipedFunctions:
     if dof == 4:
         impulse = ca.SX.sym("impulse")
         # Scalar impulse along the stance leg, from the foot towards the hip: J_PO = [0, 0, −sin q_st, cos q_st].
-        direction = ca.vertcat(0, 0, up_st)
+        direction = ca.vertcat(0, 0, _direction_up(q[stance - 1]))
         dq_push = dq + ca.solve(eom.mass, direction * impulse)
         push_off = ca.Function(
             "push_off", [q, dq, impulse, p], [dq_push], ["q", "dq", "impulse", "p"], ["dq_plus"]
@@ -173,19 +185,13 @@ def _angular_momentum_impact_map(q, dq, stance, l, a, m1, m2, hip_mass, inertia1
     hip once its foot lifts off). Both are built from the geometry with a free stance foot (x, y), so neither
     Q⁺ nor Q⁻ is typed in; after impact the new stance foot is at rest, which fixes ẋ, ẏ.
     """
-    b = l - a
-    st, sw = (0, 1) if stance == 1 else (1, 0)
+    st = 0 if stance == 1 else 1
     m_st, m_sw = (m1, m2) if stance == 1 else (m2, m1)
     inertia_st = inertia1 if stance == 1 else inertia2
     ext_q = ca.vertcat(q, ca.SX.sym("foot", 2))
     ext_dq = ca.SX.sym("ext_dq", 4)
-    foot = ext_q[2:4]
-    up_st = _direction_up(ext_q[st])
-    down_sw = -_direction_up(ext_q[sw])
-    com_st = foot + a * up_st
-    hip = foot + l * up_st
-    com_sw = hip + b * down_sw
-    striking_foot = hip + l * down_sw
+    geometry = _geometry(ext_q, ext_q[2:4], stance, l, a)
+    com_st, hip, com_sw, striking_foot = geometry.com_stance, geometry.hip, geometry.com_swing, geometry.swing_foot
 
     def velocity(point: ca.SX) -> ca.SX:
         return ca.jtimes(point, ext_q, ext_dq)
