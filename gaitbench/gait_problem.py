@@ -108,3 +108,14 @@ def legs_to_roles(values: np.ndarray, stance: int) -> np.ndarray:
 
 
 roles_to_legs = legs_to_roles
+
+
+def sectional_structure(structure: StepStructure, start_node: int) -> StepStructure:
+    """The Decrease & Conquer sectional problem: the same step started at node k0 (1-based) from a given state.
+
+    It covers nodes k0 … N with the same time step h (pass the complete step's h in :class:`StepData`), so it is
+    a step problem with N − k0 + 1 nodes; its NLP is built once per node count and reused for every step.
+    """
+    if not 1 <= start_node <= structure.n_nodes - 2:
+        raise ValueError(f"start node k0 = {start_node} must lie in 1 … N − 2 = {structure.n_nodes - 2}")
+    return StepStructure(structure.phase, structure.n_nodes - start_node + 1, structure.options)

@@ -7,9 +7,10 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli import main
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.mechanics import BipedModel
+from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
+from gaitbench.mechanics import BipedModel, biped_functions
 from gaitbench.plugins import load_registry
+from gaitbench.transcription import state_derivative
 from gaitbench.verify import verify_step
 from gaitbench.walk import next_step_state, solve_walk
 from plugins.hermite_simpson import HermiteSimpson
@@ -134,3 +135,44 @@ def test_solve_command_names_the_available_plugins_for_a_typo():
     result = CliRunner().invoke(main, ["solve", "--experiment", "forward", "--solver", "ipopd"])
     assert result.exit_code == 2
     assert "ipopt" in result.output + result.stderr
+
+
+def test_sectional_problem_from_a_node_of_the_complete_optimum_is_no_worse_than_its_tail():
+    """Bellman: the tail of the complete optimum from node k0 is feasible for the sectional problem."""
+    options = ProblemOptions(torque_regularization=1e-3)
+    transcription = HermiteSimpson()
+    _, data, built, complete = solve_step(transcription, "first", 21, options)
+    assert complete.converged
+    trajectory = built.trajectory(complete.x, data)
+    k0 = 8
+    sectional = transcription.build(sectional_structure(built.structure, k0))
+    assert sectional.structure.n_nodes == 14
+    start = np.r_[trajectory.q[k0 - 1], trajectory.dq[k0 - 1]]
+    section_data = StepData(data.robot, data.stance, start, data.chord, data.slope, data.time_step)
+    p = section_data.parameter_vector()
+    result = Ipopt().solve(sectional.nlp, p, sectional.initial_guess(section_data))
+    assert result.converged, result.message
+    np.testing.assert_allclose(sectional.trajectory(result.x, section_data).q[-1], trajectory.q[-1], atol=1e-8)
+
+    tail = tail_point(sectional, trajectory.q[k0 - 1:], trajectory.dq[k0 - 1:], trajectory.tau[k0 - 1:], p)
+    assert sectional.nlp.violation(tail, p) < 1e-7  # the tail is feasible for the sectional problem
+    assert result.objective <= float(sectional.nlp.functions.objective(tail, p)) + 1e-8
+    with pytest.raises(ValueError, match="start node"):
+        sectional_structure(built.structure, 20)
+
+
+def tail_point(built, q, dq, tau, p):
+    """A Hermite–Simpson NLP point from nodal q, q̇, τ (leg order = role order on step 1), |power| slacks exact."""
+    states, torques = np.vstack([q.T, dq.T]), tau.T
+    n, h = states.shape[1], p[14]
+    slopes = np.asarray(state_derivative(biped_functions(2, 1)).map(n)(states, torques, np.repeat(p[:8, None], n, 1)))
+    mid_states = 0.5 * (states[:, :-1] + states[:, 1:]) + h / 8 * (slopes[:, :-1] - slopes[:, 1:])
+    mid_torques = 0.5 * (torques[:, :-1] + torques[:, 1:])
+    values = {"states": states.flatten(order="F"), "torques": torques.flatten(order="F")}
+    for name, power in (("power_nodes", np.sum(torques * states[2:], axis=0)),
+                        ("power_midpoints", np.sum(mid_torques * mid_states[2:], axis=0))):
+        values[f"{name}_positive"], values[f"{name}_negative"] = np.maximum(power, 0), np.maximum(-power, 0)
+    x = np.zeros(built.nlp.n_variables)
+    for name, value in values.items():
+        x[built.nlp.variable_blocks[name]] = value
+    return x
