@@ -17,6 +17,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from gaitbench.mechanics import BipedModel, HeelStrike, other_leg
+from gaitbench.terrain import swing_foot_advance
 
 
 class Control(Protocol):
@@ -213,7 +214,7 @@ def _simulate_step(model, control, index, stance, slope, t0, q, dq, max_duration
     rhs = _swing_rhs(model, control, index, stance, t0)
 
     def advance(t, x):  # along-chord position of the swing foot ahead of the stance foot, over l
-        return np.sin(x[sw] - slope) - np.sin(x[st] - slope)
+        return swing_foot_advance(x[st], x[sw], slope)
 
     def mean_angle(t, x):  # zero when the swing foot is on the chord line (equal legs, legs apart)
         return 0.5 * (x[st] + x[sw]) - slope

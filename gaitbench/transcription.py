@@ -20,6 +20,7 @@ from gaitbench.energetics import smooth_abs
 from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, StepStructure, roles_to_legs
 from gaitbench.mechanics import BipedFunctions, biped_functions
 from gaitbench.nlp import NLP, NLPBuilder
+from gaitbench.terrain import clearance, heel_strike_configuration
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,14 @@ class StepSymbols:
     def create(cls) -> StepSymbols:
         p = ca.SX.sym("p", N_STEP_PARAMETERS)
         layout = PARAMETER_LAYOUT
-        return cls(vector=p, robot=p[layout["robot"]], initial_state=p[layout["initial_state"]],
-                   chord=p[layout["chord"]], slope=p[layout["slope"]], time_step=p[layout["time_step"]])
+        return cls(
+            vector=p,
+            robot=p[layout["robot"]],
+            initial_state=p[layout["initial_state"]],
+            chord=p[layout["chord"]],
+            slope=p[layout["slope"]],
+            time_step=p[layout["time_step"]],
+        )
 
     @property
     def leg_length(self) -> ca.SX:
@@ -130,9 +137,14 @@ class TranscribedStep:
         push_off = float(blocks["push_off"][0]) if "push_off" in blocks else 0.0
         times = np.arange(self.structure.n_nodes) * data.time_step
         return StepTrajectory(
-            times=times, q=roles_to_legs(q, data.stance), dq=roles_to_legs(dq, data.stance),
-            tau=roles_to_legs(tau, data.stance), control_times=control_times, push_off=push_off,
-            stance=data.stance, _interpolant=self.discretization.interpolant(blocks, p),
+            times=times,
+            q=roles_to_legs(q, data.stance),
+            dq=roles_to_legs(dq, data.stance),
+            tau=roles_to_legs(tau, data.stance),
+            control_times=control_times,
+            push_off=push_off,
+            stance=data.stance,
+            _interpolant=self.discretization.interpolant(blocks, p),
         )
 
 
@@ -150,9 +162,13 @@ class Transcription(ABC):
         return self._built[structure]
 
     @abstractmethod
-    def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
-                   model: BipedFunctions) -> Discretization:
-        """Declare variables (with the limits' bounds), dynamics and initial-state constraints; return the pieces."""
+    def discretize(
+        self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols, model: BipedFunctions
+    ) -> Discretization:
+        """Declare variables (with the limits' bounds), dynamics and initial-state constraints; return the pieces.
+
+        The dynamics constraints go in a block named ``"dynamics"``: verification reports its largest violation.
+        """
 
     def _build(self, structure: StepStructure) -> TranscribedStep:
         symbols = StepSymbols.create()
@@ -166,8 +182,9 @@ class Transcription(ABC):
             torques = builder.variables("torques")
             energy += rho * symbols.time_step * ca.sumsqr(torques)
         cot = energy / (symbols.total_mass * symbols.gravity * symbols.chord)
-        return TranscribedStep(structure=structure, nlp=builder.build(symbols.vector, cot),
-                               discretization=discretization)
+        return TranscribedStep(
+            structure=structure, nlp=builder.build(symbols.vector, cot), discretization=discretization
+        )
 
 
 def heel_strike_angles(symbols: StepSymbols) -> tuple[ca.SX, ca.SX]:
@@ -176,8 +193,9 @@ def heel_strike_angles(symbols: StepSymbols) -> tuple[ca.SX, ca.SX]:
     return symbols.slope - alpha, symbols.slope + alpha
 
 
-def _add_step_constraints(structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
-                          discretization: Discretization) -> ca.SX:
+def _add_step_constraints(
+    structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols, discretization: Discretization
+) -> ca.SX:
     """Constraints common to all transcriptions; returns the push-off energy (0 in the first phase)."""
     options = structure.options
     q, dq = discretization.positions, discretization.velocities
@@ -185,8 +203,7 @@ def _add_step_constraints(structure: StepStructure, builder: NLPBuilder, symbols
     q_st_end, q_sw_end = heel_strike_angles(symbols)
     builder.constrain("heel_strike_configuration", q[:, -1] - ca.vertcat(q_st_end, q_sw_end))
     interior = q[:, 1:-1]
-    clearance = ca.cos(interior[0, :] - theta) - ca.cos(interior[1, :] - theta)
-    builder.constrain("clearance", clearance, options.clearance_margin, np.inf)
+    builder.constrain("clearance", clearance(interior[0, :], interior[1, :], theta), options.clearance_margin, np.inf)
     # Replaces the thesis's infeasible "monotonically descending swing foot" (DECISIONS §4): d/dt of the
     # clearance at the last node is negative, i.e. the swing foot comes down onto the ground.
     approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]
@@ -199,8 +216,9 @@ def _add_step_constraints(structure: StepStructure, builder: NLPBuilder, symbols
     q_end4 = ca.vertcat(q[:, -1], 0, 0)
     dq_end4 = ca.vertcat(dq[:, -1], 0, 0)
     dq_plus = model4.push_off(q_end4, dq_end4, impulse, symbols.robot)
-    push_off_energy = (model4.kinetic_energy(q_end4, dq_plus, symbols.robot)
-                       - model4.kinetic_energy(q_end4, dq_end4, symbols.robot))
+    push_off_energy = model4.kinetic_energy(q_end4, dq_plus, symbols.robot) - model4.kinetic_energy(
+        q_end4, dq_end4, symbols.robot
+    )
 
     reactions = []
     for k, ddq in enumerate(discretization.accelerations):
@@ -216,8 +234,12 @@ def _add_step_constraints(structure: StepStructure, builder: NLPBuilder, symbols
         builder.constrain("unilateral_contact", reaction[1, :], 0.0, np.inf)
     if options.friction_coefficient is not None:
         mu = options.friction_coefficient
-        builder.constrain("friction_cone", ca.vertcat(reaction[0, :] - mu * reaction[1, :],
-                                                      -reaction[0, :] - mu * reaction[1, :]), -np.inf, 0.0)
+        builder.constrain(
+            "friction_cone",
+            ca.vertcat(reaction[0, :] - mu * reaction[1, :], -reaction[0, :] - mu * reaction[1, :]),
+            -np.inf,
+            0.0,
+        )
     return push_off_energy
 
 
@@ -244,8 +266,7 @@ def blended_guess(p: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
     layout = PARAMETER_LAYOUT
     x0 = p[layout["initial_state"]]
     chord, slope, h, leg = p[layout["chord"]], p[layout["slope"]], p[layout["time_step"]], p[3]
-    alpha = np.arcsin(min(chord / (2 * leg), 1.0))
-    q_end = np.array([slope - alpha, slope + alpha])
+    q_end = np.array(heel_strike_configuration(chord, slope, leg))
     s = np.linspace(0.0, 1.0, n_nodes)
     q = x0[:2, None] + (q_end - x0[:2])[:, None] * s[None, :]
     dq = np.repeat(((q_end - x0[:2]) / (h * (n_nodes - 1)))[:, None], n_nodes, axis=1)
