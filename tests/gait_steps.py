@@ -1,8 +1,9 @@
 """One-step gait problems as :class:`ReferenceProblem` s, for testing solver plugins on the NLPs they exist for.
 
-An experiment's first step, Second Phase (4-DOF), by default of the upward slope (a step that costs real work), from the transcription's standard initial guess. A
-small torque tie-break makes the optimum unique (the thesis's cost alone has a flat set of optima, so solvers could
-legitimately stop at different points with the same cost); ``f_star`` is IPOPT's optimum, computed, not typed in.
+An experiment's first step, Second Phase (4-DOF), by default on the upward slope (a step that costs real work),
+from the transcription's standard initial guess. A small torque tie-break makes the optimum unique (the thesis's
+cost alone has a flat set of optima, so solvers could legitimately stop at different points with the same cost);
+``f_star`` is IPOPT's optimum, computed, not typed in.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ TIE_BREAK = 1e-3
 
 
 @cache
-def gait_step(transcription: str, n_nodes: int, experiment_name: str = "upward-slope", phase: str = "second") -> ReferenceProblem:
+def gait_step(transcription: str, n_nodes: int, experiment_name: str = "upward-slope",
+              phase: str = "second") -> ReferenceProblem:
     registry = load_registry()
     experiment = registry.create("experiment", experiment_name)
     geometry = experiment.terrain.steps[0]
@@ -31,6 +33,7 @@ def gait_step(transcription: str, n_nodes: int, experiment_name: str = "upward-s
     parameters, x0 = data.parameter_vector(), built.initial_guess(data)
     reference = Ipopt().solve(built.nlp, parameters, x0)
     if not reference.converged:
-        raise RuntimeError(f"IPOPT does not solve {experiment_name} step 1 ({transcription}, N={n_nodes}): {reference.message}")
+        raise RuntimeError(f"IPOPT does not solve {experiment_name} step 1 ({transcription}, N={n_nodes}): "
+                           f"{reference.message}")
     return ReferenceProblem(f"{experiment_name}-step-{transcription}-{n_nodes}", built.nlp, parameters, x0,
                             reference.objective, reference.x)
