@@ -53,3 +53,16 @@ class Solver(Protocol):
     name: str
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult: ...
+
+
+def options_key(name: str, options: dict) -> tuple:
+    """A hashable, order-independent key for ``nlp.solver_cache``: a solver built with these options is reusable."""
+    return (name, _freeze(options))
+
+
+def _freeze(options):
+    if isinstance(options, dict):
+        return tuple(sorted((key, _freeze(value)) for key, value in options.items()))
+    if isinstance(options, list | tuple):
+        return tuple(_freeze(value) for value in options)
+    return options

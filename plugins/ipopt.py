@@ -13,7 +13,7 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.nlp import NLP
-from gaitbench.solver import SolverResult, SolverStatus
+from gaitbench.solver import SolverResult, SolverStatus, options_key
 
 _STATUSES = {
     "Solve_Succeeded": SolverStatus.CONVERGED,
@@ -87,17 +87,10 @@ class Ipopt:
         )
 
     def _solver(self, nlp: NLP) -> ca.Function:
-        key = ("ipopt", _freeze(self.options))
+        key = options_key("ipopt", self.options)
         if key not in nlp.solver_cache:
             nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.casadi_problem(), self.options)
         return nlp.solver_cache[key]
-
-
-def _freeze(options):
-    """Nested option dictionaries as a hashable, order-independent cache key."""
-    if isinstance(options, dict):
-        return tuple(sorted((key, _freeze(value)) for key, value in options.items()))
-    return options
 
 
 @hookimpl
