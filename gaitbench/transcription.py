@@ -68,6 +68,11 @@ class Interpolant:
     control: Callable[[float], np.ndarray]  # t -> tau
 
 
+Seed = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+"""An initial guess for a step as a function of time since the step's start: t ↦ (q, q̇, τ) in role order.
+Transcriptions sample it wherever their variables live (nodes, midpoints, intervals)."""
+
+
 @dataclass(frozen=True)
 class Discretization:
     """What a transcription hands back: nodal quantities as SX (2 × N, role order) and its pieces of the step.
@@ -75,7 +80,8 @@ class Discretization:
     ``accelerations`` may hold ``None`` columns where the scheme has none (ground reactions are then not
     evaluated there). The callables work on the solution split into named variable blocks:
     ``decode(blocks, p)`` returns (q, dq, tau, control_times) in role order, ``interpolant(blocks, p)`` the
-    continuous reconstruction, and ``guess(p)`` initial values per block (blocks left out start at 0).
+    continuous reconstruction, and ``guess(seed, p)`` initial values per block sampled from a :data:`Seed`
+    (blocks left out start at 0).
     """
 
     positions: ca.SX
@@ -84,7 +90,7 @@ class Discretization:
     hip_energy: ca.SX
     decode: Callable[[dict[str, np.ndarray], np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
     interpolant: Callable[[dict[str, np.ndarray], np.ndarray], Interpolant]
-    guess: Callable[[np.ndarray], dict[str, np.ndarray]]
+    guess: Callable[[Seed, np.ndarray], dict[str, np.ndarray]]
 
 
 @dataclass
@@ -107,6 +113,20 @@ class StepTrajectory:
     def control(self, t: float) -> np.ndarray:
         return roles_to_legs(self._interpolant.control(t), self.stance)
 
+    def seed(self, offset: float = 0.0) -> Seed:
+        """This trajectory from time ``offset`` on, as the initial guess of another step problem.
+
+        Meant for problems with the same stance leg: a First-Phase trajectory seeding the Second Phase, or the
+        tail of a complete trajectory seeding a sectional problem that starts ``offset`` seconds in.
+        """
+        interpolant = self._interpolant
+
+        def seed(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            q, dq = interpolant.state(t + offset)
+            return q, dq, interpolant.control(t + offset)
+
+        return seed
+
     @property
     def duration(self) -> float:
         return float(self.times[-1] - self.times[0])
@@ -120,9 +140,12 @@ class TranscribedStep:
     nlp: NLP
     discretization: Discretization
 
-    def initial_guess(self, data: StepData) -> np.ndarray:
+    def initial_guess(self, data: StepData, seed: Seed | None = None) -> np.ndarray:
+        """The variables sampled from ``seed``; by default the blended guess of DECISIONS §7, the same for every
+        solver."""
+        p = data.parameter_vector()
         guess = np.zeros(self.nlp.n_variables)
-        for name, values in self.discretization.guess(data.parameter_vector()).items():
+        for name, values in self.discretization.guess(seed or blended_seed(p, self.structure.n_nodes), p).items():
             guess[self.nlp.variable_blocks[name]] = values
         return guess
 
@@ -260,17 +283,26 @@ def absolute_power(builder: NLPBuilder, structure: StepStructure, name: str, tau
     return positive + negative
 
 
-def blended_guess(p: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+def blended_seed(p: np.ndarray, n_nodes: int) -> Seed:
     """DECISIONS §7: angles blend linearly from the initial state to the heel-strike configuration, with the
-    matching constant rates; the same guess for every solver. Returns role-order (q, dq), each 2 × N."""
+    matching constant rates and zero torque."""
     layout = PARAMETER_LAYOUT
     x0 = p[layout["initial_state"]]
     chord, slope, h, leg = p[layout["chord"]], p[layout["slope"]], p[layout["time_step"]], p[3]
     q_end = np.array(heel_strike_configuration(chord, slope, leg))
-    s = np.linspace(0.0, 1.0, n_nodes)
-    q = x0[:2, None] + (q_end - x0[:2])[:, None] * s[None, :]
-    dq = np.repeat(((q_end - x0[:2]) / (h * (n_nodes - 1)))[:, None], n_nodes, axis=1)
-    return q, dq
+    duration = h * (n_nodes - 1)
+    rate = (q_end - x0[:2]) / duration
+
+    def seed(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return x0[:2] + rate * t, rate.copy(), np.zeros(2)
+
+    return seed
+
+
+def sample_seed(seed: Seed, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seed at ``times``: (q, q̇, τ), each 2 × len(times), role order."""
+    samples = [seed(float(t)) for t in times]
+    return tuple(np.column_stack([sample[i] for sample in samples]) for i in range(3))
 
 
 def state_derivative(model: BipedFunctions) -> ca.Function:

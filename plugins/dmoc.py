@@ -26,9 +26,9 @@ from gaitbench.transcription import (
     StepSymbols,
     Transcription,
     absolute_power,
-    blended_guess,
     cubic_hermite,
     locate_interval,
+    sample_seed,
 )
 
 TIME_STEP = PARAMETER_LAYOUT["time_step"]
@@ -80,10 +80,12 @@ class DiscreteMechanics(Transcription):
         def interpolant(blocks, p):
             return dmoc_interpolant(*nodes(blocks, p), p[TIME_STEP])
 
-        def guess(p):
-            q_guess, dq_guess = blended_guess(p, n)
+        def guess(seed, p):
+            h = p[TIME_STEP]
+            q_guess, dq_guess, _ = sample_seed(seed, np.arange(n) * h)
+            _, _, tau_guess = sample_seed(seed, (np.arange(n - 1) + 0.5) * h)  # the interval's forcing
             return {"positions": q_guess.flatten(order="F"), "start_velocity": dq_guess[:, 0],
-                    "end_velocity": dq_guess[:, -1]}
+                    "end_velocity": dq_guess[:, -1], "torques": tau_guess.flatten(order="F")}
 
         return Discretization(positions=q, velocities=velocities, accelerations=accelerations,
                               hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)

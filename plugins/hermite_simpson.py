@@ -17,10 +17,10 @@ from gaitbench.transcription import (
     Interpolant,
     Transcription,
     absolute_power,
-    blended_guess,
     collocation_variables,
     cubic_hermite,
     locate_interval,
+    sample_seed,
     state_derivative,
 )
 
@@ -59,9 +59,9 @@ class HermiteSimpson(Transcription):
             fs = np.asarray(dynamics.map(n)(xs, us, np.repeat(p[0:8, None], n, axis=1)))
             return hermite_interpolant(xs, fs, us, p[14])
 
-        def guess(p):
-            q, dq = blended_guess(p, n)
-            return {"states": np.vstack([q, dq]).flatten(order="F")}
+        def guess(seed, p):
+            q, dq, tau = sample_seed(seed, np.arange(n) * p[14])
+            return {"states": np.vstack([q, dq]).flatten(order="F"), "torques": tau.flatten(order="F")}
 
         accelerations = [slopes[2:4, k] for k in range(n)]
         return Discretization(positions=states[:2, :], velocities=states[2:4, :], accelerations=accelerations,

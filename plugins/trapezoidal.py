@@ -22,9 +22,9 @@ from gaitbench.transcription import (
     StepSymbols,
     Transcription,
     absolute_power,
-    blended_guess,
     collocation_variables,
     locate_interval,
+    sample_seed,
     state_derivative,
 )
 
@@ -60,9 +60,9 @@ class Trapezoidal(Transcription):
             fs = np.asarray(dynamics.map(n)(xs, us, np.repeat(p[ROBOT, None], n, axis=1)))
             return trapezoidal_interpolant(xs, fs, us, p[TIME_STEP])
 
-        def guess(p):
-            q, dq = blended_guess(p, n)
-            return {"states": np.vstack([q, dq]).flatten(order="F")}
+        def guess(seed, p):
+            q, dq, tau = sample_seed(seed, np.arange(n) * p[TIME_STEP])
+            return {"states": np.vstack([q, dq]).flatten(order="F"), "torques": tau.flatten(order="F")}
 
         return Discretization(positions=states[:2, :], velocities=states[2:4, :],
                               accelerations=[slopes[2:4, k] for k in range(n)], hip_energy=hip_energy,
