@@ -17,7 +17,7 @@ import numpy as np
 from gaitbench import __version__
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.plugins import load_registry
-from gaitbench.walk import solve_walk
+from gaitbench.walk import WalkProblem
 
 TRANSCRIPTIONS = ("hermite-simpson", "trapezoidal", "dmoc")
 NODES = (25, 50, 100, 200)
@@ -59,8 +59,9 @@ def step_rows(registry, experiment):
 def walk_rows(registry, experiment):
     rows = []
     for name in TRANSCRIPTIONS:
-        walk = solve_walk(experiment, registry.create("transcription", name), registry.create("solver", "ipopt"),
-                          WALK_NODES)
+        problem = WalkProblem(experiment, registry.create("transcription", name), registry.create("solver", "ipopt"),
+                              WALK_NODES)
+        walk = registry.create("strategy", "one-phase").solve(problem)
         rows.append({"transcription": name, "N": WALK_NODES, "complete": walk.complete, "acot": walk.acot,
                      "failure": walk.failure, "wall_time_s": walk.wall_time_s,
                      "solve_time_s": sum(s.solver_result.wall_time_s for s in walk.steps if s.solver_result),

@@ -148,13 +148,13 @@ def experiments_show(ctx: click.Context, name: str) -> None:
     render_experiment(experiment, Console())
 
 
-def _parse_options(pairs: tuple[str, ...]) -> dict[str, object]:
+def _parse_options(pairs: tuple[str, ...], option: str) -> dict[str, object]:
     """KEY=VALUE pairs with numbers and true/false converted, for plugin factories."""
     options: dict[str, object] = {}
     for pair in pairs:
         key, sep, text = pair.partition("=")
         if not sep or not key:
-            raise click.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint="--solver-option")
+            raise click.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint=option)
         value: object = text
         for convert in (int, float):
             try:
@@ -195,11 +195,20 @@ def _create(ctx: click.Context, kind: str, name: str, **options):
 )
 @click.option("--steps", type=click.IntRange(min=1), default=None, help="Solve only the first K steps.")
 @click.option(
-    "--phase",
-    type=click.Choice(["second", "first"]),
-    default="second",
+    "--strategy",
+    "-S",
+    "strategy_name",
+    default="one-phase",
     show_default=True,
-    help="second: the full 4-DOF problem with push-off (One Phase); first: the 2-DOF First Phase problem.",
+    help="Strategy plugin: one-phase, warm-start, decrease-and-conquer, whole-walk, ...",
+)
+@click.option(
+    "--strategy-option",
+    "-x",
+    "strategy_options",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Passed to the strategy, e.g. -x phase=first (one-phase on the 2-DOF problem), -x polish=false.",
 )
 @click.option(
     "--solver-option",
@@ -238,26 +247,29 @@ def solve(
     solver_name: str,
     n_nodes: int,
     steps: int | None,
-    phase: str,
+    strategy_name: str,
+    strategy_options: tuple[str, ...],
     solver_options: tuple[str, ...],
     absolute_value: str,
     torque_regularization: float,
     out: Path | None,
 ) -> None:
-    """Solve an experiment's walk one phase, step by step, and verify every step.
+    """Solve an experiment's walk with a strategy, and verify every step.
 
-    Each step's NLP is solved from the heel-strike state of the previous one. Every solved step is checked: its
-    largest dynamic defect, its re-simulation error, and its COT recomputed from the trajectory itself. The walk
-    stops at the first step that fails, keeping what was solved. Exit status 1 if the walk is incomplete.
+    Step-by-step strategies solve each step from the heel-strike state of the previous one. Every reported step is
+    checked: its largest dynamic defect, its re-simulation error, and its COT recomputed from the trajectory
+    itself. The walk stops at the first step that fails, keeping what was solved. Exit status 1 if the walk is
+    incomplete.
     """
     from dataclasses import replace
 
     from gaitbench.gait_problem import ProblemOptions
-    from gaitbench.walk import solve_walk
+    from gaitbench.walk import WalkProblem
 
     experiment = _create(ctx, "experiment", experiment_name)
     transcriber = _create(ctx, "transcription", transcription)
-    solver = _create(ctx, "solver", solver_name, **_parse_options(solver_options))
+    solver = _create(ctx, "solver", solver_name, **_parse_options(solver_options, "--solver-option"))
+    strategy = _create(ctx, "strategy", strategy_name, **_parse_options(strategy_options, "--strategy-option"))
     if steps is not None and steps > experiment.n_steps:
         raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
     options = replace(
@@ -268,16 +280,9 @@ def solve(
     console = Console()
     total = steps or experiment.n_steps
     with console.status(f"solving step 1 of {total}") as status:
-        walk = solve_walk(
-            experiment,
-            transcriber,
-            solver,
-            n_nodes,
-            steps=steps,
-            phase=phase,
-            options=options,
-            on_step=lambda outcome: status.update(f"solving step {outcome.index + 1} of {total}"),
-        )
+        problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options)
+        walk = strategy.solve(problem, on_step=lambda outcome: status.update(f"solving step {outcome.index + 1} "
+                                                                             f"of {total}"))
     _print_walk(console, walk)
     if out is not None:
         path = walk.save(out)
@@ -308,6 +313,14 @@ def _print_walk(console: Console, walk) -> None:
         console.print(f"ACOT = {walk.acot:.4f} over {len(walk.steps)} steps ({walk.wall_time_s:.1f} s)")
     else:
         _print(console, f"incomplete walk: {walk.failure}", "red")
+    details = walk.strategy_details
+    if "claimed_acot" in details:
+        verified = details["verified_acot"]
+        failing = len(walk.steps) - details["steps_satisfying_dynamics"]
+        console.print(f"claimed ACOT {_fmt(details['claimed_acot'], '.4f')}: {failing} of {len(walk.steps)} "
+                      "chosen trajectories fail the dynamics (see max defect, resim error)")
+        console.print(f"verified ACOT {_fmt(verified, '.4f')} (each step polished: re-solved from the chosen "
+                      "trajectory)")
 
 
 def _fmt(value, spec: str) -> str:

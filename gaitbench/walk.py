@@ -1,4 +1,4 @@
-"""Multi-step walking: H per-step problems chained through the end-of-step events.
+"""Walks: the problem a strategy solves, what it returns, and the step-by-step chaining most strategies share.
 
 Each step starts from the heel-strike map (after push-off, in the second phase) of the previous step's solution
 (DECISIONS §7). A step whose geometry is infeasible or whose solve fails ends the walk with its reason; the steps
@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from gaitbench.experiment import Experiment
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.mechanics import BipedModel
 from gaitbench.solver import Solver, SolverResult
-from gaitbench.transcription import StepTrajectory, Transcription
+from gaitbench.transcription import Seed, StepTrajectory, TranscribedStep, Transcription
 from gaitbench.verify import StepVerification, verify_step
 
 
@@ -33,10 +34,14 @@ class StepOutcome:
     solver_result: SolverResult | None = None
     trajectory: StepTrajectory | None = None
     verification: StepVerification | None = None
+    next_state: np.ndarray | None = field(default=None, repr=False)
+    """(q1, q2, q̇1, q̇2) after this step's push-off and heel strike: where the next step starts."""
+    details: dict = field(default_factory=dict)
+    """What the strategy did to produce this step (candidates, choices, polish), JSON-ready."""
 
     @property
     def solved(self) -> bool:
-        return self.verification is not None
+        return self.verification is not None and self.next_state is not None
 
     def as_dict(self) -> dict:
         result, check = self.solver_result, self.verification
@@ -57,6 +62,7 @@ class StepOutcome:
             "hip_energy": check.hip_energy if check else None,
             "push_off_energy": check.push_off_energy if check else None,
             "push_off_impulse": self.trajectory.push_off if self.trajectory else None,
+            **({"details": self.details} if self.details else {}),
         }
 
 
@@ -71,6 +77,8 @@ class WalkResult:
     requested_steps: int
     steps: list[StepOutcome] = field(default_factory=list)
     wall_time_s: float = 0.0
+    strategy_details: dict = field(default_factory=dict)
+    """Walk-level figures of the strategy (for decrease-and-conquer: claimed and verified ACOT, candidates)."""
 
     @property
     def failure(self) -> str | None:
@@ -99,6 +107,7 @@ class WalkResult:
             "acot": self.acot,
             "failure": self.failure,
             "wall_time_s": self.wall_time_s,
+            "strategy_details": self.strategy_details,
             "steps": [step.as_dict() for step in self.steps],
         }
 
@@ -127,61 +136,101 @@ class WalkResult:
         return path
 
 
-def solve_walk(
-    experiment: Experiment,
-    transcription: Transcription,
-    solver: Solver,
-    n_nodes: int,
-    *,
-    steps: int | None = None,
-    phase: str = "second",
-    options: ProblemOptions | None = None,
-    on_step: Callable[[StepOutcome], None] | None = None,
-) -> WalkResult:
-    """Solve the experiment's walk one phase, step by step (the thesis's One Phase method when ``phase='second'``)."""
-    n_steps = experiment.n_steps if steps is None else steps
-    if not 1 <= n_steps <= experiment.n_steps:
-        raise ValueError(f"steps = {steps}: the {experiment.name} experiment has {experiment.n_steps} steps")
-    options = options or ProblemOptions(limits=experiment.limits)
-    structure = StepStructure(phase, n_nodes, options)
-    model = BipedModel(experiment.robot, 4 if phase == "second" else 2)
-    walk = WalkResult(
-        experiment=experiment.name,
-        transcription=transcription.name,
-        solver=solver.name,
-        strategy="one-phase",
-        N=n_nodes,
-        phase=phase,
-        requested_steps=n_steps,
-    )
+@dataclass(frozen=True)
+class WalkProblem:
+    """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
+    transcription and one solver, under the given problem options."""
+
+    experiment: Experiment
+    transcription: Transcription
+    solver: Solver
+    n_nodes: int
+    steps: int | None = None
+    options: ProblemOptions | None = None
+
+    def __post_init__(self) -> None:
+        if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
+            raise ValueError(f"steps = {self.steps}: the {self.experiment.name} experiment has "
+                             f"{self.experiment.n_steps} steps")
+        if self.options is None:
+            object.__setattr__(self, "options", ProblemOptions(limits=self.experiment.limits))
+
+    @property
+    def n_steps(self) -> int:
+        return self.experiment.n_steps if self.steps is None else self.steps
+
+    def structure(self, phase: str, n_nodes: int | None = None) -> StepStructure:
+        return StepStructure(phase, n_nodes or self.n_nodes, self.options)
+
+    def step_data(self, index: int, state: np.ndarray) -> StepData:
+        """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""
+        geometry = self.experiment.terrain.steps[index - 1]
+        return StepData(self.experiment.robot, self.experiment.stance_leg(index), np.asarray(state, dtype=float),
+                        geometry.D, geometry.theta, self.experiment.time_step(self.n_nodes))
+
+    def model(self, phase: str) -> BipedModel:
+        """The model a step of ``phase`` is verified with: 4-DOF (push-off acts) or the 2-DOF First Phase."""
+        return BipedModel(self.experiment.robot, 4 if phase == "second" else 2)
+
+    def result(self, strategy: str, phase: str = "second") -> WalkResult:
+        return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
+                          solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
+                          requested_steps=self.n_steps)
+
+
+class Strategy(Protocol):
+    """How the per-step gait problems of a walk are posed, solved and combined (a ``strategy`` plugin)."""
+
+    name: str
+
+    def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
+        """Walk the problem; report each finished step to ``on_step``. Failures end the walk, never raise."""
+
+
+StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
+"""Solves step ``index`` from a (q1, q2, q̇1, q̇2) state; a solved outcome carries the next step's state."""
+
+
+def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
+                      on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second") -> WalkResult:
+    """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
+
+    A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
+    steps before it are kept.
+    """
+    walk = problem.result(strategy, phase)
     started = time.perf_counter()
-    checks = experiment.feasibility()
-    state = np.asarray(experiment.initial_state)[[0, 1, 4, 5]]
-    for index in range(1, n_steps + 1):
-        outcome = _solve_step(experiment, transcription, solver, structure, model, index, state, checks[index - 1])
+    checks = problem.experiment.feasibility()
+    state = np.asarray(problem.experiment.initial_state)[[0, 1, 4, 5]]
+    for index in range(1, problem.n_steps + 1):
+        check = checks[index - 1]
+        if check.ok:
+            outcome = solve_step(problem, index, state)
+        else:
+            outcome = StepOutcome(index, problem.experiment.stance_leg(index), "infeasible_geometry",
+                                  "; ".join(check.problems))
         walk.steps.append(outcome)
         if on_step:
             on_step(outcome)
         if not outcome.solved:
             break
-        state = next_step_state(model, outcome.trajectory)
+        state = outcome.next_state
     walk.wall_time_s = time.perf_counter() - started
     return walk
 
 
-def _solve_step(experiment, transcription, solver, structure, model, index, state, check) -> StepOutcome:
-    stance = experiment.stance_leg(index)
-    if not check.ok:
-        return StepOutcome(index, stance, "infeasible_geometry", "; ".join(check.problems))
-    step = experiment.terrain.steps[index - 1]
-    data = StepData(experiment.robot, stance, state, step.D, step.theta, experiment.time_step(structure.n_nodes))
-    built = transcription.build(structure)
-    result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
+                     seed: Seed | None = None, phase: str = "second") -> StepOutcome:
+    """Step ``index``'s NLP solved from ``seed`` (the blended guess by default), decoded, verified and chained."""
+    result = problem.solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data, seed))
     if not result.converged:
-        return StepOutcome(index, stance, result.status.value, f"{result.status.value}: {result.message}", result)
+        return StepOutcome(index, data.stance, result.status.value, f"{result.status.value}: {result.message}",
+                           result)
     trajectory = built.trajectory(result.x, data)
+    model = problem.model(phase)
     verification = verify_step(built, result.x, data, trajectory, model)
-    return StepOutcome(index, stance, result.status.value, result.message, result, trajectory, verification)
+    return StepOutcome(index, data.stance, result.status.value, result.message, result, trajectory, verification,
+                       next_state=next_step_state(model, trajectory))
 
 
 def next_step_state(model: BipedModel, trajectory: StepTrajectory) -> np.ndarray:

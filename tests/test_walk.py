@@ -12,9 +12,10 @@ from gaitbench.mechanics import BipedModel, biped_functions
 from gaitbench.plugins import load_registry
 from gaitbench.transcription import state_derivative
 from gaitbench.verify import verify_step
-from gaitbench.walk import next_step_state, solve_walk
+from gaitbench.walk import WalkProblem, next_step_state
 from plugins.hermite_simpson import HermiteSimpson
 from plugins.ipopt import Ipopt
+from plugins.one_phase import OnePhase
 
 REGISTRY = load_registry()
 
@@ -86,7 +87,7 @@ def test_a_flat_step_converges_and_lands_on_its_heel_strike_configuration(n_node
 def test_even_steps_are_solved_in_mirrored_role_coordinates():
     """Step 2 (Leg 2 stance) lands with Leg 2 behind and Leg 1 in front, in leg-labelled output."""
     experiment = REGISTRY.create("experiment", "forward")
-    walk = solve_walk(experiment, HermiteSimpson(), Ipopt(), 21, steps=2)
+    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 21, steps=2))
     assert walk.complete, walk.failure
     step2 = walk.steps[1].trajectory
     alpha = np.arcsin(experiment.terrain.steps[1].D / (2 * experiment.robot.l))
@@ -102,14 +103,14 @@ def test_even_steps_are_solved_in_mirrored_role_coordinates():
 
 def test_a_failed_step_ends_the_walk_keeping_the_solved_steps():
     experiment = REGISTRY.create("experiment", "forward")
-    walk = solve_walk(experiment, HermiteSimpson(), Ipopt(max_iterations=5), 21, steps=2)
+    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(max_iterations=5), 21, steps=2))
     assert not walk.complete and walk.acot is None
     assert walk.failure.startswith("step 1: iteration_limit")
 
 
 def test_infeasible_geometry_is_reported_before_solving():
     experiment = REGISTRY.create("experiment", "downward-slope")
-    walk = solve_walk(experiment, HermiteSimpson(), Ipopt(), 21, steps=2)
+    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 21, steps=2))
     assert walk.steps[0].status == "infeasible_geometry"
     assert "below the lower angle bound" in walk.failure and walk.steps[0].solver_result is None
 

@@ -1,0 +1,238 @@
+"""Decrease & Conquer (thesis §3.7; ch3b §6; DECISIONS §7), with the verification the thesis leaves out.
+
+Per step:
+
+1. the First Phase (2-DOF) problem;
+2. the complete Second Phase (4-DOF) problem from the step's initial state (k0 = 1), seeded by the First Phase;
+3. the sectional Second Phase problems, k0 = 2 … N−2, each started from the First Phase state at node k0 and
+   covering nodes k0 … N with the same time step (the thesis's k0 = N−1 would leave a two-node problem, below the
+   three nodes a step needs, so it is not posed);
+4. synthesis: at each node the candidate with the lowest point cost that keeps the reference's "typical value
+   relation", with backtracking (:mod:`plugins.synthesis`);
+5. the sectional trajectories completed with the earlier nodes, and the final choice by the thesis's candidate COT
+   among the synthesized and completed trajectories;
+6. the next step from the heel-strike map of the chosen trajectory.
+
+The synthesized (and completed) trajectories are node-wise patchworks of different NLP solutions, so in general
+they are not motions of the robot. Every chosen trajectory is therefore verified like any other step — the
+transcription's dynamics residual at its nodes and its re-simulation under its own torques — and, with ``polish``,
+the complete 4-DOF problem is re-solved from it: the polished COT is the figure of a trajectory that satisfies the
+dynamics, reported beside the claimed one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from gaitbench import Registration, hookimpl
+from gaitbench.energetics import candidate_cot, point_costs
+from gaitbench.gait_problem import StepData, legs_to_roles, sectional_structure
+from gaitbench.transcription import Interpolant, StepTrajectory, cubic_hermite, locate_interval
+from gaitbench.verify import verify_step
+from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, next_step_state, solve_and_verify, walk_step_by_step
+from plugins.synthesis import complete_sections, synthesize
+from plugins.warm_start import first_phase_summary
+
+DYNAMICS_TOLERANCE = 1e-6
+"""A chosen trajectory whose dynamics residual exceeds this is reported as failing verification."""
+
+
+class DecreaseAndConquer:
+    """Options: ``polish`` (True: re-solve the complete problem from each chosen trajectory and report its COT),
+    ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
+    the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
+    to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search)."""
+
+    name = "decrease-and-conquer"
+
+    def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000):
+        if sectional_guess not in ("first-phase", "complete"):
+            raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
+        self.polish = bool(polish)
+        self.sectional_guess = sectional_guess
+        self.max_checks = int(max_checks)
+
+    def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
+        walk = walk_step_by_step(problem, self.name, self._solve_step, on_step)
+        walk.strategy_details = walk_summary(walk)
+        return walk
+
+    def _solve_step(self, problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
+        transcription, n = problem.transcription, problem.n_nodes
+        data = problem.step_data(index, state)
+        first = solve_and_verify(problem, index, transcription.build(problem.structure("first")), data,
+                                 phase="first")
+        if not first.solved:
+            first.message = f"First Phase: {first.message}"
+            return first
+        complete_built = transcription.build(problem.structure("second"))
+        complete = solve_and_verify(problem, index, complete_built, data, seed=first.trajectory.seed())
+        details = {"first_phase": first_phase_summary(first), "complete": _summary(complete)}
+        if not complete.solved:
+            complete.message = f"complete Second Phase: {complete.message}"
+            complete.details = details
+            return complete
+
+        h = data.time_step
+        candidates, starts, failed = [complete.trajectory], [0], []
+        for k0 in range(2, n - 1):
+            start = k0 - 1  # 0-based node
+            section_data = StepData(data.robot, data.stance, np.r_[first.trajectory.q[start],
+                                                                  first.trajectory.dq[start]],
+                                    data.chord, data.slope, h)
+            guess = (first if self.sectional_guess == "first-phase" else complete).trajectory.seed(start * h)
+            built = transcription.build(sectional_structure(problem.structure("second"), k0))
+            result = problem.solver.solve(built.nlp, section_data.parameter_vector(),
+                                          built.initial_guess(section_data, guess))
+            if result.converged:
+                candidates.append(built.trajectory(result.x, section_data))
+                starts.append(start)
+            else:
+                failed.append({"k0": k0, "status": result.status.value, "message": result.message})
+
+        nodes = NodeValues.of(candidates, starts, n, h, problem.model("second"))
+        synthesis = synthesize(nodes.pcot, nodes.values, max_checks=self.max_checks)
+        completed = nodes.completed(starts)
+        options = {"synthesized": nodes.patch(synthesis.selection)}
+        options |= {_label(start): completed.patch([j] * n) for j, start in enumerate(starts)}
+        robot = data.robot
+        cots = {label: candidate_cot(patch.pcot, robot.total_mass, data.chord, robot.g)
+                for label, patch in options.items()}
+        chosen_label = min(cots, key=cots.get)
+        chosen = options[chosen_label]
+        trajectory = chosen.trajectory(data.stance, h)
+        model = problem.model("second")
+        x_patch = complete_built.initial_guess(data, trajectory.seed())
+        verification = verify_step(complete_built, x_patch, data, trajectory, model)
+        details |= {
+            "candidates": len(candidates), "failed_sections": failed,
+            "selection": [_label(starts[j]) for j in synthesis.selection],
+            "backtracks": synthesis.backtracks, "relation_checks": synthesis.checks,
+            "synthesis_exhausted": synthesis.exhausted, "candidate_cots": cots, "chosen": chosen_label,
+            "claimed_cot": verification.cot,
+            "verified": verification.max_defect <= DYNAMICS_TOLERANCE,
+        }
+        if self.polish:
+            polished = solve_and_verify(problem, index, complete_built, data, seed=trajectory.seed())
+            details["polished"] = _summary(polished)
+        message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
+                                          f"fails verification: dynamics residual {verification.max_defect:.2e}")
+        return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
+                           verification, next_state=next_step_state(model, trajectory), details=details)
+
+
+def _label(start: int) -> str:
+    return "complete" if start == 0 else f"sectional-{start + 1}"
+
+
+def _summary(outcome: StepOutcome) -> dict:
+    result = outcome.solver_result
+    return {"status": outcome.status, "cot": outcome.verification.cot if outcome.solved else None,
+            "iterations": result.iterations if result else None,
+            "solve_time_s": result.wall_time_s if result else None,
+            "resim_error": outcome.verification.resim_error if outcome.solved else None}
+
+
+class NodeValues:
+    """Every candidate's values at the step's N nodes (NaN before its start): states, torques, point costs."""
+
+    def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: np.ndarray,
+                 push_off_energy: np.ndarray) -> None:
+        self.q, self.dq, self.tau = q, dq, tau  # (J, N, 2), leg order
+        self.push_off, self.push_off_energy = push_off, push_off_energy  # (J,)
+
+    @classmethod
+    def of(cls, candidates: list[StepTrajectory], starts: list[int], n_nodes: int, h: float, model) -> NodeValues:
+        shape = (len(candidates), n_nodes, 2)
+        q, dq, tau = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+        push_off, energy = np.zeros(len(candidates)), np.zeros(len(candidates))
+        for j, (trajectory, start) in enumerate(zip(candidates, starts, strict=True)):
+            q[j, start:], dq[j, start:] = trajectory.q, trajectory.dq
+            tau[j, start:] = [trajectory.control(t) for t in trajectory.times]
+            push_off[j] = trajectory.push_off
+            foot = np.zeros(2)
+            _, energy[j] = model.push_off(np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot],
+                                          trajectory.push_off, trajectory.stance)
+        return cls(q, dq, tau, push_off, energy)
+
+    @property
+    def values(self) -> np.ndarray:
+        """(J, N, 4): q1, q2, q̇1, q̇2 — the variables the synthesis's relation check compares."""
+        return np.concatenate([self.q, self.dq], axis=2)
+
+    @property
+    def pcot(self) -> np.ndarray:
+        """(J, N) point costs, the push-off energy of each candidate at its last node."""
+        rows = []
+        for j in range(self.q.shape[0]):
+            defined = ~np.isnan(self.q[j, :, 0])
+            row = np.full(self.q.shape[1], np.nan)
+            row[defined] = point_costs(self.dq[j, defined], self.tau[j, defined], self.push_off_energy[j])
+            rows.append(row)
+        return np.array(rows)
+
+    def completed(self, starts: list[int]) -> NodeValues:
+        return NodeValues(complete_sections(self.q, starts), complete_sections(self.dq, starts),
+                          complete_sections(self.tau, starts), self.push_off, self.push_off_energy)
+
+    def patch(self, selection: list[int]) -> Patch:
+        nodes = np.arange(len(selection))
+        last = selection[-1]
+        return Patch(self.q[selection, nodes], self.dq[selection, nodes], self.tau[selection, nodes],
+                     float(self.push_off[last]), float(self.push_off_energy[last]))
+
+
+class Patch:
+    """A trajectory assembled node by node from candidates: what the thesis synthesizes and completes."""
+
+    def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float, push_off_energy: float):
+        self.q, self.dq, self.tau = q, dq, tau
+        self.push_off, self.push_off_energy = push_off, push_off_energy
+
+    @property
+    def pcot(self) -> np.ndarray:
+        return point_costs(self.dq, self.tau, self.push_off_energy)
+
+    def trajectory(self, stance: int, h: float) -> StepTrajectory:
+        """The patch as a step trajectory: cubic Hermite angles through the nodal (q, q̇), linear rates and
+        torques — the smoothest reading of node values that carry no interpolant of their own."""
+        n = len(self.q)
+        q, dq, tau = (legs_to_roles(a, stance) for a in (self.q, self.dq, self.tau))
+
+        def state(t: float) -> tuple[np.ndarray, np.ndarray]:
+            k, s = locate_interval(t, h, n)
+            angles, _ = cubic_hermite(q[k], q[k + 1], h * dq[k], h * dq[k + 1], s)
+            return angles, (1 - s) * dq[k] + s * dq[k + 1]
+
+        def control(t: float) -> np.ndarray:
+            k, s = locate_interval(t, h, n)
+            return (1 - s) * tau[k] + s * tau[k + 1]
+
+        times = np.arange(n) * h
+        return StepTrajectory(times=times, q=self.q, dq=self.dq, tau=self.tau, control_times=times,
+                              push_off=self.push_off, stance=stance, _interpolant=Interpolant(state, control))
+
+
+def walk_summary(walk: WalkResult) -> dict:
+    """Claimed against verified: the thesis's figure and the figure of trajectories that satisfy the dynamics."""
+    steps = [step for step in walk.steps if step.details.get("chosen")]
+    polished = [step.details.get("polished", {}).get("cot") for step in steps]
+    complete = walk.complete
+    return {
+        "claimed_acot": walk.acot,
+        "verified_acot": float(np.mean(polished)) if complete and polished and None not in polished else None,
+        "steps_satisfying_dynamics": sum(step.details["verified"] for step in steps),
+        "chosen": [step.details["chosen"] for step in steps],
+        "candidates": sum(step.details["candidates"] for step in steps),
+        "failed_sections": sum(len(step.details["failed_sections"]) for step in steps),
+        "backtracks": sum(step.details["backtracks"] for step in steps),
+    }
+
+
+@hookimpl
+def register_strategies():
+    return [Registration("decrease-and-conquer", "First Phase, N−2 Second Phase solves, synthesis by point cost "
+                         "with verification and backtracking (the thesis's method), verified and polished",
+                         DecreaseAndConquer)]

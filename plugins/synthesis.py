@@ -1,0 +1,108 @@
+"""Decrease & Conquer's trajectory synthesis with on-line verification (thesis §3.7, ch3b §6.4–6.5).
+
+Pure logic on node arrays, independent of how the candidates were computed: candidate ``j`` is defined from its
+start node on; at every node the candidate with the lowest point cost is taken, provided the "typical value
+relation" with the previous node holds (each of q1, q2, q̇1, q̇2 rises, falls or stays as it does along the
+reference, the complete trajectory); otherwise the next-cheapest candidate is tried, and when none fits the search
+steps back one node and tries that node's next candidate (depth-first with backtracking).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+REFERENCE = 0
+"""Candidate 0 is the complete trajectory (k0 = 1), defined at every node: the verification's reference."""
+
+
+@dataclass(frozen=True)
+class Synthesis:
+    selection: list[int]
+    """The candidate each node's values come from."""
+    backtracks: int
+    """How many times the search stepped back to an earlier node."""
+    checks: int
+    """Relation checks made."""
+    exhausted: bool
+    """The search went over its check budget and fell back to the reference."""
+
+
+def relation_holds(candidate: np.ndarray, previous: np.ndarray, reference: np.ndarray, reference_previous: np.ndarray,
+                   tolerance: float = 1e-9) -> bool:
+    """Whether every variable changes from ``previous`` to ``candidate`` in the direction the reference changes.
+
+    The thesis's "typical value relation" (L10054–10089) is not defined further; this is the reading of ch3b
+    §6.4: the signs of the increments agree, with changes within ``tolerance`` counting as "equal".
+    """
+    return bool(np.array_equal(_direction(candidate - previous, tolerance),
+                               _direction(reference - reference_previous, tolerance)))
+
+
+def _direction(change: np.ndarray, tolerance: float) -> np.ndarray:
+    return np.where(np.abs(change) <= tolerance, 0, np.sign(change))
+
+
+def synthesize(point_costs: np.ndarray, values: np.ndarray, *, tolerance: float = 1e-9,
+               max_checks: int = 1_000_000) -> Synthesis:
+    """Select a candidate per node.
+
+    ``point_costs`` is (J, N) and ``values`` (J, N, V), NaN where a candidate is not defined (before its start
+    node); candidate 0 is the reference and must be defined everywhere. The all-reference path satisfies the
+    relation with itself, so the search always ends with a path; it is exponential in the worst case, and after
+    ``max_checks`` relation checks every node takes the reference.
+    """
+    point_costs = np.asarray(point_costs, dtype=float)
+    values = np.asarray(values, dtype=float)
+    n_nodes = point_costs.shape[1]
+    if np.isnan(point_costs[REFERENCE]).any() or np.isnan(values[REFERENCE]).any():
+        raise ValueError("the reference candidate (row 0) must be defined at every node")
+    ranked = [_ranked(point_costs[:, k]) for k in range(n_nodes)]
+    selection = [REFERENCE] * n_nodes
+    tried = [0] * n_nodes
+    backtracks = checks = 0
+    k = 1
+    while k < n_nodes:
+        found = False
+        while tried[k] < len(ranked[k]):
+            j = ranked[k][tried[k]]
+            checks += 1
+            if relation_holds(values[j, k], values[selection[k - 1], k - 1], values[REFERENCE, k],
+                              values[REFERENCE, k - 1], tolerance):
+                selection[k] = j
+                found = True
+                break
+            tried[k] += 1
+        if checks > max_checks:
+            return Synthesis([REFERENCE] * n_nodes, backtracks, checks, exhausted=True)
+        if found:
+            k += 1
+            if k < n_nodes:
+                tried[k] = 0
+            continue
+        tried[k] = 0
+        k -= 1  # never reaches node 0: the reference at node k always fits the reference at k − 1
+        backtracks += 1
+        tried[k] += 1
+    return Synthesis(selection, backtracks, checks, exhausted=False)
+
+
+def _ranked(costs: np.ndarray) -> list[int]:
+    """Candidates defined at a node, cheapest first (ties by candidate index, so the result is deterministic)."""
+    defined = np.flatnonzero(~np.isnan(costs))
+    return [int(j) for j in defined[np.argsort(costs[defined], kind="stable")]]
+
+
+def complete_sections(values: np.ndarray, starts: list[int]) -> np.ndarray:
+    """Each candidate's missing nodes filled in (ch3b §6.5): node m < start comes from the candidate starting at m
+    (whose values there are the First Phase's), or from the reference where no candidate starts at m.
+
+    ``values`` is (J, N, ...) with NaN before each start; returns the completed copy.
+    """
+    completed = np.array(values, dtype=float, copy=True)
+    owner = {start: j for j, start in enumerate(starts)}
+    for j, start in enumerate(starts):
+        for m in range(start):
+            completed[j, m] = values[owner.get(m, REFERENCE), m]
+    return completed

@@ -1,0 +1,154 @@
+"""Strategies: the synthesis and backtracking logic on hand-made candidates, and end-to-end walks."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gaitbench.cli import main
+from gaitbench.plugins import load_registry
+from gaitbench.walk import WalkProblem
+from plugins.decrease_and_conquer import DYNAMICS_TOLERANCE, DecreaseAndConquer, NodeValues
+from plugins.synthesis import complete_sections, relation_holds, synthesize
+
+NAN = np.nan
+REGISTRY = load_registry()
+
+
+def _values(*rows):
+    """Candidates with one variable: (J, N, 1)."""
+    return np.array(rows, dtype=float)[:, :, None]
+
+
+def test_relation_compares_directions_of_change():
+    assert relation_holds(np.array([2.0, 1.0]), np.array([1.0, 3.0]), np.array([5.0, 0.0]), np.array([4.0, 1.0]))
+    assert not relation_holds(np.array([2.0]), np.array([1.0]), np.array([3.0]), np.array([4.0]))
+    assert relation_holds(np.array([1.0]), np.array([1.0]), np.array([7.0]), np.array([7.0]))  # equal, equal
+
+
+def test_cheapest_candidate_wins_where_the_relation_holds():
+    # Reference rises 0, 1, 2, 3; candidates 1 (from node 1) and 2 (from node 2) rise too.
+    values = _values([0, 1, 2, 3], [NAN, 1.5, 2.5, 3.5], [NAN, NAN, 2.2, 3.2])
+    costs = np.array([[1, 5, 5, 5], [NAN, 1, 4, 6], [NAN, NAN, 2, 1]], dtype=float)
+    result = synthesize(costs, values)
+    assert result.selection == [0, 1, 2, 2]
+    assert (result.backtracks, result.exhausted) == (0, False)
+
+
+def test_a_cheaper_candidate_breaking_the_relation_is_skipped():
+    # At node 2 candidate 2 is cheapest but would make the variable fall from candidate 1's node-1 value.
+    values = _values([0, 1, 2, 3], [NAN, 1.5, 2.5, 3.5], [NAN, NAN, 1.0, 3.2])
+    costs = np.array([[1, 5, 5, 5], [NAN, 1, 4, 6], [NAN, NAN, 2, 1]], dtype=float)
+    result = synthesize(costs, values)
+    assert result.selection == [0, 1, 1, 2]
+    assert result.backtracks == 0
+
+
+def test_a_dead_end_steps_back_and_takes_the_next_cheapest_earlier():
+    # After candidate 1 at node 1 (value 5), nothing at node 2 rises above 5: back to node 1, take the
+    # reference (next cheapest there); from it candidate 1 falls and candidate 2 rises.
+    values = _values([0, 1, 2, 3], [NAN, 5.0, 0.5, 4.5], [NAN, NAN, 1.5, 3.5])
+    costs = np.array([[1, 3, 5, 5], [NAN, 1, 1, 1], [NAN, NAN, 2, 2]], dtype=float)
+    result = synthesize(costs, values)
+    assert result.selection == [0, 0, 2, 1]
+    assert result.backtracks == 1
+    assert not result.exhausted
+
+
+def test_the_search_budget_falls_back_to_the_reference():
+    """The all-reference path always satisfies the relation, so only the budget can end the search early."""
+    values = _values([0, 1, 2], [NAN, 5.0, 4.0])
+    costs = np.array([[1, 9, 9], [NAN, 1, 1]], dtype=float)
+    found = synthesize(costs, values)  # candidate 1 at node 1 leaves no rising value at node 2: back off
+    assert (found.selection, found.backtracks) == ([0, 0, 1], 1)
+    budget = synthesize(np.array([[1, 9, 9], [NAN, 1, 1]], dtype=float), _values([0, 1, 2], [NAN, 0.5, 0.7]),
+                        max_checks=1)
+    assert budget.exhausted and budget.selection == [0, 0, 0]
+
+
+def test_sections_are_completed_from_the_candidates_starting_earlier():
+    values = _values([0, 1, 2, 3], [NAN, 11, 12, 13], [NAN, NAN, 22, 23])
+    completed = complete_sections(values, [0, 1, 2])
+    np.testing.assert_array_equal(completed[:, :, 0], [[0, 1, 2, 3], [0, 11, 12, 13], [0, 11, 22, 23]])
+
+
+@pytest.fixture(scope="module")
+def forward():
+    return REGISTRY.create("experiment", "forward")
+
+
+@pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
+def test_decrease_and_conquer_walks_and_records_everything(forward, transcription):
+    n = 8
+    problem = WalkProblem(forward, REGISTRY.create("transcription", transcription), REGISTRY.create("solver", "ipopt"),
+                          n, steps=2)
+    walk = DecreaseAndConquer().solve(problem)
+    assert walk.complete, walk.failure
+    for step in walk.steps:
+        details = step.details
+        assert details["candidates"] + len(details["failed_sections"]) == n - 2  # complete + k0 = 2 … N−2
+        assert len(details["selection"]) == n and details["selection"][0] == "complete"
+        assert set(details["candidate_cots"]) >= {"synthesized", "complete"}
+        assert details["chosen"] == min(details["candidate_cots"], key=details["candidate_cots"].get)
+        assert details["verified"] == (step.verification.max_defect <= DYNAMICS_TOLERANCE)
+        assert details["claimed_cot"] == step.verification.cot
+        assert details["polished"]["status"] == "converged"
+        assert details["first_phase"]["status"] == "converged"
+    summary = walk.strategy_details
+    assert summary["claimed_acot"] == pytest.approx(walk.acot)
+    assert summary["verified_acot"] == pytest.approx(np.mean([s.details["polished"]["cot"] for s in walk.steps]))
+    assert summary["candidates"] == sum(s.details["candidates"] for s in walk.steps)
+
+
+def test_verification_tells_a_solution_from_a_patchwork(forward):
+    """The complete trajectory re-assembled node by node satisfies the dynamics; a patch mixing it with a
+    sectional solution does not — the check that decrease-and-conquer's claims rely on."""
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 8, steps=1)
+    walk = DecreaseAndConquer(polish=False).solve(problem)
+    step = walk.steps[0]
+    complete_only = step.details["candidate_cots"]["complete"]
+    assert np.isfinite(complete_only)
+    from gaitbench.verify import verify_step
+
+    built = problem.transcription.build(problem.structure("second"))
+    data = problem.step_data(1, np.asarray(forward.initial_state)[[0, 1, 4, 5]])
+    complete = problem.solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+    trajectory = built.trajectory(complete.x, data)
+    nodes = NodeValues.of([trajectory], [0], 8, data.time_step, problem.model("second"))
+    patch = nodes.patch([0] * 8).trajectory(data.stance, data.time_step)
+    x = built.initial_guess(data, patch.seed())
+    check = verify_step(built, x, data, patch, problem.model("second"))
+    assert check.max_defect < 1e-7
+    assert "polished" not in step.details
+
+
+def test_warm_start_records_the_first_phase(forward):
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 10,
+                          steps=2)
+    walk = REGISTRY.create("strategy", "warm-start").solve(problem)
+    assert walk.complete, walk.failure
+    assert walk.strategy == "warm-start"
+    assert all(step.details["first_phase"]["status"] == "converged" for step in walk.steps)
+
+
+def test_solve_command_with_a_strategy_writes_strategy_details(tmp_path):
+    out = tmp_path / "dc.json"
+    result = CliRunner().invoke(main, ["solve", "-e", "forward", "-t", "dmoc", "--N", "8", "--steps", "1",
+                                       "-S", "decrease-and-conquer", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "claimed ACOT" in result.output and "verified ACOT" in result.output
+    data = json.loads(out.read_text())
+    assert data["strategy"] == "decrease-and-conquer"
+    assert {"claimed_acot", "verified_acot", "candidates", "backtracks"} <= set(data["strategy_details"])
+    assert data["steps"][0]["details"]["chosen"]
+
+
+def test_unknown_strategy_option_is_a_clear_error():
+    result = CliRunner().invoke(main, ["solve", "-e", "forward", "-S", "decrease-and-conquer",
+                                       "-x", "sectional_guess=random"])
+    assert result.exit_code == 2
+    assert "sectional_guess = 'random'" in result.output
