@@ -152,3 +152,20 @@ def test_unknown_strategy_option_is_a_clear_error():
                                        "-x", "sectional_guess=random"])
     assert result.exit_code == 2
     assert "sectional_guess = 'random'" in result.output
+
+
+def test_whole_walk_chains_its_steps_and_improves_on_one_phase(forward):
+    """Started from the One Phase walk (a feasible point of the whole-walk NLP), the whole-walk optimum costs no
+    more, and each step starts exactly where the event map of the previous one ends."""
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 10,
+                          steps=3)
+    baseline = REGISTRY.create("strategy", "one-phase").solve(problem)
+    walk = REGISTRY.create("strategy", "whole-walk", guess="one-phase").solve(problem)
+    assert walk.complete, walk.failure
+    assert walk.strategy_details["solver"]["status"] == "converged"
+    optimum = walk.strategy_details["solver"]["objective"]
+    assert optimum <= np.mean([step.solver_result.objective for step in baseline.steps]) + 1e-7
+    for before, after in zip(walk.steps, walk.steps[1:], strict=False):
+        start = np.r_[after.trajectory.q[0], after.trajectory.dq[0]]
+        np.testing.assert_allclose(start, before.next_state, atol=1e-7)
+    assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
