@@ -1,0 +1,219 @@
+"""The FSQP solver plugin: what is specific to a feasible method — iterates that keep the inequalities, the
+feasibility phase, equality orientation and the penalty — plus its two Hessians, log, limits and multipliers."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from gait_steps import gait_step
+from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative_projection, undefined_at_start
+
+import plugins.fsqp as fsqp
+from gaitbench.evaluation import Deadline
+from gaitbench.nlp import NLPBuilder
+from gaitbench.solver import SolverStatus
+from plugins.fsqp import FSQP
+from plugins.ipopt import Ipopt
+
+
+def _solve(problem: ReferenceProblem, x0=None, **options):
+    solver = FSQP(**options)
+    result = solver.solve(problem.nlp, problem.parameters, problem.x0 if x0 is None else x0)
+    return solver, result
+
+
+def _inequalities_hold(problem: ReferenceProblem, x: np.ndarray) -> bool:
+    """Every bound and every inequality row (lbg < ubg) of the NLP holds exactly at x."""
+    nlp = problem.nlp
+    g = nlp.constraint_values(x, problem.parameters)
+    rows = nlp.lbg < nlp.ubg
+    return bool(np.all(g[rows] >= nlp.lbg[rows]) and np.all(g[rows] <= nlp.ubg[rows])
+                and np.all(x >= nlp.lbx) and np.all(x <= nlp.ubx))
+
+
+def _circle_point() -> ReferenceProblem:
+    """min (x − 2)² s.t. x² = 1: x* = 1, where ∇f + λ∇g = 0 gives λ = 1."""
+    b = NLPBuilder()
+    x = b.variable("x", (1, 1))
+    b.constrain("circle", x ** 2 - 1)
+    return ReferenceProblem("circle-point", b.build(ca.SX.sym("p", 0), (x - 2) ** 2), np.zeros(0), np.array([3.0]),
+                            1.0, np.array([1.0]))
+
+
+@pytest.mark.parametrize("hessian", ["bfgs", "exact"])
+def test_both_hessians_reach_hs071s_optimum(hessian: str):
+    problem = hs071()
+    _, result = _solve(problem, hessian=hessian)
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.objective == pytest.approx(problem.f_star, abs=1e-6)
+    assert result.constraint_violation <= 1e-7
+    np.testing.assert_allclose(result.x, problem.x_star, atol=1e-5)
+    assert result.iterations <= 30  # measured: 22 (bfgs), 21 (exact)
+    assert ("hess_l" in result.evaluations) == (hessian == "exact")
+
+
+def test_every_iterate_satisfies_the_inequalities():
+    """HS071 starts on four bounds with its product inequality active; every iterate keeps them all, while the
+    sphere equality, violated by 12 at the start, is only reached in the limit."""
+    problem = hs071()
+    solver, result = _solve(problem)
+    assert result.converged
+    iterates = [record.x for record in solver.log]
+    assert len(iterates) == result.iterations + 1
+    assert all(_inequalities_hold(problem, x) for x in iterates)
+    violations = [record.max_violation for record in solver.log]
+    assert violations[0] == pytest.approx(12.0, abs=1e-3) and violations[-1] <= 1e-7
+
+
+def test_feasibility_phase_repairs_an_infeasible_start():
+    problem = hs076()
+    start = np.full(4, 1.5)  # violates two of HS076's three inequalities
+    assert not _inequalities_hold(problem, start)
+    solver, result = _solve(problem, x0=start)
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.objective == pytest.approx(problem.f_star, abs=1e-6)
+    phases = [record.phase for record in solver.log]
+    assert phases[0] == "feasibility" and phases[-1] == "main"
+    assert phases == sorted(phases)  # "feasibility" < "main": phase 1 only at the start
+    assert all(_inequalities_hold(problem, record.x) for record in solver.log if record.phase == "main")
+    assert result.iterations == len(solver.log) - 1  # phase-1 iterations count toward the limit
+
+
+def test_no_feasible_start_is_infeasible_and_names_the_phase():
+    _, result = _solve(infeasible())
+    assert result.status is SolverStatus.INFEASIBLE
+    assert result.message.startswith("FSQP feasibility phase: no point satisfies the inequalities")
+    assert result.constraint_violation == pytest.approx(0.5, abs=1e-6)  # the least violating x = 1/2
+
+
+@pytest.mark.parametrize("start", [3.0, 0.5])
+def test_equalities_are_oriented_to_be_nonpositive_at_the_start(start: float):
+    """x² − 1 is +8 at x = 3 and −0.75 at x = 0.5: either way F_c = f + c |x² − 1| at the start, the solution is
+    x = 1 and the reported multiplier is in the NLP's own sign convention."""
+    problem = _circle_point()
+    solver, result = _solve(problem, x0=np.array([start]))
+    assert result.status is SolverStatus.CONVERGED, result.message
+    np.testing.assert_allclose(result.x, [1.0], atol=1e-8)
+    np.testing.assert_allclose(result.multipliers, [1.0], atol=1e-6)
+    first = solver.log[0]
+    assert first.merit == pytest.approx((start - 2) ** 2 + first.penalty * abs(start ** 2 - 1))
+
+
+def test_penalty_never_decreases_and_ends_above_the_equality_multiplier():
+    """Step 2: c_k = max(max_E |π_j| + ρ, c_{k−1} + ε) whenever c_{k−1} < max_E |π_j| + ρ, else c_{k−1}."""
+    problem = hs071()  # unscaled: its gradients are below the scaling threshold
+    rho, epsilon = 0.5, 0.25
+    solver, result = _solve(problem, rho=rho, epsilon=epsilon)
+    assert result.converged
+    penalties = [record.penalty for record in solver.log]
+    assert penalties == sorted(penalties)
+    assert penalties[0] >= rho + epsilon
+    sphere = result.multipliers[1]
+    assert penalties[-1] >= abs(sphere) + rho - 1e-6
+    assert len(set(penalties)) < len(penalties)  # it settles: the thesis's Lemma 4
+
+
+def test_multipliers_follow_casadis_sign_convention():
+    _, result = _solve(nonnegative_projection(-1.0))
+    assert result.converged
+    np.testing.assert_allclose(result.multipliers, [-2.0], atol=1e-6)  # ∇f + λ∇g = 0 at x = 0, p = −1
+    problem = hs071()
+    _, result = _solve(problem)
+    reference = Ipopt().solve(problem.nlp, problem.parameters, problem.x0)
+    np.testing.assert_allclose(result.multipliers, reference.multipliers, atol=1e-5)
+
+
+def test_iteration_log_has_one_line_per_iterate(capsys: pytest.CaptureFixture[str]):
+    solver, result = _solve(hs076(), x0=np.full(4, 1.5), print_level=1)
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "FSQP feasibility phase"
+    main = lines.index("FSQP main phase")
+    assert lines[main + 1].split() == ["iter", "F_c", "|d0|", "step", "c_k", "|J|", "max", "viol", "dir"]
+    rows = [line.split() for line in lines if line.split()[0].isdigit()]
+    assert len(rows) == len(solver.log) == result.iterations + 1
+    assert [int(row[0]) for row in rows] == list(range(result.iterations + 1))
+    assert rows[-1][-1] == "-" and rows[-1][3] == "nan"  # the converged iterate takes no step
+
+
+def test_print_level_zero_is_silent(capsys: pytest.CaptureFixture[str]):
+    _solve(hs076(), x0=np.full(4, 1.5))
+    assert capsys.readouterr().out == ""
+
+
+def test_iteration_limit():
+    solver, result = _solve(hs071(), max_iterations=2)
+    assert result.status is SolverStatus.ITERATION_LIMIT
+    assert result.message == "FSQP: iteration limit of 2 reached"
+    assert result.iterations == 2 and len(solver.log) == 2
+    assert _inequalities_hold(hs071(), result.x)  # a stopped run still returns an admissible point
+
+
+def test_time_limit_before_the_first_iteration():
+    _, result = _solve(hs071(), time_limit_s=1e-9)
+    assert result.status is SolverStatus.TIME_LIMIT
+    assert result.message == "FSQP: time limit of 1e-09 s reached"
+    assert result.iterations == 0
+
+
+def test_time_limit_inside_the_arc_search(monkeypatch: pytest.MonkeyPatch):
+    """The deadline is checked at every arc-search trial, not only once per iteration."""
+
+    class ExpiresOnSecondCheck(Deadline):
+        checks = 0
+
+        def expired(self) -> bool:
+            self.checks += 1
+            return self.checks >= 2  # 1: iteration 0 starts; 2: the first trial of its arc search
+
+    monkeypatch.setattr(fsqp, "Deadline", ExpiresOnSecondCheck)
+    _, result = _solve(hs071(), time_limit_s=60.0)
+    assert result.status is SolverStatus.TIME_LIMIT
+    assert result.message == "FSQP: time limit of 60.0 s reached in the arc search"
+    assert result.iterations == 0
+
+
+def test_nan_and_exceptions_are_errors():
+    _, result = _solve(undefined_at_start())
+    assert result.status is SolverStatus.ERROR
+    assert result.message == "FSQP: NaN or infinite f or g at the starting point"
+    problem = hs071()
+    result = FSQP().solve(problem.nlp, problem.parameters, np.zeros(3))
+    assert result.status is SolverStatus.ERROR
+    assert "3 values" in result.message
+
+
+def test_bad_options_are_rejected_when_built():
+    with pytest.raises(ValueError, match="hessian must be"):
+        FSQP(hessian="newton")
+    with pytest.raises(ValueError, match="δ ∈ \\(2, ν\\)"):
+        FSQP(nu=2.5, delta=3.0)
+
+
+def test_gait_step_iterates_stay_admissible():
+    """The DMOC step's standard guess violates foot clearance and the approach condition; phase 1 repairs them and
+    every main-phase iterate keeps all 299 inequality rows (joint, torque, velocity limits, clearance)."""
+    problem = gait_step("dmoc", 20)
+    assert not _inequalities_hold(problem, problem.x0)
+    solver, result = _solve(problem, max_iterations=12)
+    assert result.status is SolverStatus.ITERATION_LIMIT, result.message
+    main = [record.x for record in solver.log if record.phase == "main"]
+    assert solver.log[0].phase == "feasibility" and len(solver.log) == 12 and len(main) >= 5
+    assert all(_inequalities_hold(problem, x) for x in main)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="measured: from the standard guess the least-norm step onto the linearized "
+                   "equalities is ~900 long (the torques must reach ~2e3) and FSQP stalls far from f*")
+@pytest.mark.parametrize("transcription", ["dmoc", "hermite-simpson"])
+def test_gait_step_reaches_ipopts_optimum(transcription: str):
+    problem = gait_step(transcription, 20)
+    _, result = _solve(problem, hessian="exact", max_iterations=3000, time_limit_s=120)
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.objective == pytest.approx(problem.f_star, rel=1e-4)
+
+
+def test_registered_as_a_solver_plugin():
+    (registration,) = fsqp.register_solvers()
+    assert registration.name == "fsqp" == FSQP.name
+    assert isinstance(registration.factory(max_iterations=5), FSQP)
