@@ -11,7 +11,7 @@ run: $(INSTALLED)
 	$(VENV)/bin/gaitbench experiments show forward
 
 test: $(INSTALLED)
-	$(VENV)/bin/pytest -q
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/pytest -q  # threaded BLAS thrashes small dense solves on 2 cores
 
 lint: $(INSTALLED)
 	$(VENV)/bin/ruff check .
