@@ -43,6 +43,14 @@ class StepOutcome:
     def solved(self) -> bool:
         return self.verification is not None and self.next_state is not None
 
+    def summary(self) -> dict:
+        """Status, verified COT, iterations and time: how a strategy records a sub-solve in its details."""
+        result, check = self.solver_result, self.verification
+        return {"status": self.status, "cot": check.cot if check else None,
+                "iterations": result.iterations if result else None,
+                "solve_time_s": result.wall_time_s if result else None,
+                "resim_error": check.resim_error if check else None}
+
     def as_dict(self) -> dict:
         result, check = self.solver_result, self.verification
         return {

@@ -25,14 +25,8 @@ whatever their print options say.
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import io
-import os
 import re
-import sys
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import casadi as ca
@@ -41,31 +35,8 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline
 from gaitbench.nlp import NLP
+from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus, options_key
-
-_C_RUNTIME = ctypes.CDLL(None) if os.name == "posix" else None
-"""The C library, to flush what C code buffered for standard output before it is restored."""
-
-
-@contextlib.contextmanager
-def quiet_stdout(active: bool = True) -> Iterator[None]:
-    """Discard standard output, both Python's (where CasADi prints) and file descriptor 1 (where C libraries do)."""
-    if not active:
-        yield
-        return
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        with contextlib.redirect_stdout(io.StringIO()):
-            yield
-    finally:
-        if _C_RUNTIME is not None:
-            _C_RUNTIME.fflush(None)
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
 
 
 class _IterationWatch(ca.Callback):

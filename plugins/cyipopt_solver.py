@@ -19,8 +19,9 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.nlp import NLP
+from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus, options_key
-from plugins.casadi_solvers import quiet_stdout
+from plugins.ipopt import IPOPT_STATUSES
 
 _RETURN_STATUSES = {
     0: "Solve_Succeeded",
@@ -47,17 +48,6 @@ _RETURN_STATUSES = {
 """IPOPT's ApplicationReturnStatus (IpReturnCodes_inc.h, IPOPT 3.14) by the number cyipopt returns in
 ``info["status"]``; cyipopt's own table lacks -5, Maximum_WallTime_Exceeded, which IPOPT 3.14 returns for
 ``max_wall_time``."""
-
-_STATUSES = {
-    "Solve_Succeeded": SolverStatus.CONVERGED,
-    "Solved_To_Acceptable_Level": SolverStatus.CONVERGED,
-    "Infeasible_Problem_Detected": SolverStatus.INFEASIBLE,
-    "Maximum_Iterations_Exceeded": SolverStatus.ITERATION_LIMIT,
-    "Maximum_CpuTime_Exceeded": SolverStatus.TIME_LIMIT,
-    "Maximum_WallTime_Exceeded": SolverStatus.TIME_LIMIT,
-}
-"""The same shared meanings as the ``ipopt`` plugin gives them; every other status is an error."""
-
 
 class _Callbacks:
     """The problem object cyipopt calls: the current solve's evaluator, the iteration count, the first failure.
@@ -166,7 +156,7 @@ class CyIpopt:
             failure = error_result(error, x0, deadline, iterations=built.callbacks.iterations if built else 0)
             return replace(failure, message=f"cyipopt: {failure.message}")
         return_status = _RETURN_STATUSES.get(info["status"], f"status {info['status']}")
-        return solver_result(_STATUSES.get(return_status, SolverStatus.ERROR), f"cyipopt: {return_status}", x,
+        return solver_result(IPOPT_STATUSES.get(return_status, SolverStatus.ERROR), f"cyipopt: {return_status}", x,
                              evaluator, built.callbacks.iterations, deadline,
                              multipliers=np.asarray(info["mult_g"], dtype=float))
 

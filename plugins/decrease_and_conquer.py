@@ -33,7 +33,6 @@ from gaitbench.transcription import Interpolant, StepTrajectory, cubic_hermite, 
 from gaitbench.verify import verify_step
 from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, next_step_state, solve_and_verify, walk_step_by_step
 from plugins.synthesis import complete_sections, synthesize
-from plugins.warm_start import first_phase_summary
 
 DYNAMICS_TOLERANCE = 1e-6
 """A chosen trajectory whose dynamics residual exceeds this is reported as failing verification."""
@@ -69,7 +68,7 @@ class DecreaseAndConquer:
             return first
         complete_built = transcription.build(problem.structure("second"))
         complete = solve_and_verify(problem, index, complete_built, data, seed=first.trajectory.seed())
-        details = {"first_phase": first_phase_summary(first), "complete": _summary(complete)}
+        details = {"first_phase": first.summary(), "complete": complete.summary()}
         if not complete.solved:
             complete.message = f"complete Second Phase: {complete.message}"
             complete.details = details
@@ -116,7 +115,7 @@ class DecreaseAndConquer:
         }
         if self.polish:
             polished = solve_and_verify(problem, index, complete_built, data, seed=trajectory.seed())
-            details["polished"] = _summary(polished)
+            details["polished"] = polished.summary()
         message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
                                           f"fails verification: dynamics residual {verification.max_defect:.2e}")
         return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
@@ -125,14 +124,6 @@ class DecreaseAndConquer:
 
 def _label(start: int) -> str:
     return "complete" if start == 0 else f"sectional-{start + 1}"
-
-
-def _summary(outcome: StepOutcome) -> dict:
-    result = outcome.solver_result
-    return {"status": outcome.status, "cot": outcome.verification.cot if outcome.solved else None,
-            "iterations": result.iterations if result else None,
-            "solve_time_s": result.wall_time_s if result else None,
-            "resim_error": outcome.verification.resim_error if outcome.solved else None}
 
 
 class NodeValues:

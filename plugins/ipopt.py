@@ -15,7 +15,7 @@ from gaitbench import Registration, hookimpl
 from gaitbench.nlp import NLP
 from gaitbench.solver import SolverResult, SolverStatus, options_key
 
-_STATUSES = {
+IPOPT_STATUSES = {
     "Solve_Succeeded": SolverStatus.CONVERGED,
     "Solved_To_Acceptable_Level": SolverStatus.CONVERGED,
     "Infeasible_Problem_Detected": SolverStatus.INFEASIBLE,
@@ -73,7 +73,7 @@ class Ipopt:
                                 wall_time_s=time.perf_counter() - start, function_time_s=0.0)
         return_status = stats["return_status"]
         return SolverResult(
-            status=_STATUSES.get(return_status, SolverStatus.ERROR),
+            status=IPOPT_STATUSES.get(return_status, SolverStatus.ERROR),
             message=f"IPOPT: {return_status}",
             x=x,
             objective=objective,

@@ -74,10 +74,7 @@ Options on the command line: ``-s sqp -o qp_solver=daqp -o hessian=bfgs -o merit
 
 from __future__ import annotations
 
-import contextlib
 import itertools
-import os
-import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -91,6 +88,7 @@ import scipy.sparse as sp
 from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.nlp import NLP
+from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus
 
 _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
@@ -478,7 +476,7 @@ class _Run:
                 options["z"] = np.concatenate(z)
         start = time.perf_counter()
         try:
-            with warnings.catch_warnings(), _c_stdout_silenced():
+            with warnings.catch_warnings(), quiet_stdout():
                 warnings.simplefilter("ignore")
                 solution = qpsolvers.solve_problem(problem, solver=self.o.qp_solver, initvals=initvals, **options)
         except Exception as error:  # a backend that rejects the problem: reported like any failed QP
@@ -775,22 +773,6 @@ class _Run:
             self.restoration = None
             self.lam = self._least_squares_multipliers()
         return None
-
-
-@contextlib.contextmanager
-def _c_stdout_silenced():
-    """Point file descriptor 1 at /dev/null: some backends print from C whatever their verbosity (HiGHS its banner,
-    OSQP its polishing notes), which would break print_level 0's silence and interleave with the log."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(null)
 
 
 def _positive_definite(matrix: np.ndarray) -> bool:

@@ -29,17 +29,10 @@ class WarmStart:
                 coarse.message = f"First Phase: {coarse.message}"
                 return coarse
             outcome = solve_and_verify(problem, index, second, data, seed=coarse.trajectory.seed(), phase="second")
-            outcome.details = {"first_phase": first_phase_summary(coarse)}
+            outcome.details = {"first_phase": coarse.summary()}
             return outcome
 
         return walk_step_by_step(problem, self.name, solve_step, on_step)
-
-
-def first_phase_summary(outcome: StepOutcome) -> dict:
-    """The First Phase solve of a step, as recorded in a strategy's step details."""
-    result = outcome.solver_result
-    return {"status": outcome.status, "cot": outcome.verification.cot, "iterations": result.iterations,
-            "solve_time_s": result.wall_time_s}
 
 
 @hookimpl
