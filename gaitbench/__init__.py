@@ -17,4 +17,13 @@ except PackageNotFoundError:  # running from a source tree that was never instal
 hookimpl = pluggy.HookimplMarker("gaitbench")
 """Marks a plugin function as the implementation of a hook in :mod:`gaitbench.hookspecs`."""
 
-__all__ = ["Registration", "__version__", "hookimpl"]
+
+
+def load_results(path):
+    """The cases of a results store as a pandas DataFrame, one row per case (see :mod:`gaitbench.store`)."""
+    from gaitbench.store import load_results as load
+
+    return load(path)
+
+
+__all__ = ["Registration", "__version__", "hookimpl", "load_results"]

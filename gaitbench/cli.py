@@ -325,3 +325,14 @@ def _print_walk(console: Console, walk) -> None:
 
 def _fmt(value, spec: str) -> str:
     return "—" if value is None else format(value, spec)
+
+
+def _add_run_commands() -> None:
+    """`run` and `runs` live in their own module; registered here so `gaitbench --help` lists them."""
+    from gaitbench.run_commands import run, runs
+
+    main.add_command(run)
+    main.add_command(runs)
+
+
+_add_run_commands()

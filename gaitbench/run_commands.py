@@ -1,0 +1,184 @@
+"""``gaitbench run`` and ``gaitbench runs``: run a suite into a store, and look at what a store holds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+from rich.text import Text
+
+from gaitbench.executors import EXECUTORS
+
+
+@click.command("run")
+@click.argument("suite_file", metavar="SUITE.toml", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes (local executor) or local Dask workers.")
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
+              help="local: a pool of worker processes that can stop a hung case; dask: a Dask cluster; "
+                   "inprocess: this process, for debugging (time limits reach the solver only).")
+@click.option("--scheduler", metavar="ADDR", help="Address of an existing Dask scheduler, e.g. tcp://HOST:8786 "
+              "(implies --executor dask); without it a local cluster of --jobs workers is started.")
+@click.option("--store", "store_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Results directory [default: the suite's `output`].")
+@click.option("--resume", is_flag=True, help="Skip the cases the store already holds.")
+@click.option("--retry-failed", is_flag=True,
+              help="With --resume, run again the cases that errored, timed out or crashed.")
+@click.pass_obj
+def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
+        resume: bool, retry_failed: bool) -> None:
+    """Run every case of a suite and record each in the results store as it finishes.
+
+    A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
+    the rest. Exit status 1 if any case failed, 2 if the suite is invalid.
+    """
+    from gaitbench.runner import RunRefused, run_suite
+    from gaitbench.suite import SuiteError, load_suite
+
+    try:
+        suite = load_suite(suite_file, extra_plugin_dirs=state.plugin_dirs)
+    except SuiteError as error:
+        raise click.ClickException(str(error)) from None
+    if scheduler:
+        executor = "dask"
+    store_dir = store_dir or suite.output
+    console = Console(stderr=True)
+    with _CaseProgress(console) as progress:
+        try:
+            summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
+                                retry_failed=retry_failed, on_start=progress.start, on_outcome=progress.advance)
+        except RunRefused as error:
+            raise click.ClickException(str(error)) from None
+    console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, "
+                  f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
+    if summary.failed:
+        raise SystemExit(1)
+
+
+def _executor(name: str, jobs: int, scheduler: str | None):
+    from gaitbench.executors import DaskExecutor, InProcessExecutor, LocalPoolExecutor
+
+    if name == "dask":
+        return DaskExecutor(scheduler, jobs)
+    if name == "inprocess":
+        return InProcessExecutor()
+    return LocalPoolExecutor(jobs)
+
+
+class _CaseProgress:
+    """Cases done, failed and left, with an estimate of the time left; each failure printed as it happens."""
+
+    def __init__(self, console: Console) -> None:
+        self.console = console
+        self.done = self.failed = 0
+        self.progress = Progress(
+            TextColumn("{task.description}"), BarColumn(),
+            TextColumn("{task.fields[done]} done · {task.fields[failed]} failed · {task.fields[left]} left"),
+            TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=console, transient=False)
+        self.task = None
+
+    def __enter__(self) -> _CaseProgress:
+        self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.progress.__exit__(*exc_info)
+
+    def start(self, to_run: int, skipped: int) -> None:
+        if skipped:
+            self.console.print(f"{skipped} cases already in the store are skipped")
+        self.task = self.progress.add_task("cases", total=to_run, done=0, failed=0, left=to_run)
+
+    def advance(self, outcome) -> None:
+        self.done += 1
+        if outcome.failed:
+            self.failed += 1
+            self.console.print(Text(f"{outcome.status}: {outcome.case.label}: {outcome.message}", style="yellow"),
+                               soft_wrap=True)
+        total = self.progress.tasks[0].total or 0
+        self.progress.update(self.task, advance=1, done=self.done, failed=self.failed, left=int(total) - self.done)
+
+
+@click.group("runs")
+def runs() -> None:
+    """Look at results stores: their runs, their cases, and exports for other tools."""
+
+
+@runs.command("list")
+@click.argument("stores", nargs=-1, type=click.Path(path_type=Path))
+def runs_list(stores: tuple[Path, ...]) -> None:
+    """List the runs of each STORE (default: every store under ./results)."""
+    from gaitbench.store import DATABASE, ResultStore, StoreError
+
+    paths = list(stores) or sorted(path.parent for path in Path("results").glob(f"*/{DATABASE}"))
+    if not paths:
+        raise click.ClickException("no results stores under ./results; name a store directory")
+    table = Table(title="runs")
+    for column in ("store", "run", "suite", "executor", "jobs", "cases", "done", "failed", "skipped", "finished"):
+        table.add_column(column)
+    for path in paths:
+        try:
+            with ResultStore.open(path) as store:
+                for row in store.runs():
+                    table.add_row(str(path), row["run_id"], row["suite"], row["executor"], str(row["jobs"]),
+                                  str(row["cases_total"]), str(row["cases_done"]), str(row["cases_failed"] or 0),
+                                  str(row["cases_skipped"]), row["finished_at"] or "not finished")
+        except StoreError as error:
+            raise click.ClickException(str(error)) from None
+    Console().print(table)
+
+
+@runs.command("show")
+@click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
+@click.argument("run_id", metavar="[RUN]", required=False)
+def runs_show(store_dir: Path, run_id: str | None) -> None:
+    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed."""
+    from gaitbench.store import ResultStore, StoreError
+
+    try:
+        with ResultStore.open(store_dir) as store:
+            rows = store.cases(store.resolve_run(run_id) if run_id else None)
+    except StoreError as error:
+        raise click.ClickException(str(error)) from None
+    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""))
+    for column in ("experiment", "N", "method", "status", "ACOT", "claimed", "COT min", "COT max", "time (s)",
+                   "iterations", "message"):
+        table.add_column(column, justify="left" if column in ("experiment", "method", "status", "message")
+                         else "right")
+    for row in rows:
+        table.add_row(row["experiment"], str(row["N"]), row["method"] or row["strategy"], row["status"],
+                      *(_number(row[key], ".4f") for key in ("acot", "claimed_acot", "cot_min", "cot_max")),
+                      _number(row["wall_time_s"], ".1f"), str(row["iterations"] or ""), row["message"] or "")
+    Console().print(table)
+
+
+@runs.command("export")
+@click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
+@click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Output file [default: STORE/cases.csv or STORE/cases.parquet].")
+def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
+    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV)."""
+    import json
+
+    from gaitbench.store import JSON_COLUMNS, StoreError, load_results
+
+    try:
+        frame = load_results(store_dir)
+    except StoreError as error:
+        raise click.ClickException(str(error)) from None
+    for column in JSON_COLUMNS:  # nested values as JSON text: one flat, typed table for CSV and Parquet alike
+        frame[column] = frame[column].map(lambda value: None if value is None else json.dumps(value))
+    out = out or Path(store_dir) / f"cases.{fmt}"
+    if fmt == "csv":
+        frame.to_csv(out, index=False)
+    else:
+        frame.to_parquet(out, index=False)
+    Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
+
+
+def _number(value, spec: str) -> str:
+    return "" if value is None else format(value, spec)

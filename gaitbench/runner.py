@@ -1,0 +1,228 @@
+"""Running a suite: each case solved (anywhere), its outcome recorded in the store the moment it arrives.
+
+:func:`run_case` is what a worker does with one case; it never raises, so a failing method, a broken plugin or
+bad options become a recorded status. :func:`run_suite` hands the cases that are not yet in the store to an
+executor (:mod:`gaitbench.executors`) and records each outcome as it arrives.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from gaitbench.case import Case
+from gaitbench.provenance import provenance
+from gaitbench.store import ResultStore, case_file
+
+WALK_FILE = "walk.json"
+TRACK_FILE = "track.json"
+
+
+@dataclass
+class CaseOutcome:
+    """What a worker sends back for one case: plain data, so it crosses process and machine boundaries.
+
+    ``metrics`` are store columns computed in the worker (:func:`walk_metrics`, :func:`tracking_metrics`);
+    ``files`` are the saved walk (and tracking) by file name, written into the store beside the row.
+    """
+
+    case: Case
+    status: str
+    message: str
+    wall_time_s: float
+    metrics: dict[str, Any] = field(default_factory=dict)
+    files: dict[str, bytes] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> bool:
+        return self.status != "solved"
+
+
+def run_case(case: Case) -> CaseOutcome:
+    """Solve one case's walk (and track it if the case asks), in this process."""
+    started = time.perf_counter()
+    metrics: dict[str, Any] = {}
+    files: dict[str, bytes] = {}
+    try:
+        walk = _solve_walk(case)
+        metrics |= walk_metrics(walk)
+        files |= _saved_files(walk, WALK_FILE)
+        status = "solved" if walk.complete else "incomplete"
+        message = "" if walk.complete else (walk.failure or "the walk stopped early")
+        if case.tracking is not None and walk.complete:
+            tracking = _track(case, walk)
+            metrics |= tracking_metrics(tracking)
+            files |= _saved_files(tracking, TRACK_FILE)
+    except Exception as error:  # a failing plugin is this case's result, not the run's end
+        status, message = "error", _describe(error)
+    return CaseOutcome(case, status, message, time.perf_counter() - started, metrics, files, provenance())
+
+
+def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0.0) -> CaseOutcome:
+    """The outcome of a case whose worker never answered (timeout, crash, lost connection)."""
+    return CaseOutcome(case, status, message, wall_time_s)
+
+
+def _solve_walk(case: Case):
+    from gaitbench.gait_problem import ProblemOptions
+    from gaitbench.walk import WalkProblem
+
+    registry = _registry(case)
+    experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
+    transcription = registry.create("transcription", case.transcription.name, **case.transcription.options)
+    solver_options = dict(case.solver.options)
+    if case.time_limit_s is not None:
+        solver_options.setdefault("time_limit_s", case.time_limit_s)
+    solver = registry.create("solver", case.solver.name, **solver_options)
+    strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
+    options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
+    problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options)
+    return strategy.solve(problem)
+
+
+def _track(case: Case, walk):
+    from gaitbench.tracking import track_walk
+
+    stage = case.tracking
+    return track_walk(walk, controller=stage.controller, observer=stage.observer, disturbance=stage.disturbance,
+                      options=stage.options, registry=_registry(case))
+
+
+def _saved_files(result, name: str) -> dict[str, bytes]:
+    """The files ``result.save`` writes (JSON and its NPZ), read back as bytes for the trip to the store."""
+    with tempfile.TemporaryDirectory(prefix="gaitbench-save-") as directory:
+        result.save(Path(directory) / name)
+        return {path.name: path.read_bytes() for path in Path(directory).iterdir()}
+
+
+def _registry(case: Case):
+    from gaitbench.plugins import load_registry
+
+    return load_registry(case.plugin_dirs)
+
+
+def _describe(error: Exception) -> str:
+    """The exception and the innermost frame it came from: enough to find the failing plugin."""
+    frame = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
+    where = f" (at {Path(frame.filename).name}:{frame.lineno} in {frame.name})" if frame else ""
+    return f"{type(error).__name__}: {error}{where}"
+
+
+def case_row(outcome: CaseOutcome, suite: str, run_id: str) -> dict[str, Any]:
+    """The store row of an outcome: every parameter of the case, the status, the metrics, the provenance."""
+    case = outcome.case
+    row: dict[str, Any] = {
+        "case_key": case.key, "run_id": run_id, "suite": suite, "method": case.method,
+        "experiment": case.experiment.name, "experiment_options": case.experiment.options,
+        "N": case.n_nodes, "steps": case.steps,
+        "transcription": case.transcription.name, "transcription_options": case.transcription.options,
+        "solver": case.solver.name, "solver_options": case.solver.options,
+        "strategy": case.strategy.name, "strategy_options": case.strategy.options,
+        "problem_options": case.problem_options, "repetition": case.repetition, "time_limit_s": case.time_limit_s,
+        "tracking_stage": case.tracking.as_dict() if case.tracking else None,
+        "status": outcome.status, "message": outcome.message, "wall_time_s": outcome.wall_time_s,
+        "provenance": outcome.provenance or None, "finished_at": _now(),
+    }
+    row |= outcome.metrics
+    for column, name in (("walk_path", WALK_FILE), ("tracking_path", TRACK_FILE)):
+        if name in outcome.files:
+            row[column] = case_file(case.key, name)
+    return row
+
+
+def walk_metrics(walk) -> dict[str, Any]:
+    """ACOT, per-step COT and its bounds, effort and verification of a walk, as store columns."""
+    cots = [step.verification.cot if step.verification else None for step in walk.steps]
+    solved = [cot for cot in cots if cot is not None]
+    results = [step.solver_result for step in walk.steps if step.solver_result is not None]
+    checks = [step.verification for step in walk.steps if step.verification is not None]
+    return {
+        "acot": walk.acot,
+        "claimed_acot": walk.strategy_details.get("claimed_acot"),
+        "cot_steps": cots,
+        "cot_min": min(solved) if solved else None,
+        "cot_max": max(solved) if solved else None,
+        "steps_solved": sum(step.solved for step in walk.steps),
+        "solve_time_s": sum(result.wall_time_s for result in results),
+        "function_time_s": sum(result.function_time_s for result in results),
+        "iterations": sum(result.iterations for result in results),
+        "max_defect": max((check.max_defect for check in checks), default=None),
+        "max_resim_error": max((check.resim_error for check in checks), default=None),
+        "strategy_details": walk.strategy_details or None,
+    }
+
+
+def tracking_metrics(tracking) -> dict[str, Any]:
+    summary = tracking.as_dict()
+    return {
+        "max_position_error": summary.get("max_position_error"),
+        "max_velocity_error": summary.get("max_velocity_error"),
+        "acot_tracked": summary.get("acot_tracked"),
+        "acot_increase_percent": summary.get("acot_increase_percent"),
+        "fell": summary.get("fell"),
+        "tracking": {key: value for key, value in summary.items() if not isinstance(value, list)},
+    }
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    run_id: str
+    store: Path
+    total: int
+    skipped: int
+    solved: int
+    failed: int
+    wall_time_s: float
+
+
+def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
+              on_start: Callable[[int, int], None] | None = None,
+              on_outcome: Callable[[CaseOutcome], None] | None = None) -> RunSummary:
+    """Run every case of ``suite`` that the store does not hold yet, recording each as it finishes.
+
+    Without ``resume`` a store that already holds cases of this suite is refused (nothing is overwritten);
+    with it, finished cases are skipped (and failed ones re-run with ``retry_failed``).
+    ``on_start(to_run, skipped)`` and ``on_outcome(outcome)`` feed a progress display.
+    """
+    started = time.perf_counter()
+    with ResultStore.create(store_dir) as store:
+        finished = store.finished_keys(retry_failed=retry_failed)
+        present = [case for case in suite.cases if case.key in finished]
+        if present and not resume:
+            raise RunRefused(
+                f"{store.directory} already holds {len(present)} of the {len(suite.cases)} cases of this suite; "
+                "pass --resume to run only the missing ones, or --store to write somewhere else"
+            )
+        pending = [case for case in suite.cases if case.key not in finished]
+        run_id = f"{datetime.now(timezone.utc):%Y%m%d-%H%M%S}-{suite.name}"
+        store.start_run({"run_id": run_id, "suite": suite.name, "suite_path": str(suite.path),
+                         "suite_text": suite.text, "executor": executor.name, "jobs": executor.jobs,
+                         "cases_total": len(suite.cases), "cases_skipped": len(present),
+                         "started_at": _now(), "provenance": provenance()})
+        if on_start:
+            on_start(len(pending), len(present))
+        solved = failed = 0
+        for outcome in executor.run(pending):
+            store.record_case(case_row(outcome, suite.name, run_id), outcome.files)
+            solved += not outcome.failed
+            failed += outcome.failed
+            if on_outcome:
+                on_outcome(outcome)
+        store.finish_run(run_id, _now())
+    return RunSummary(run_id, Path(store_dir), len(suite.cases), len(present), solved, failed,
+                      time.perf_counter() - started)
+
+
+class RunRefused(Exception):
+    """A run that would mix with or overwrite stored results; the message says which flag to pass."""
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")

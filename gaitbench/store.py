@@ -1,0 +1,276 @@
+"""The results store: one SQLite row per finished case, its trajectories in files beside it.
+
+Layout of a store directory::
+
+    results.sqlite          runs (one row per `gaitbench run` session) and cases (one row per case key)
+    cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked
+
+Only the process that runs the suite writes: workers return their results and the runner records each one as
+soon as it arrives. A case's files are written to a temporary directory and renamed into place before its row
+is committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import sqlite3
+import tempfile
+from pathlib import Path
+from typing import Any
+
+DATABASE = "results.sqlite"
+CASES_DIR = "cases"
+
+FINISHED_STATUSES = ("solved", "incomplete", "error", "timeout", "crashed")
+"""``solved``: every step solved and verified. ``incomplete``: the method failed at a step (a result, not a
+fault). ``error``: the case raised. ``timeout``: it ran past its time limit. ``crashed``: its worker died."""
+
+RETRYABLE_STATUSES = ("error", "timeout", "crashed")
+"""Failures of the run rather than of the method: ``--resume --retry-failed`` runs them again."""
+
+CASE_COLUMNS: dict[str, str] = {
+    "case_key": "TEXT PRIMARY KEY",
+    "run_id": "TEXT",
+    "suite": "TEXT",
+    "method": "TEXT",
+    "experiment": "TEXT",
+    "experiment_options": "TEXT",
+    "N": "INTEGER",
+    "steps": "INTEGER",
+    "transcription": "TEXT",
+    "transcription_options": "TEXT",
+    "solver": "TEXT",
+    "solver_options": "TEXT",
+    "strategy": "TEXT",
+    "strategy_options": "TEXT",
+    "problem_options": "TEXT",
+    "repetition": "INTEGER",
+    "time_limit_s": "REAL",
+    "tracking_stage": "TEXT",
+    "status": "TEXT",
+    "message": "TEXT",
+    "acot": "REAL",
+    "claimed_acot": "REAL",
+    "cot_steps": "TEXT",
+    "cot_min": "REAL",
+    "cot_max": "REAL",
+    "steps_solved": "INTEGER",
+    "wall_time_s": "REAL",
+    "solve_time_s": "REAL",
+    "function_time_s": "REAL",
+    "iterations": "INTEGER",
+    "max_defect": "REAL",
+    "max_resim_error": "REAL",
+    "strategy_details": "TEXT",
+    "max_position_error": "REAL",
+    "max_velocity_error": "REAL",
+    "acot_tracked": "REAL",
+    "acot_increase_percent": "REAL",
+    "fell": "INTEGER",
+    "tracking": "TEXT",
+    "walk_path": "TEXT",
+    "tracking_path": "TEXT",
+    "provenance": "TEXT",
+    "finished_at": "TEXT",
+}
+"""Every column of the ``cases`` table, in order (documented in docs/results.md). Columns holding lists or
+dicts are JSON text; paths are relative to the store directory."""
+
+JSON_COLUMNS = ("experiment_options", "transcription_options", "solver_options", "strategy_options",
+                "problem_options", "tracking_stage", "cot_steps", "strategy_details", "tracking", "provenance")
+
+RUN_COLUMNS: dict[str, str] = {
+    "run_id": "TEXT PRIMARY KEY",
+    "suite": "TEXT",
+    "suite_path": "TEXT",
+    "suite_text": "TEXT",
+    "executor": "TEXT",
+    "jobs": "INTEGER",
+    "cases_total": "INTEGER",
+    "cases_skipped": "INTEGER",
+    "started_at": "TEXT",
+    "finished_at": "TEXT",
+    "provenance": "TEXT",
+}
+
+
+class StoreError(Exception):
+    """A store that is missing, unreadable or not a gaitbench store; the message says which path and why."""
+
+
+class ResultStore:
+    """A store directory; open with :meth:`create` (writing) or :meth:`open` (reading an existing one)."""
+
+    def __init__(self, directory: Path, connection: sqlite3.Connection) -> None:
+        self.directory = directory
+        self._db = connection
+
+    @classmethod
+    def create(cls, directory: str | Path) -> ResultStore:
+        """Open the store at ``directory`` for writing, creating it (and its tables) if needed."""
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        store = cls(directory, _connect(directory / DATABASE))
+        with store._db:
+            store._db.execute(_create_table("runs", RUN_COLUMNS))
+            store._db.execute(_create_table("cases", CASE_COLUMNS))
+        return store
+
+    @classmethod
+    def open(cls, directory: str | Path) -> ResultStore:
+        """Open an existing store; :class:`StoreError` if there is none at ``directory``."""
+        directory = Path(directory)
+        database = directory / DATABASE if directory.is_dir() else directory
+        if not database.is_file():
+            raise StoreError(f"{directory}: no results store here (expected {DATABASE}); "
+                             "pass the directory given to `gaitbench run --store`, or the suite's output directory")
+        try:
+            connection = _connect(database)
+            connection.execute("SELECT case_key FROM cases LIMIT 1")
+        except sqlite3.DatabaseError as error:
+            raise StoreError(f"{database}: not a gaitbench results store ({error})") from error
+        return cls(database.parent, connection)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> ResultStore:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # --- runs -----------------------------------------------------------------------------------------------
+
+    def start_run(self, run: dict[str, Any]) -> None:
+        with self._db:
+            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(run, RUN_COLUMNS))
+
+    def finish_run(self, run_id: str, finished_at: str) -> None:
+        with self._db:
+            self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+
+    def runs(self) -> list[dict[str, Any]]:
+        """Every run, oldest first, with how many of the stored cases it computed and how many failed."""
+        rows = self._db.execute(
+            "SELECT runs.*, COUNT(cases.case_key) AS cases_done, "
+            "SUM(CASE WHEN cases.status != 'solved' THEN 1 ELSE 0 END) AS cases_failed "
+            "FROM runs LEFT JOIN cases ON cases.run_id = runs.run_id GROUP BY runs.run_id ORDER BY started_at"
+        ).fetchall()
+        return [_decode(dict(row)) for row in rows]
+
+    # --- cases ----------------------------------------------------------------------------------------------
+
+    def finished_keys(self, retry_failed: bool = False) -> set[str]:
+        """Keys of cases that need no new run: all stored ones, or the non-retryable ones with ``retry_failed``."""
+        query = "SELECT case_key FROM cases"
+        if retry_failed:
+            query += f" WHERE status NOT IN ({', '.join('?' * len(RETRYABLE_STATUSES))})"
+            return {key for (key,) in self._db.execute(query, RETRYABLE_STATUSES)}
+        return {key for (key,) in self._db.execute(query)}
+
+    def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> None:
+        """Write one finished case: its files first (renamed into place as one directory), then its row.
+
+        ``files`` maps file names to their contents; the row's path columns should name them through
+        :func:`case_file`.
+        """
+        if files:
+            target = self.directory / case_file(row["case_key"])
+            staging = Path(tempfile.mkdtemp(prefix=f".{row['case_key']}-", dir=self.directory))
+            try:
+                for name, content in files.items():
+                    (staging / name).write_bytes(content)
+                if target.exists():  # a retried case replaces its earlier files
+                    shutil.rmtree(target)
+                target.parent.mkdir(exist_ok=True)
+                os.replace(staging, target)
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
+        with self._db:
+            self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+
+    def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
+        """Stored case rows (JSON columns decoded), optionally only those a given run computed."""
+        if run_id is None:
+            rows = self._db.execute("SELECT * FROM cases ORDER BY rowid")
+        else:
+            rows = self._db.execute("SELECT * FROM cases WHERE run_id = ? ORDER BY rowid", (run_id,))
+        return [_decode(dict(row)) for row in rows]
+
+    def resolve_run(self, run: str) -> str:
+        """A run id from a full id or a unique prefix of one; :class:`StoreError` otherwise."""
+        ids = [row["run_id"] for row in self.runs()]
+        matches = [run_id for run_id in ids if run_id.startswith(run)]
+        if len(matches) == 1:
+            return matches[0]
+        known = ", ".join(ids) or "none"
+        problem = "matches several runs" if matches else "is not a run"
+        raise StoreError(f"{self.directory}: {run!r} {problem} of this store; runs: {known}")
+
+
+def case_file(case_key: str, name: str = "") -> str:
+    """Where a case's files live, relative to the store directory (the form path columns hold)."""
+    return f"{CASES_DIR}/{case_key}" + (f"/{name}" if name else "")
+
+
+def load_results(path: str | Path):
+    """The cases of a store as a pandas DataFrame: one row per case, a ``case_key`` column, JSON columns decoded.
+
+    ``path`` is the store directory (as given to ``gaitbench run --store``) or its ``results.sqlite``.
+    """
+    import pandas as pd
+
+    with ResultStore.open(path) as store:
+        rows = store.cases()
+    return pd.DataFrame(rows, columns=list(CASE_COLUMNS))
+
+
+def _connect(database: Path) -> sqlite3.Connection:
+    connection = sqlite3.connect(database, timeout=30)
+    connection.row_factory = sqlite3.Row
+    connection.execute("PRAGMA journal_mode=WAL")  # readers (`runs show` during a run) never block the writer
+    connection.execute("PRAGMA synchronous=FULL")
+    return connection
+
+
+def _create_table(name: str, columns: dict[str, str]) -> str:
+    return f"CREATE TABLE IF NOT EXISTS {name} ({', '.join(f'{c} {t}' for c, t in columns.items())})"
+
+
+def _insert(table: str, columns: dict[str, str], replace: bool) -> str:
+    verb = "INSERT OR REPLACE" if replace else "INSERT"
+    return f"{verb} INTO {table} ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})"
+
+
+def _row(values: dict[str, Any], columns: dict[str, str]) -> tuple:
+    unknown = set(values) - set(columns)
+    if unknown:
+        raise ValueError(f"unknown store columns: {', '.join(sorted(unknown))}")
+    return tuple(_encode(column, values.get(column)) for column in columns)
+
+
+def _encode(column: str, value: Any) -> Any:
+    if column in JSON_COLUMNS:
+        return None if value is None else json.dumps(value, sort_keys=True, default=_json_default)
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _decode(row: dict[str, Any]) -> dict[str, Any]:
+    for column in JSON_COLUMNS:
+        if isinstance(row.get(column), str):
+            row[column] = json.loads(row[column])
+    return row
+
+
+def _json_default(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return str(value)
