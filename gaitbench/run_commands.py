@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -11,6 +12,7 @@ from rich.table import Table
 from rich.text import Text
 
 from gaitbench.executors import EXECUTORS
+from gaitbench.plugins import PLUGINS_DIR_ENV
 
 
 @click.command("run")
@@ -38,10 +40,15 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     from gaitbench.runner import RunRefused, run_suite
     from gaitbench.suite import SuiteError, load_suite
 
+    if state.plugin_dirs:  # through the environment, so worker processes load them too
+        os.environ[PLUGINS_DIR_ENV] = os.pathsep.join(
+            [*map(str, state.plugin_dirs), *filter(None, [os.environ.get(PLUGINS_DIR_ENV)])])
     try:
-        suite = load_suite(suite_file, extra_plugin_dirs=state.plugin_dirs)
+        suite = load_suite(suite_file)
     except SuiteError as error:
-        raise click.ClickException(str(error)) from None
+        invalid = click.ClickException(str(error))
+        invalid.exit_code = 2
+        raise invalid from None
     if scheduler:
         executor = "dask"
     store_dir = store_dir or suite.output

@@ -1,0 +1,231 @@
+"""Suites: a TOML file that names a benchmark's cases, checked against the plugins and expanded into cases.
+
+:func:`load_suite` reads a suite file (format in ``docs/suites.md``; parsing in :mod:`gaitbench.suite_schema`),
+looks every plugin up in the registry, builds each distinct plugin choice once so a bad option fails at load
+time rather than hours into a run, and expands the sweep into :class:`gaitbench.case.Case` objects:
+experiments × N × methods × repetitions, in file order, minus the exclusions. Everything wrong with a file is a
+:class:`SuiteError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gaitbench.case import Case, TrackingStage
+from gaitbench.plugins import (
+    PluginConflictError,
+    PluginDirectoryError,
+    PluginRegistry,
+    UnknownPluginError,
+    load_registry,
+)
+from gaitbench.suite_schema import METHOD_PARTS, Entry, SuiteError, SuiteSpec, Variant, parse_suite
+
+__all__ = ["Suite", "SuiteError", "expand", "load_suite"]
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A checked suite file and its cases, ready to run."""
+
+    name: str
+    description: str
+    path: Path
+    text: str
+    """The file's text as read, kept for provenance."""
+    output: Path
+    """The results store directory; relative paths are relative to the current working directory."""
+    repetitions: int
+    time_limit_s: float
+    """Wall-clock limit per case, in seconds."""
+    steps: int | None
+    plugin_dirs: tuple[str, ...]
+    """Absolute plugin directories (``[suite].plugins`` resolved against the suite file's directory)."""
+    problem_options: dict[str, Any]
+    tracking: TrackingStage | None
+    cases: list[Case]
+    methods: tuple[str, ...] = ()
+    """The method labels, in file order."""
+
+
+@dataclass(frozen=True)
+class Method:
+    """A labelled transcription/solver/strategy combination."""
+
+    label: str
+    key: str
+    parts: dict[str, Variant]
+
+
+def load_suite(path: str | Path, registry: PluginRegistry | None = None) -> Suite:
+    """Read, check and expand the suite file at ``path``.
+
+    ``registry`` defaults to the entry-point plugins plus the suite's ``[suite].plugins`` directories (and
+    ``$GAITBENCH_PLUGINS_DIR``); a given registry is used as it is. Raises :class:`SuiteError`.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SuiteError(path, "", f"cannot read the suite file: {exc}") from None
+    spec = parse_suite(path, text)
+    plugin_dirs = _plugin_dirs(path, spec)
+    if registry is None:
+        try:
+            registry = load_registry(plugin_dirs)
+        except PluginDirectoryError as exc:
+            raise SuiteError(path, "", str(exc)) from None
+    methods, cases = expand(path, spec, registry, plugin_dirs)
+    return Suite(
+        name=spec.name, description=spec.description, path=path, text=text, output=spec.output,
+        repetitions=spec.repetitions, time_limit_s=spec.time_limit_s, steps=spec.steps, plugin_dirs=plugin_dirs,
+        problem_options=dict(spec.problem_options), tracking=spec.tracking, cases=cases,
+        methods=tuple(method.label for method in methods),
+    )
+
+
+def expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
+           plugin_dirs: tuple[str, ...] = ()) -> tuple[list[Method], list[Case]]:
+    """The suite's methods and its cases, in file order, exclusions dropped and duplicates merged.
+
+    Every plugin choice is built once with its options; the experiments also check ``[suite].steps``.
+    """
+    builder = _Builder(path, registry)
+    experiments = [variant for entry in spec.experiments for variant in builder.variants("experiment", entry)]
+    if spec.steps is not None:
+        for variant in experiments:
+            experiment = builder.built[_identity("experiment", variant)]
+            if spec.steps > experiment.n_steps:
+                raise SuiteError(path, "[suite].steps", f"steps = {spec.steps} exceeds the {experiment.n_steps} "
+                                                        f"steps of experiment {variant.label!r}")
+    methods = _methods(path, spec, builder)
+    _check_tracking(path, spec, registry)
+
+    planned: list[tuple[Case, dict[str, set]]] = []
+    for experiment, n_nodes, method in itertools.product(experiments, spec.n_nodes, methods):
+        tags = {"experiment": experiment.names, "N": {n_nodes}, "method": {method.label}}
+        tags.update({part: method.parts[part].names for part in METHOD_PARTS})
+        for repetition in range(spec.repetitions):
+            case = Case(
+                experiment=experiment.choice, n_nodes=n_nodes,
+                transcription=method.parts["transcription"].choice, solver=method.parts["solver"].choice,
+                strategy=method.parts["strategy"].choice, steps=spec.steps,
+                problem_options=dict(spec.problem_options), repetition=repetition, tracking=spec.tracking,
+                method=method.label, time_limit_s=spec.time_limit_s, plugin_dirs=plugin_dirs,
+            )
+            planned.append((case, tags))
+
+    kept = []
+    matched = [0] * len(spec.exclusions)
+    for case, tags in planned:
+        hits = [index for index, exclusion in enumerate(spec.exclusions)
+                if all(tags[key] & set(values) for key, values in exclusion.match.items())]
+        for index in hits:
+            matched[index] += 1
+        if not hits:
+            kept.append(case)
+    for exclusion, count in zip(spec.exclusions, matched, strict=True):
+        if not count:
+            given = "; ".join(f"{key} = {list(values)}" for key, values in exclusion.match.items())
+            raise SuiteError(path, exclusion.key, f"matches no case (a typo?): no case has {given}; names "
+                                                  "and labels are matched exactly")
+    if not kept:
+        raise SuiteError(path, "[[exclude]]", f"the exclusions drop all {len(planned)} cases: nothing to run")
+
+    cases: dict[str, Case] = {}
+    for case in kept:
+        earlier = cases.setdefault(case.key, case)
+        if earlier is not case and earlier.method != case.method:
+            raise SuiteError(path, "", f"methods {earlier.method!r} and {case.method!r} are the same "
+                                       f"transcription, solver and strategy ({case.label}); remove one")
+    return methods, list(cases.values())
+
+
+class _Builder:
+    """Looks plugins up and builds each distinct choice once, turning every failure into a SuiteError."""
+
+    def __init__(self, path: Path, registry: PluginRegistry) -> None:
+        self.path = path
+        self.registry = registry
+        self.built: dict[tuple[str, str], Any] = {}
+
+    def variants(self, kind: str, entry: Entry) -> list[Variant]:
+        try:
+            self.registry.get(kind, entry.name)
+        except (UnknownPluginError, PluginConflictError) as exc:
+            raise SuiteError(self.path, entry.key, str(exc)) from None
+        variants = entry.variants()
+        for variant in variants:
+            identity = _identity(kind, variant)
+            if identity in self.built:
+                continue
+            try:
+                self.built[identity] = self.registry.create(kind, variant.choice.name, **variant.choice.options)
+            except (TypeError, ValueError) as exc:
+                options = ", ".join(f"{k}={v!r}" for k, v in variant.choice.options.items()) or "no options"
+                raise SuiteError(self.path, entry.key, f"cannot build {kind} {variant.choice.name!r} with "
+                                                       f"{options}: {exc}") from None
+        return variants
+
+
+def _methods(path: Path, spec: SuiteSpec, builder: _Builder) -> list[Method]:
+    methods = []
+    if spec.methods is None:
+        assert spec.product is not None
+        lists = [[v for entry in spec.product[part] for v in builder.variants(part, entry)] for part in METHOD_PARTS]
+        for transcription, solver, strategy in itertools.product(*lists):
+            label = f"{strategy.label} {transcription.label} {solver.label}"
+            methods.append(Method(label, "[sweep]", {"transcription": transcription, "solver": solver,
+                                                     "strategy": strategy}))
+    else:
+        for method in spec.methods:
+            lists = [builder.variants(part, method.parts[part]) for part in METHOD_PARTS]
+            for transcription, solver, strategy in itertools.product(*lists):
+                parts = {"transcription": transcription, "solver": solver, "strategy": strategy}
+                if method.label is None:
+                    label = f"{strategy.label} {transcription.label} {solver.label}"
+                else:
+                    suffixes = [parts[part].grid_suffix for part in METHOD_PARTS if parts[part].grid_suffix]
+                    label = f"{method.label}({'; '.join(suffixes)})" if suffixes else method.label
+                methods.append(Method(label, method.key, parts))
+    seen: dict[str, Method] = {}
+    for method in methods:
+        if method.label in seen:
+            raise SuiteError(path, method.key, f"method label {method.label!r} is used twice; labels name the "
+                                          "methods in results and must be distinct")
+        seen[method.label] = method
+    return methods
+
+
+def _check_tracking(path: Path, spec: SuiteSpec, registry: PluginRegistry) -> None:
+    """Tracking plugin names must exist, for each kind of which any plugin is registered (none yet: issue 8)."""
+    if spec.tracking is None:
+        return
+    for kind in ("controller", "observer", "disturbance"):
+        name = getattr(spec.tracking, kind)
+        if not registry.names(kind):
+            continue
+        try:
+            registry.get(kind, name)
+        except (UnknownPluginError, PluginConflictError) as exc:
+            raise SuiteError(path, f"[tracking].{kind}", str(exc)) from None
+
+
+def _plugin_dirs(path: Path, spec: SuiteSpec) -> tuple[str, ...]:
+    directories = []
+    for index, given in enumerate(spec.plugins):
+        directory = (path.parent / Path(given).expanduser()).resolve()
+        if not directory.is_dir():
+            raise SuiteError(path, f"[suite].plugins[{index}]", f"plugin directory '{given}' ({directory}, "
+                                                                 "relative to the suite file) does not exist")
+        directories.append(str(directory))
+    return tuple(directories)
+
+
+def _identity(kind: str, variant: Variant) -> tuple[str, str]:
+    return kind, json.dumps(variant.choice.as_dict(), sort_keys=True, default=str)
+

@@ -1,0 +1,252 @@
+"""The suite runner: store round trips, resume after a kill, crashed and hung workers, Dask against local."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+import gaitbench
+from gaitbench.case import Case, PluginChoice
+from gaitbench.executors import DaskExecutor, InProcessExecutor, LocalPoolExecutor
+from gaitbench.runner import CaseOutcome, RunRefused, case_row, run_suite
+from gaitbench.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
+
+GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
+COMPARED = ("case_key", "method", "N", "status", "acot", "cot_steps", "iterations", "steps_solved", "max_defect")
+"""Columns that must agree between executors (times and provenance differ by nature)."""
+
+FAULTY_PLUGIN = '''
+import os, signal, time
+from gaitbench import Registration, hookimpl
+
+
+class Crash:
+    """Kills its own process mid-solve, as a segfaulting solver library would."""
+    name = "crash"
+
+    def __init__(self, **options):
+        pass
+
+    def solve(self, nlp, parameters, initial_guess):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+class Hang:
+    """Never returns and ignores its time limit, as a solver stuck in compiled code would."""
+    name = "hang"
+
+    def __init__(self, **options):
+        pass
+
+    def solve(self, nlp, parameters, initial_guess):
+        time.sleep(3600)
+
+
+@hookimpl
+def register_solvers():
+    return [Registration("crash", "kills its process", Crash), Registration("hang", "never returns", Hang)]
+'''
+
+
+def walk_case(n_nodes: int, solver: str = "ipopt", plugin_dirs: tuple[str, ...] = (), **options) -> Case:
+    return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice(solver, options),
+                PluginChoice("one-phase"), steps=1, method=f"OP-DC {solver}", time_limit_s=60,
+                plugin_dirs=plugin_dirs)
+
+
+def suite_of(cases: list[Case], name: str = "test") -> SimpleNamespace:
+    return SimpleNamespace(name=name, path=Path(f"{name}.toml"), text="# test suite", cases=cases)
+
+
+def rows_by_key(store: Path) -> dict[str, dict]:
+    frame = gaitbench.load_results(store)
+    return {row["case_key"]: row for row in frame.to_dict("records")}
+
+
+@pytest.fixture(scope="module")
+def faulty_plugins(tmp_path_factory) -> Path:
+    directory = tmp_path_factory.mktemp("faulty-plugins")
+    (directory / "faulty.py").write_text(FAULTY_PLUGIN)
+    return directory
+
+
+@pytest.fixture(scope="module")
+def local_store(tmp_path_factory) -> Path:
+    """Two real one-step walks run by the local process pool: the reference rows for the other executors."""
+    store = tmp_path_factory.mktemp("local") / "store"
+    run_suite(suite_of([walk_case(8), walk_case(10)]), store, LocalPoolExecutor(2))
+    return store
+
+
+def test_case_key_is_canonical() -> None:
+    one = walk_case(8, tol=1e-8, max_iterations=100)
+    other = walk_case(8, max_iterations=100, tol=1e-8)
+    relabelled = Case(one.experiment, 8, one.transcription, one.solver, one.strategy, steps=1, method="renamed",
+                      time_limit_s=5, plugin_dirs=("/elsewhere",))
+    assert one.key == other.key == relabelled.key
+    assert walk_case(10).key != walk_case(8).key
+    assert walk_case(8, tol=1e-6).key != walk_case(8, tol=1e-8).key
+
+
+def test_store_round_trip_and_messages(tmp_path: Path) -> None:
+    case = walk_case(8)
+    outcome = CaseOutcome(case, "timeout", "stopped", 12.5, provenance={"hostname": "here"})
+    with ResultStore.create(tmp_path) as store:
+        store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
+        store.record_case(case_row(outcome, "s", "r1"), {"walk.json": b"{}"})
+        assert store.finished_keys() == {case.key}
+        assert store.finished_keys(retry_failed=True) == set()  # a timeout is the run's failure: retried
+        assert store.resolve_run("r") == "r1"
+        with pytest.raises(StoreError, match="'x' is not a run of this store; runs: r1"):
+            store.resolve_run("x")
+    frame = gaitbench.load_results(tmp_path)
+    assert list(frame.columns) == list(CASE_COLUMNS)
+    row = frame.iloc[0]
+    assert (row.case_key, row.status, row.N, row.provenance) == (case.key, "timeout", 8, {"hostname": "here"})
+    assert (tmp_path / "cases" / case.key / "walk.json").read_bytes() == b"{}"
+    with pytest.raises(StoreError, match="no results store here"):
+        gaitbench.load_results(tmp_path / "missing")
+
+
+def test_local_pool_records_real_walks(local_store: Path) -> None:
+    rows = rows_by_key(local_store)
+    assert len(rows) == 2
+    for row in rows.values():
+        assert row["status"] == "solved", row["message"]
+        assert row["acot"] == pytest.approx(row["cot_steps"][0]) and row["acot"] > 0
+        assert row["max_defect"] < 1e-6
+        assert row["provenance"]["packages"]["casadi"]
+        walk = (local_store / row["walk_path"]).read_text()
+        assert '"complete": true' in walk and (local_store / row["walk_path"]).with_suffix(".npz").exists()
+
+
+def test_crashed_and_hung_workers_fail_only_their_case(tmp_path, faulty_plugins, monkeypatch) -> None:
+    monkeypatch.setattr("gaitbench.executors.hard_limit", lambda case: 20.0)
+    dirs = (str(faulty_plugins),)
+    cases = [walk_case(8, "crash", dirs), walk_case(8, "hang", dirs), walk_case(8, plugin_dirs=dirs)]
+    summary = run_suite(suite_of(cases), tmp_path, LocalPoolExecutor(2))
+    rows = rows_by_key(tmp_path)
+    assert (summary.solved, summary.failed) == (1, 2)
+    assert rows[cases[0].key]["status"] == "crashed" and "SIGKILL" in rows[cases[0].key]["message"]
+    assert rows[cases[1].key]["status"] == "timeout" and "worker was stopped" in rows[cases[1].key]["message"]
+    assert rows[cases[2].key]["status"] == "solved"
+
+
+def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:
+    good = walk_case(8)
+    case = Case(good.experiment, 8, good.transcription, good.solver, PluginChoice("one-phase", {"bogus_option": 1}))
+    run_suite(suite_of([case]), tmp_path, InProcessExecutor())
+    row = rows_by_key(tmp_path)[case.key]
+    assert row["status"] == "error" and "bogus_option" in row["message"]
+
+
+def test_refuses_to_mix_without_resume(local_store: Path) -> None:
+    with pytest.raises(RunRefused, match="pass --resume"):
+        run_suite(suite_of([walk_case(8)]), local_store, InProcessExecutor())
+
+
+def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path: Path) -> None:
+    suite_file = tmp_path / "resume.toml"
+    suite_file.write_text(textwrap.dedent("""
+        [suite]
+        name = "resume"
+        steps = 1
+        [sweep]
+        experiments = ["forward"]
+        N = [8, 9, 10, 11]
+        transcriptions = ["hermite-simpson"]
+        solvers = ["ipopt"]
+        strategies = ["one-phase"]
+    """))
+    store = tmp_path / "store"
+    command = [GAITBENCH, "run", str(suite_file), "--store", str(store), "--executor", "inprocess"]
+    first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while _stored(store) < 1 and time.monotonic() < deadline and first.poll() is None:
+        time.sleep(0.2)
+    first.send_signal(signal.SIGKILL)
+    first.wait()
+    before = rows_by_key(store)
+    assert 1 <= len(before) < 4, "the kill should land mid-run"
+
+    refused = subprocess.run(command, capture_output=True, text=True)
+    assert refused.returncode == 1 and "--resume" in refused.stderr
+
+    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    after = rows_by_key(store)
+    assert len(after) == 4
+    for key, row in before.items():  # completed cases were skipped, not redone
+        assert (after[key]["run_id"], after[key]["finished_at"]) == (row["run_id"], row["finished_at"])
+    with ResultStore.open(store) as opened:
+        runs = opened.runs()
+    assert [run["cases_skipped"] for run in runs] == [0, len(before)]  # the killed run, the resumed one
+
+
+def _stored(store: Path) -> int:
+    if not (store / DATABASE).exists():
+        return 0
+    try:
+        with sqlite3.connect(store / DATABASE) as connection:
+            return connection.execute("SELECT COUNT(*) FROM cases").fetchone()[0]
+    except sqlite3.OperationalError:  # the table is not created yet
+        return 0
+
+
+def test_dask_cluster_on_loopback_gives_the_local_rows(tmp_path: Path, local_store: Path) -> None:
+    scheduler_file = tmp_path / "scheduler.json"
+    dask = str(Path(sys.executable).with_name("dask"))
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                  "--scheduler-file", str(scheduler_file)], env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = None
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        address = __import__("json").loads(scheduler_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        worker = subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
+                                  env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        store = tmp_path / "dask-store"
+        summary = run_suite(suite_of([walk_case(8), walk_case(10)]), store, DaskExecutor(address))
+        assert summary.solved == 2
+    finally:
+        for process in (worker, scheduler):
+            if process is not None:
+                process.terminate()
+                process.wait(timeout=30)
+    local, distributed = rows_by_key(local_store), rows_by_key(store)
+    assert local.keys() == distributed.keys()
+    for key in local:
+        for column in COMPARED:
+            assert distributed[key][column] == local[key][column], column
+
+
+def test_runs_commands_list_show_and_export(local_store: Path, tmp_path: Path) -> None:
+    listed = subprocess.run([GAITBENCH, "runs", "list", str(local_store)], capture_output=True, text=True)
+    assert listed.returncode == 0 and "test" in listed.stdout
+    shown = subprocess.run([GAITBENCH, "runs", "show", str(local_store)], capture_output=True, text=True,
+                           env={**os.environ, "COLUMNS": "200"})
+    assert shown.returncode == 0 and "solved" in shown.stdout and "forward" in shown.stdout
+    for fmt in ("csv", "parquet"):
+        out = tmp_path / f"cases.{fmt}"
+        exported = subprocess.run([GAITBENCH, "runs", "export", str(local_store), "--format", fmt, "--out", str(out)],
+                                  capture_output=True, text=True)
+        assert exported.returncode == 0, exported.stderr
+        import pandas as pd
+
+        frame = pd.read_csv(out) if fmt == "csv" else pd.read_parquet(out)
+        assert len(frame) == 2 and set(frame.case_key) == set(rows_by_key(local_store))
+    missing = subprocess.run([GAITBENCH, "runs", "show", str(tmp_path / "nowhere")], capture_output=True, text=True)
+    assert missing.returncode == 1 and "no results store here" in missing.stderr
