@@ -21,9 +21,11 @@ hookspec = pluggy.HookspecMarker("gaitbench")
 def register_experiments():
     """Walking experiments: a robot, a terrain, an initial state and per-step timing.
 
-    ``factory()`` takes no arguments and returns a :class:`gaitbench.experiment.Experiment`. The built-in
-    experiments are ``forward``, ``downward-slope``, ``upward-slope``, ``stairs`` (the thesis's chapter 5)
-    and ``compass-gait`` (the passive walker of Goswami, Thuilot and Espiau, 1996).
+    ``factory(**options)`` returns a :class:`gaitbench.experiment.Experiment`; options (from a suite's
+    ``options``/``grid``) parametrize a family of experiments, and invalid ones raise ``ValueError``. The
+    built-in experiments are ``forward``, ``downward-slope``, ``upward-slope``, ``stairs`` (the thesis's
+    chapter 5, no options), ``energetics`` (the §5.6 study's bipeds, with options) and ``compass-gait`` (the
+    passive walker of Goswami, Thuilot and Espiau, 1996).
     """
 
 
