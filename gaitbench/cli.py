@@ -328,11 +328,13 @@ def _fmt(value, spec: str) -> str:
 
 
 def _add_run_commands() -> None:
-    """`run` and `runs` live in their own module; registered here so `gaitbench --help` lists them."""
+    """`run`, `runs` and `report` live in their own modules; registered here so `gaitbench --help` lists them."""
+    from gaitbench.report_command import report
     from gaitbench.run_commands import run, runs
 
     main.add_command(run)
     main.add_command(runs)
+    main.add_command(report)
 
 
 _add_run_commands()

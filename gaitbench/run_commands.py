@@ -29,9 +29,11 @@ from gaitbench.plugins import PLUGINS_DIR_ENV
 @click.option("--resume", is_flag=True, help="Skip the cases the store already holds.")
 @click.option("--retry-failed", is_flag=True,
               help="With --resume, run again the cases that errored, timed out or crashed.")
+@click.option("--report/--no-report", "write_report", default=True, show_default=True,
+              help="Write the HTML and CSV report (`gaitbench report`) to reports/<store name> at the end.")
 @click.pass_obj
 def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
-        resume: bool, retry_failed: bool) -> None:
+        resume: bool, retry_failed: bool, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
@@ -61,6 +63,10 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             raise click.ClickException(str(error)) from None
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, "
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
+    if write_report:
+        from gaitbench.reports import write_report as write
+
+        console.print(f"report: {write(store_dir, Path('reports') / Path(store_dir).resolve().name)}")
     if summary.failed:
         raise SystemExit(1)
 

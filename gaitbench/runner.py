@@ -143,9 +143,12 @@ def walk_metrics(walk) -> dict[str, Any]:
     solved = [cot for cot in cots if cot is not None]
     results = [step.solver_result for step in walk.steps if step.solver_result is not None]
     checks = [step.verification for step in walk.steps if step.verification is not None]
+    details = walk.strategy_details
     return {
-        "acot": walk.acot,
-        "claimed_acot": walk.strategy_details.get("claimed_acot"),
+        # The ACOT of trajectories that satisfy the dynamics: for decrease-and-conquer the polished one (None
+        # without polish), never the patchwork's claim, which goes to claimed_acot.
+        "acot": details["verified_acot"] if "verified_acot" in details else walk.acot,
+        "claimed_acot": details.get("claimed_acot"),
         "cot_steps": cots,
         "cot_min": min(solved) if solved else None,
         "cot_max": max(solved) if solved else None,
@@ -155,7 +158,7 @@ def walk_metrics(walk) -> dict[str, Any]:
         "iterations": sum(result.iterations for result in results),
         "max_defect": max((check.max_defect for check in checks), default=None),
         "max_resim_error": max((check.resim_error for check in checks), default=None),
-        "strategy_details": walk.strategy_details or None,
+        "strategy_details": details or None,
     }
 
 

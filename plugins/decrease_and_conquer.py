@@ -22,14 +22,18 @@ dynamics, reported beside the claimed one.
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 
 import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.energetics import candidate_cot, point_costs
 from gaitbench.gait_problem import StepData, legs_to_roles, sectional_structure
-from gaitbench.transcription import Interpolant, StepTrajectory, cubic_hermite, locate_interval
+from gaitbench.solver import SolverResult
+from gaitbench.transcription import Interpolant, StepTrajectory, TranscribedStep, cubic_hermite, locate_interval
 from gaitbench.verify import verify_step
 from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, next_step_state, solve_and_verify, walk_step_by_step
 from plugins.synthesis import complete_sections, synthesize
@@ -42,23 +46,32 @@ class DecreaseAndConquer:
     """Options: ``polish`` (True: re-solve the complete problem from each chosen trajectory and report its COT),
     ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
-    to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search)."""
+    to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
+    (processes for the sectional solves of a step; see :class:`SectionalSolves`)."""
 
     name = "decrease-and-conquer"
 
-    def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000):
+    def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
+                 workers: int = 1):
         if sectional_guess not in ("first-phase", "complete"):
             raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
+        if int(workers) < 1:
+            raise ValueError(f"workers = {workers}: expected at least 1")
+        if int(workers) > 1 and "fork" not in multiprocessing.get_all_start_methods():
+            raise ValueError("workers > 1 needs the 'fork' start method (Linux, macOS); use workers = 1 here")
         self.polish = bool(polish)
         self.sectional_guess = sectional_guess
         self.max_checks = int(max_checks)
+        self.workers = int(workers)
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
-        walk = walk_step_by_step(problem, self.name, self._solve_step, on_step)
+        with SectionalSolves(problem, self.workers) as sections:
+            walk = walk_step_by_step(problem, self.name, partial(self._solve_step, sections=sections), on_step)
         walk.strategy_details = walk_summary(walk)
         return walk
 
-    def _solve_step(self, problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
+    def _solve_step(self, problem: WalkProblem, index: int, state: np.ndarray,
+                    sections: SectionalSolves) -> StepOutcome:
         transcription, n = problem.transcription, problem.n_nodes
         data = problem.step_data(index, state)
         first = solve_and_verify(problem, index, transcription.build(problem.structure("first")), data,
@@ -76,18 +89,17 @@ class DecreaseAndConquer:
 
         h = data.time_step
         candidates, starts, failed = [complete.trajectory], [0], []
-        for k0 in range(2, n - 1):
-            start = k0 - 1  # 0-based node
-            section_data = StepData(data.robot, data.stance, np.r_[first.trajectory.q[start],
-                                                                  first.trajectory.dq[start]],
-                                    data.chord, data.slope, h)
-            guess = (first if self.sectional_guess == "first-phase" else complete).trajectory.seed(start * h)
-            built = transcription.build(sectional_structure(problem.structure("second"), k0))
-            result = problem.solver.solve(built.nlp, section_data.parameter_vector(),
-                                          built.initial_guess(section_data, guess))
+        section_data = {k0: StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
+                                                                    first.trajectory.dq[k0 - 1]],
+                                     data.chord, data.slope, h) for k0 in sections.starts}
+        seed_from = first if self.sectional_guess == "first-phase" else complete
+        tasks = [(k0, section_data[k0].parameter_vector(),
+                  sections.built[k0].initial_guess(section_data[k0], seed_from.trajectory.seed((k0 - 1) * h)))
+                 for k0 in sections.starts]
+        for (k0, _, _), result in zip(tasks, sections.solve(tasks), strict=True):
             if result.converged:
-                candidates.append(built.trajectory(result.x, section_data))
-                starts.append(start)
+                candidates.append(sections.built[k0].trajectory(result.x, section_data[k0]))
+                starts.append(k0 - 1)  # 0-based node
             else:
                 failed.append({"k0": k0, "status": result.status.value, "message": result.message})
 
@@ -120,6 +132,53 @@ class DecreaseAndConquer:
                                           f"fails verification: dynamics residual {verification.max_defect:.2e}")
         return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
                            verification, next_state=next_step_state(model, trajectory), details=details)
+
+
+class SectionalSolves:
+    """The sectional problems k0 = 2 … N−2 of a walk: each NLP built once, solved for every step.
+
+    With ``workers`` > 1 the solves of a step run in a pool of forked processes. Forking, rather than sending
+    the problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures
+    that do not pickle); each worker then keeps its own solver instances across steps. A process that is itself
+    a daemon (a suite's local pool worker) cannot have children: give the suite ``--jobs`` or the strategy
+    ``workers``, not both.
+    """
+
+    def __init__(self, problem: WalkProblem, workers: int = 1) -> None:
+        structure = problem.structure("second")
+        self.starts = list(range(2, problem.n_nodes - 1))
+        self.built: dict[int, TranscribedStep] = {
+            k0: problem.transcription.build(sectional_structure(structure, k0)) for k0 in self.starts}
+        self.solver = problem.solver
+        self._pool: ProcessPoolExecutor | None = None
+        if workers > 1 and len(self.starts) > 1:
+            global _FORKED
+            _FORKED = self  # what the forked workers see: workers start on first submit, after this is set
+            self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
+
+    def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]]) -> list[SolverResult]:
+        """Solve (k0, parameters, initial guess) tasks; results in the tasks' order."""
+        if self._pool is None:
+            return [self.solve_one(task) for task in tasks]
+        return list(self._pool.map(_solve_forked, tasks))
+
+    def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
+        k0, parameters, guess = task
+        return self.solver.solve(self.built[k0].nlp, parameters, guess)
+
+    def __enter__(self) -> SectionalSolves:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+
+
+_FORKED: SectionalSolves | None = None
+
+
+def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
+    return _FORKED.solve_one(task)
 
 
 def _label(start: int) -> str:

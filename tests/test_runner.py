@@ -169,7 +169,7 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path: Path) -> None:
     """))
     store = tmp_path / "store"
     command = [GAITBENCH, "run", str(suite_file), "--store", str(store), "--executor", "inprocess"]
-    first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    first = subprocess.Popen([*command, "--no-report"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
     while _stored(store) < 1 and time.monotonic() < deadline and first.poll() is None:
         time.sleep(0.2)
@@ -178,11 +178,12 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path: Path) -> None:
     before = rows_by_key(store)
     assert 1 <= len(before) < 4, "the kill should land mid-run"
 
-    refused = subprocess.run(command, capture_output=True, text=True)
+    refused = subprocess.run([*command, "--no-report"], capture_output=True, text=True)
     assert refused.returncode == 1 and "--resume" in refused.stderr
 
-    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True)
+    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True, cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr
+    assert (tmp_path / "reports" / "store" / "index.html").exists()  # the run ends with its report
     after = rows_by_key(store)
     assert len(after) == 4
     for key, row in before.items():  # completed cases were skipped, not redone

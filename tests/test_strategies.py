@@ -104,6 +104,22 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
     assert summary["candidates"] == sum(s.details["candidates"] for s in walk.steps)
 
 
+def test_parallel_sectional_solves_give_the_sequential_walk(forward):
+    """Forked workers solve the same sectional NLPs from the same guesses: the walk must not change."""
+    def walk(workers):
+        problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                              REGISTRY.create("solver", "ipopt"), 8, steps=1)
+        return DecreaseAndConquer(polish=False, workers=workers).solve(problem)
+
+    sequential, parallel = walk(1), walk(2)
+    assert parallel.complete
+    for key in ("candidates", "failed_sections", "selection", "candidate_cots", "chosen", "claimed_cot"):
+        assert parallel.steps[0].details[key] == sequential.steps[0].details[key], key
+    np.testing.assert_array_equal(parallel.steps[0].trajectory.q, sequential.steps[0].trajectory.q)
+    with pytest.raises(ValueError, match="workers = 0"):
+        DecreaseAndConquer(workers=0)
+
+
 def test_verification_tells_a_solution_from_a_patchwork(forward):
     """The complete trajectory re-assembled node by node satisfies the dynamics; a patch mixing it with a
     sectional solution does not — the check that decrease-and-conquer's claims rely on."""

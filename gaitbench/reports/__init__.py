@@ -1,0 +1,173 @@
+"""Reports of a results store: HTML with the thesis's figures regenerated, and CSV files of every table.
+
+``write_report(store_dir, out_dir)`` reads the store once (:func:`build_report`) and hands the result to each
+reporter plugin (kind ``reporter``; built in: ``csv`` and ``html``, registered by ``plugins/reports.py``). A
+reporter is any object with ``write(report: ReportData, out_dir: Path) -> list[Path]``. docs/reports.md lists
+every file, column and figure.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+DEFAULT_REPORTERS = ("csv", "html")
+
+
+class ReportError(Exception):
+    """A report that cannot be built (no store, an unknown ``--gait`` case); the message says why."""
+
+
+@dataclass
+class GaitSection:
+    gait: Any  # gaitbench.reports.gait.Gait
+    figures: list
+    animation: str
+    dc_claim: dict | None = None  # claimed and verified ACOT of a D&C gait
+
+
+@dataclass
+class TrackingSection:
+    case_key: str
+    label: str
+    summary: dict
+    figures: list
+
+
+@dataclass
+class ReportData:
+    """Everything a reporter renders: the tables (by CSV name), the figures and the gait and tracking sections."""
+
+    store_dir: Path
+    title: str
+    cases: Any  # the prepared DataFrame
+    runs: list[dict]
+    tables: dict[str, Any]
+    experiments: list[str]
+    experiment_figures: dict[str, list] = field(default_factory=dict)
+    gaits: list[GaitSection] = field(default_factory=list)
+    gait_problems: list[str] = field(default_factory=list)
+    energetics_figures: list = field(default_factory=list)
+    tracking: list[TrackingSection] = field(default_factory=list)
+
+
+def build_report(store_dir: str | Path, gait: str | None = None, registry=None) -> ReportData:
+    """Read the store and compute every table and figure of its report.
+
+    ``gait`` is a case key (or a unique prefix) whose gait is shown; by default each sweep experiment's solved case
+    with the lowest verified ACOT.
+    """
+    import numpy as np
+
+    from gaitbench.reports import figures as fig
+    from gaitbench.reports import tables as tb
+    from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
+    from gaitbench.store import ResultStore, StoreError, load_results
+
+    store_dir = Path(store_dir)
+    try:
+        raw = load_results(store_dir)
+        with ResultStore.open(store_dir) as store:
+            runs = store.runs()
+            store_dir = store.directory
+    except StoreError as error:
+        raise ReportError(str(error)) from None
+    df = tb.prepare(raw)
+    info = tb.method_info(df)
+    acot = tb.acot_table(df)
+    minima = tb.method_minima(acot, info)
+    savings = tb.savings_table(acot, info)
+    energetics = tb.energetics_table(df)
+    summaries = _track_summaries(store_dir, df)
+    tables = {
+        "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "savings": savings,
+        "published_acot": tb.published_comparison(minima), "published_savings": tb.published_savings(savings, info),
+        "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
+        "failed_cases": tb.failed_cases(df), "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
+    }
+    suites = sorted({run.get("suite") or "?" for run in runs})
+    report = ReportData(store_dir=store_dir, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",
+                        cases=df, runs=runs, tables=tables, experiments=tb.experiments(df))
+    for experiment in report.experiments:
+        made = [fig.acot_figure(acot, experiment), fig.cot_bounds_figure(acot, experiment),
+                fig.savings_figure(savings, experiment)]
+        report.experiment_figures[experiment] = [figure for figure in made if figure is not None]
+    report.energetics_figures = fig.energetics_figures(energetics)
+
+    if gait is not None:
+        matches = [key for key in df["case_key"] if key.startswith(gait)] if not df.empty else []
+        if len(matches) != 1:
+            problem = "matches several cases" if matches else "is not a case of this store"
+            raise ReportError(f"--gait {gait!r} {problem} ({store_dir})")
+        chosen = {None: matches[0]}
+    else:
+        chosen = tb.chosen_gaits(df)
+    if chosen:
+        from gaitbench.plugins import load_registry
+
+        registry = registry or load_registry()
+    for key in chosen.values():
+        case = df[df["case_key"] == key].iloc[0]
+        if not isinstance(case["walk_path"], str):
+            report.gait_problems.append(f"case {key}: no stored walk ({case['status']}: {case['message']})")
+            continue
+        try:
+            loaded = load_gait(store_dir, case, registry)
+        except Exception as error:  # a report shows what it can and says what it could not
+            report.gait_problems.append(f"case {key}: gait not shown ({type(error).__name__}: {error})")
+            continue
+        claim = None
+        if case["is_dc"]:
+            claims = tables["dc_claims"]
+            row = claims[claims["case_key"] == key]
+            claim = row.iloc[0].to_dict() if not row.empty else None
+        report.gaits.append(GaitSection(loaded, gait_figures(loaded), animation_svg(loaded, f"anim-{fig.slug(key)}"),
+                                        claim))
+
+    for key, summary in summaries.items():
+        case = df[df["case_key"] == key].iloc[0]
+        label = f"{case['experiment']}, {case['method']}, N = {int(case['N'])} (case {key})"
+        series = {}
+        name = summary.get("series")
+        npz_path = (store_dir / case["tracking_path"]).parent / name if name else None
+        if npz_path is not None and npz_path.is_file():
+            with np.load(npz_path) as npz:
+                series = {k: npz[k] for k in npz.files}
+        report.tracking.append(TrackingSection(key, label, summary, fig.tracking_figures(key, label, series, summary)))
+    return report
+
+
+def _track_summaries(store_dir: Path, df) -> dict[str, dict]:
+    summaries = {}
+    if df.empty:
+        return summaries
+    for key, path in zip(df["case_key"], df["tracking_path"], strict=True):
+        if isinstance(path, str) and (store_dir / path).is_file():
+            try:
+                summaries[key] = json.loads((store_dir / path).read_text())
+            except (OSError, json.JSONDecodeError):
+                continue
+    return summaries
+
+
+def write_report(store_dir: str | Path, out_dir: str | Path, gait: str | None = None,
+                 reporters: Sequence[str] = DEFAULT_REPORTERS, registry=None) -> Path:
+    """Write the report of the store at ``store_dir`` into ``out_dir`` with the named reporter plugins.
+
+    Returns the HTML page (``out_dir/index.html``) when the ``html`` reporter ran, else ``out_dir``.
+    Raises :class:`ReportError` for a missing store or an unknown ``gait`` case key.
+    """
+    from gaitbench.plugins import load_registry
+
+    registry = registry or load_registry()
+    built = [registry.create("reporter", name) for name in reporters]
+    report = build_report(store_dir, gait=gait, registry=registry)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for reporter in built:
+        reporter.write(report, out_dir)
+    index = out_dir / "index.html"
+    return index if "html" in reporters else out_dir

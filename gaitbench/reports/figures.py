@@ -1,0 +1,251 @@
+"""The report's figures, drawn with matplotlib (Agg backend) from the tables of :mod:`gaitbench.reports.tables`.
+
+Every function returns a :class:`Figure` (an id, a title, a caption and the SVG text), or ``None`` when the data
+for it are missing. The HTML reporter embeds the SVG (base64 ``<img>``) and writes it beside the page.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from gaitbench.reports import thesis_values  # noqa: E402
+
+plt.rcParams.update({"svg.fonttype": "none", "font.size": 9, "axes.grid": True, "grid.alpha": 0.3,
+                     "figure.dpi": 100, "svg.hashsalt": "gaitbench"})
+
+MINIMUM_COLOR = "red"
+
+
+@dataclass
+class Figure:
+    id: str
+    title: str
+    caption: str
+    svg: str
+
+    @property
+    def filename(self) -> str:
+        return f"{self.id}.svg"
+
+
+def render(fig) -> str:
+    """The figure as SVG text (text kept as text, so files stay small); closes the figure."""
+    buffer = io.StringIO()
+    fig.savefig(buffer, format="svg", bbox_inches="tight", metadata={"Date": None})
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def slug(text: str) -> str:
+    """An HTML-id-safe form of an experiment or method name."""
+    out = "".join(ch if ch.isalnum() else "-" for ch in text.lower())
+    while "--" in out:
+        out = out.replace("--", "-")
+    return out.strip("-") or "x"
+
+
+def _thesis(experiment: str, role: str) -> str:
+    name = thesis_values.figure(experiment, role)
+    return f" Thesis counterpart: {name}." if name else ""
+
+
+def _integer_n(ax) -> None:
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+
+
+def _colors(methods: list[str]) -> dict[str, str]:
+    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    return {method: cycle[i % len(cycle)] for i, method in enumerate(methods)}
+
+
+def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
+    """ACOT against N for every method, each method's minimum marked in red; D&C claims dashed."""
+    data = acot[acot["experiment"] == experiment]
+    if data["acot"].notna().sum() == 0 and data["claimed_acot"].notna().sum() == 0:
+        return None
+    methods = list(dict.fromkeys(data["method"]))
+    colors = _colors(methods)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method in methods:
+        rows = data[data["method"] == method]
+        ax.plot(rows["N"], rows["acot"], "o-", color=colors[method], label=f"{method} (verified)", ms=4)
+        if rows["claimed_acot"].notna().any():
+            ax.plot(rows["N"], rows["claimed_acot"], "s--", color=colors[method], alpha=0.7, ms=3,
+                    label=f"{method} (claimed, patchwork)")
+        best = rows[rows["is_minimum"]]
+        if not best.empty:
+            ax.plot(best["N"], best["acot"], "o", color=MINIMUM_COLOR, ms=9, mfc="none", mew=2)
+            ax.annotate(f"{best['acot'].iloc[0]:.4f} @ N={int(best['N'].iloc[0])}",
+                        (best["N"].iloc[0], best["acot"].iloc[0]), textcoords="offset points", xytext=(5, 6),
+                        color=MINIMUM_COLOR, fontsize=8)
+    ax.plot([], [], "o", color=MINIMUM_COLOR, mfc="none", mew=2, label="minimum of each method")
+    ax.set_xlabel("N (nodes per step)")
+    _integer_n(ax)
+    ax.set_ylabel("ACOT")
+    ax.set_title(f"{experiment}: ACOT against N")
+    ax.legend(fontsize=7, loc="best")
+    return Figure(f"fig-acot-{slug(experiment)}", f"ACOT against N: {experiment}",
+                  "Average cost of transport of each method at each N (verified; dashed: the claimed ACOT of "
+                  "Decrease & Conquer's synthesized trajectory). Red circles: each method's minimum."
+                  + _thesis(experiment, "acot"), render(fig))
+
+
+def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
+    """Lowest (solid) and highest (dashed) per-step COT of every method against N."""
+    data = acot[acot["experiment"] == experiment]
+    if data["cot_min"].notna().sum() == 0:
+        return None
+    methods = list(dict.fromkeys(data["method"]))
+    colors = _colors(methods)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method in methods:
+        rows = data[data["method"] == method]
+        ax.plot(rows["N"], rows["cot_min"], "v-", color=colors[method], ms=4, label=f"{method} min")
+        ax.plot(rows["N"], rows["cot_max"], "^--", color=colors[method], ms=4, label=f"{method} max")
+    ax.set_xlabel("N (nodes per step)")
+    _integer_n(ax)
+    ax.set_ylabel("per-step COT")
+    ax.set_title(f"{experiment}: minimum and maximum per-step COT")
+    ax.legend(fontsize=7, ncol=2)
+    return Figure(f"fig-cot-bounds-{slug(experiment)}", f"Per-step COT bounds: {experiment}",
+                  "Lowest and highest COT of a single step of the walk, per method and N (store columns cot_min, "
+                  "cot_max; for D&C the chosen, synthesized trajectory)." + _thesis(experiment, "cot_bounds"),
+                  render(fig))
+
+
+def savings_figure(savings: pd.DataFrame, experiment: str) -> Figure | None:
+    """Energy savings of D&C against One Phase (same transcription) and against the reference solver."""
+    data = savings[savings["experiment"] == experiment]
+    if data.empty:
+        return None
+    data = data[data["savings_percent"].notna() | data["claimed_savings_percent"].notna()]
+    kinds = [kind for kind in ("one-phase", "reference") if (data["baseline_kind"] == kind).any()]
+    if not kinds:
+        return None
+    fig, axes = plt.subplots(1, len(kinds), figsize=(5 * len(kinds), 3.6), squeeze=False)
+    for ax, kind in zip(axes[0], kinds, strict=True):
+        rows = data[data["baseline_kind"] == kind]
+        pairs = list(dict.fromkeys(zip(rows["method"], rows["baseline"], strict=True)))
+        colors = _colors([f"{m} vs {b}" for m, b in pairs])
+        for method, baseline in pairs:
+            pair = rows[(rows["method"] == method) & (rows["baseline"] == baseline)]
+            label = f"{method} vs {baseline}"
+            ax.plot(pair["N"], pair["savings_percent"], "o-", color=colors[label], ms=4, label=f"{label} (verified)")
+            ax.plot(pair["N"], pair["claimed_savings_percent"], "s--", color=colors[label], ms=3, alpha=0.7,
+                    label=f"{label} (claimed)")
+        ax.axhline(0, color="black", lw=0.8)
+        ax.set_xlabel("N (nodes per step)")
+        _integer_n(ax)
+        ax.set_ylabel("energy savings (%)")
+        ax.set_title("against One Phase" if kind == "one-phase" else "against the reference solver")
+        ax.legend(fontsize=7)
+    roles = " and ".join(thesis_values.figure(experiment, role) or "" for role in ("savings_op", "savings_reference"))
+    return Figure(f"fig-savings-{slug(experiment)}", f"Energy savings of Decrease & Conquer: {experiment}",
+                  "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N both methods solved "
+                  "(ch5 §1.3). Solid: D&C's verified ACOT; dashed: its claim, as the thesis computes it."
+                  + (f" Thesis counterparts: {roles}." if roles.strip(" and") else ""), render(fig))
+
+
+def energetics_figures(table: pd.DataFrame) -> list[Figure]:
+    """COT against step length: one panel per fixed (other ratio, V) on flat ground, one curve per varied ratio;
+    and the slope effect: COT against slope angle, one curve per step length."""
+    solved = table[table["status"] == "solved"].dropna(subset=["acot"])
+    if solved.empty:
+        return []
+    figures = []
+    studies = (("mass_ratio", "length_ratio", "Rm", "Rl", "5.55–5.66"),
+               ("length_ratio", "mass_ratio", "Rl", "Rm", "5.67–5.78"))
+    flat = solved[np.isclose(solved["slope"], 0.0)]
+    for varied, fixed, varied_symbol, fixed_symbol, thesis in studies:
+        panels = flat.groupby([fixed, "speed"]).filter(lambda g, v=varied: g[v].nunique() > 1)
+        keys = list(dict.fromkeys(zip(panels[fixed], panels["speed"], strict=True)))
+        if not keys:
+            continue
+        fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.4), squeeze=False)
+        for ax, (fixed_value, speed) in zip(axes[0], keys, strict=True):
+            panel = panels[(panels[fixed] == fixed_value) & (panels["speed"] == speed)]
+            for value, curve in panel.groupby(varied):
+                curve = curve.groupby("step_length")["acot"].mean()
+                ax.plot(curve.index, curve.values, "o-", ms=3, label=f"{varied_symbol}={value:g}")
+            ax.set_xlabel("step length D (leg lengths)")
+            ax.set_ylabel("COT")
+            ax.set_title(f"{fixed_symbol}={fixed_value:g}, V={speed:g}, flat")
+            ax.legend(fontsize=7)
+        figures.append(Figure(f"fig-energetics-{slug(varied_symbol)}", f"COT against step length for {varied_symbol}",
+                              f"Average COT of the energetics bipeds against step length, one curve per "
+                              f"{varied_symbol}, with {fixed_symbol} and V fixed per panel (flat ground). Thesis "
+                              f"counterparts: Figs {thesis} (which plot COT against {varied_symbol}, one curve per D).",
+                              render(fig)))
+    sloped = solved.groupby(["mass_ratio", "length_ratio", "speed"]).filter(lambda g: g["slope"].nunique() > 1)
+    if not sloped.empty:
+        keys = list(dict.fromkeys(zip(sloped["mass_ratio"], sloped["length_ratio"], sloped["speed"], strict=True)))[:4]
+        fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.4), squeeze=False)
+        for ax, (rm, rl, speed) in zip(axes[0], keys, strict=True):
+            panel = sloped[(sloped["mass_ratio"] == rm) & (sloped["length_ratio"] == rl) & (sloped["speed"] == speed)]
+            for step_length, curve in panel.groupby("step_length"):
+                curve = curve.groupby("slope")["acot"].mean()
+                ax.plot(curve.index, curve.values, "o-", ms=3, label=f"D={step_length:g}")
+            ax.set_xlabel("slope θ (deg)")
+            ax.set_ylabel("COT")
+            ax.set_title(f"Rm={rm:g}, Rl={rl:g}, V={speed:g}")
+            ax.legend(fontsize=7)
+        figures.append(Figure("fig-energetics-slope", "Effect of the slope angle on COT",
+                              "COT against slope angle for the first (Rm, Rl, V) combinations that vary it. Thesis "
+                              "counterparts: Figs 5.57, 5.60, …, 5.78.", render(fig)))
+    return figures
+
+
+def tracking_figures(case_key: str, label: str, series: dict[str, np.ndarray], summary: dict) -> list[Figure]:
+    """Desired against actual angles, position and velocity-estimation errors, ACOT under control."""
+    figures = []
+    key = slug(case_key)
+    t = series.get("t")
+    if t is not None and len(t):
+        q, q_d = series["q"], series["q_desired"]
+        fig, ax = plt.subplots(figsize=(7, 3.4))
+        for leg in (0, 1):
+            ax.plot(t, q_d[:, leg], "--", label=f"q{leg + 1} desired")
+            ax.plot(t, q[:, leg], "-", lw=0.8, label=f"q{leg + 1} actual")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("angle (rad)")
+        ax.legend(fontsize=7)
+        figures.append(Figure(f"fig-track-angles-{key}", f"Desired and actual angles: {label}",
+                              "Leg angles of the reference and of the closed-loop robot (thesis Figs 5.6, 5.19, "
+                              "5.32, 5.45).", render(fig)))
+        fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+        position = np.abs(q - q_d)
+        velocity = np.abs(series["dq"] - series["dq_estimated"])
+        for ax, values, what in ((axes[0], position, "|q − q_d| (rad)"), (axes[1], velocity, "|q̇ − q̂̇| (rad/s)")):
+            for leg in (0, 1):
+                ax.semilogy(t, np.maximum(values[:, leg], 1e-16), lw=0.8, label=f"leg {leg + 1}")
+            ax.set_xlabel("t (s)")
+            ax.set_ylabel(what)
+            ax.legend(fontsize=7)
+        axes[0].set_title("position error")
+        axes[1].set_title("velocity-estimation error")
+        figures.append(Figure(f"fig-track-errors-{key}", f"Tracking errors: {label}",
+                              "Position error and velocity-estimation error of each leg (thesis Figs 5.7–5.11 and "
+                              "their analogues).", render(fig)))
+    reference, tracked = summary.get("acot_reference"), summary.get("acot_tracked")
+    if reference is not None and tracked is not None:
+        fig, ax = plt.subplots(figsize=(4, 3))
+        ax.bar(["reference", "under control"], [reference, tracked], color=["tab:gray", "tab:blue"])
+        ax.set_ylabel("ACOT")
+        increase = summary.get("acot_increase_percent")
+        if increase is not None:
+            ax.set_title(f"increase {increase:+.2f} %")
+        figures.append(Figure(f"fig-track-acot-{key}", f"ACOT under control: {label}",
+                              "ACOT of the reference against the ACOT of the tracked walk (thesis: +0.5 % to +1.2 %, "
+                              "ch5 §2.4).", render(fig)))
+    return figures

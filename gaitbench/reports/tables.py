@@ -1,0 +1,455 @@
+"""Every table of a report, computed with pandas from the results store (no plotting, no files).
+
+Start from :func:`prepare` (the store's DataFrame from :func:`gaitbench.store.load_results`, with the columns
+the tables share); every other function takes its result. Column names are documented in docs/reports.md.
+
+Which ACOT is "verified": for One Phase and the other per-step strategies the store's ``acot`` (every step's COT
+recomputed from its trajectory). For Decrease & Conquer the store's ``acot`` is the mean COT of the synthesized
+patchwork, i.e. the thesis's claim (``claimed_acot``); the figure of trajectories that satisfy the dynamics is the
+polished one in ``strategy_details.verified_acot`` (plugins/decrease_and_conquer.py). The tables use that as the
+verified ACOT of D&C and keep the claim beside it; with ``polish = false`` there is no verified D&C figure (NaN).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from gaitbench.reports import thesis_values
+
+DC_STRATEGY = "decrease-and-conquer"
+ONE_PHASE = "one-phase"
+REFERENCE_LABEL = "reference"
+ENERGETICS = "energetics"
+ENERGETICS_OPTIONS = ("mass_ratio", "length_ratio", "speed", "step_length", "slope")
+THESIS_TRANSCRIPTION = {"hermite-simpson": "DC", "dmoc": "DM"}
+
+ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "acot", "claimed_acot", "cot_min", "cot_max",
+                "wall_time_s", "iterations", "max_defect", "max_resim_error", "is_minimum"]
+MINIMA_COLUMNS = ["experiment", "method", "thesis_method", "min_acot", "N_at_min", "claimed_acot_at_min",
+                  "N_values", "N_solved"]
+COT_BOUNDS_COLUMNS = ["experiment", "method", "N", "cot_min", "cot_max", "acot"]
+SAVINGS_COLUMNS = ["experiment", "method", "baseline", "baseline_kind", "N", "acot", "baseline_acot",
+                   "savings_percent", "claimed_acot", "claimed_savings_percent"]
+PUBLISHED_COLUMNS = ["experiment", "thesis_method", "method", "published_acot", "published_N", "acot", "N_at_min",
+                     "difference", "difference_percent", "claimed_acot", "claimed_difference", "source"]
+PUBLISHED_SAVINGS_COLUMNS = ["experiment", "comparison", "published_min_percent", "published_min_N",
+                             "published_max_percent", "published_max_N", "min_percent", "min_N", "max_percent",
+                             "max_N", "claimed_max_percent", "claimed_max_N", "source"]
+DC_CLAIMS_COLUMNS = ["experiment", "method", "N", "case_key", "status", "claimed_acot", "verified_acot",
+                     "difference_percent", "steps", "steps_satisfying_dynamics", "max_defect", "max_resim_error",
+                     "candidates", "backtracks"]
+ENERGETICS_COLUMNS = ["method", "N", *ENERGETICS_OPTIONS, "status", "acot", "claimed_acot", "cot_min", "cot_max",
+                      "case_key"]
+TRACKING_COLUMNS = ["experiment", "method", "N", "case_key", "max_position_error", "max_velocity_error",
+                    "acot_reference", "acot_tracked", "acot_increase_percent", "fell", "published_increase_percent",
+                    "published_position_error", "published_velocity_error"]
+FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "message", "wall_time_s"]
+PROVENANCE_COLUMNS = ["run_id", "item", "value"]
+CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "transcription", "solver", "strategy",
+                 "repetition", "status", "message", "acot", "claimed_acot", "cot_min", "cot_max", "steps_solved",
+                 "wall_time_s", "solve_time_s", "iterations", "max_defect", "max_resim_error", "walk_path",
+                 "tracking_path"]
+
+
+# --- shared columns --------------------------------------------------------------------------------------------
+
+def prepare(cases: pd.DataFrame) -> pd.DataFrame:
+    """The store's case rows with the columns every table uses.
+
+    ``experiment`` becomes a label (the plugin name, with its options for parametrized experiments other than
+    ``energetics``), ``method`` falls back to strategy/transcription/solver when a case has no label,
+    ``store_acot`` keeps the store's ``acot`` and ``acot`` becomes the verified ACOT (see the module docstring).
+    """
+    df = cases.copy()
+    if df.empty:
+        for column in ("store_acot", "verified_acot", "is_dc", "experiment_name"):
+            df[column] = pd.Series(dtype=object)
+        return df
+    df["experiment_name"] = df["experiment"]
+    df["experiment"] = [_experiment_label(name, options) for name, options in
+                        zip(df["experiment"], df["experiment_options"], strict=True)]
+    df["method"] = [method if isinstance(method, str) and method else
+                    f"{strategy} {transcription} {solver}" for method, strategy, transcription, solver in
+                    zip(df["method"], df["strategy"], df["transcription"], df["solver"], strict=True)]
+    df["is_dc"] = df["strategy"] == DC_STRATEGY
+    df["store_acot"] = pd.to_numeric(df["acot"], errors="coerce")
+    df["claimed_acot"] = pd.to_numeric(df["claimed_acot"], errors="coerce")
+    verified = [_details(details).get("verified_acot") if is_dc else acot
+                for details, is_dc, acot in zip(df["strategy_details"], df["is_dc"], df["store_acot"], strict=True)]
+    df["verified_acot"] = pd.to_numeric(pd.Series(verified, index=df.index, dtype=object), errors="coerce")
+    solved = df["status"] == "solved"
+    df["acot"] = df["verified_acot"].where(solved)
+    df["claimed_acot"] = df["claimed_acot"].where(solved & df["is_dc"])
+    for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N"):
+        df[column] = pd.to_numeric(df[column], errors="coerce")
+    return df
+
+
+def _experiment_label(name: str, options: Any) -> str:
+    if not options or name == ENERGETICS:
+        return name
+    listed = ", ".join(f"{key}={value}" for key, value in sorted(dict(options).items()))
+    return f"{name}({listed})"
+
+
+def _details(value: Any) -> dict:
+    if isinstance(value, str):
+        try:
+            value = json.loads(value)
+        except json.JSONDecodeError:
+            return {}
+    return value if isinstance(value, dict) else {}
+
+
+def sweep_cases(df: pd.DataFrame) -> pd.DataFrame:
+    """The cases of the per-experiment ACOT sweeps (everything but the energetics study)."""
+    return df[df["experiment_name"] != ENERGETICS] if not df.empty else df
+
+
+def experiments(df: pd.DataFrame) -> list[str]:
+    """The sweep experiments in store order."""
+    return list(dict.fromkeys(sweep_cases(df)["experiment"])) if not df.empty else []
+
+
+def method_info(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per (experiment, method): its transcription, solver, strategy and the thesis method it stands for."""
+    columns = ["experiment", "method", "transcription", "solver", "strategy", "thesis_method"]
+    sweep = sweep_cases(df)
+    if sweep.empty:
+        return pd.DataFrame(columns=columns)
+    info = sweep.groupby(["experiment", "method"], sort=False)[["transcription", "solver", "strategy"]].first()
+    info = info.reset_index()
+    info["thesis_method"] = None
+    for _, group in info.groupby("experiment", sort=False):
+        taken: set[str] = set()
+        guesses = {}
+        for index, row in group.iterrows():
+            guesses[index] = _thesis_method(row["method"], row["strategy"], row["transcription"])
+        counts = pd.Series([g for g in guesses.values() if g]).value_counts()
+        for index, guess in guesses.items():
+            if guess and counts[guess] == 1 and guess not in taken:
+                info.loc[index, "thesis_method"] = guess
+                taken.add(guess)
+    return info[columns]
+
+
+def _thesis_method(label: str, strategy: str, transcription: str) -> str | None:
+    if label in thesis_values.METHODS:
+        return label
+    if label.lower() == REFERENCE_LABEL:
+        return thesis_values.REFERENCE_METHOD
+    suffix = THESIS_TRANSCRIPTION.get(transcription)
+    if suffix is None:
+        return None
+    if strategy == ONE_PHASE:
+        return f"OP-{suffix}"
+    if strategy == DC_STRATEGY:
+        return f"D&C-{suffix}"
+    return None
+
+
+# --- ACOT, minima, COT bounds ------------------------------------------------------------------------------------
+
+def acot_table(df: pd.DataFrame) -> pd.DataFrame:
+    """ACOT per experiment × method × N (mean over solved repetitions), per-step COT bounds, effort, and whether
+    this N gives the method's minimum ACOT (the first N reaching it, as the thesis quotes)."""
+    sweep = sweep_cases(df)
+    if sweep.empty:
+        return pd.DataFrame(columns=ACOT_COLUMNS)
+    solved = sweep.assign(is_solved=sweep["status"] == "solved")
+    grouped = solved.groupby(["experiment", "method", "N"], sort=False)
+    table = grouped.agg(cases=("case_key", "size"), solved=("is_solved", "sum"), acot=("acot", "mean"),
+                        claimed_acot=("claimed_acot", "mean"), cot_min=("cot_min", "min"),
+                        cot_max=("cot_max", "max"), wall_time_s=("wall_time_s", "mean"),
+                        iterations=("iterations", "mean"), max_defect=("max_defect", "max"),
+                        max_resim_error=("max_resim_error", "max")).reset_index()
+    table = table.sort_values(["experiment", "method", "N"], kind="stable",
+                              key=lambda column: column.map(_order(sweep, column.name)))
+    table["N"] = table["N"].astype(int)
+    table["is_minimum"] = False
+    for _, group in table.groupby(["experiment", "method"], sort=False):
+        values = group["acot"]
+        if values.notna().any():
+            table.loc[values.idxmin(), "is_minimum"] = True
+    return table[ACOT_COLUMNS].reset_index(drop=True)
+
+
+def _order(df: pd.DataFrame, column: str):
+    if column == "N":
+        return lambda value: value
+    order = {value: i for i, value in enumerate(dict.fromkeys(df[column]))}
+    return lambda value: order.get(value, len(order))
+
+
+def method_minima(acot: pd.DataFrame, info: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Each method's minimum ACOT over N and the (first) N at which it is reached."""
+    rows = []
+    thesis = {} if info is None else {(r.experiment, r.method): r.thesis_method for r in info.itertuples()}
+    for (experiment, method), group in acot.groupby(["experiment", "method"], sort=False):
+        best = group[group["is_minimum"]]
+        row = {"experiment": experiment, "method": method, "thesis_method": thesis.get((experiment, method)),
+               "min_acot": math.nan, "N_at_min": None, "claimed_acot_at_min": math.nan,
+               "N_values": len(group), "N_solved": int((group["solved"] > 0).sum())}
+        if not best.empty:
+            row |= {"min_acot": float(best["acot"].iloc[0]), "N_at_min": int(best["N"].iloc[0]),
+                    "claimed_acot_at_min": float(best["claimed_acot"].iloc[0])}
+        rows.append(row)
+    return _integers(pd.DataFrame(rows, columns=MINIMA_COLUMNS), "N_at_min")
+
+
+def cot_bounds(acot: pd.DataFrame) -> pd.DataFrame:
+    """The lowest and highest per-step COT of each method at each N (the thesis's Figs 5.3, 5.16, 5.29, 5.42)."""
+    return acot[COT_BOUNDS_COLUMNS].copy()
+
+
+# --- energy savings ----------------------------------------------------------------------------------------------
+
+def savings_percent(reference: Any, candidate: Any) -> Any:
+    """S = 100 (ACOT_ref − ACOT_D&C) / ACOT_ref (ch5 §1.3), element-wise; NaN where either is missing."""
+    reference = pd.to_numeric(reference, errors="coerce") if isinstance(reference, pd.Series) else reference
+    return 100.0 * (reference - candidate) / reference
+
+
+def baselines(info: pd.DataFrame) -> list[tuple[str, str, str, str]]:
+    """(experiment, D&C method, baseline method, kind) pairs: each D&C method against One Phase with the same
+    transcription and solver (kind ``one-phase``) and against the suite's ``reference`` method (kind ``reference``)."""
+    pairs = []
+    for experiment, group in info.groupby("experiment", sort=False):
+        references = [m for m in group["method"] if m.lower() == REFERENCE_LABEL]
+        for row in group[group["strategy"] == DC_STRATEGY].itertuples():
+            same = group[(group["strategy"] == ONE_PHASE) & (group["transcription"] == row.transcription)
+                         & (group["solver"] == row.solver) & (group["method"].str.lower() != REFERENCE_LABEL)]
+            if not same.empty:
+                pairs.append((experiment, row.method, same["method"].iloc[0], ONE_PHASE))
+            for reference in references:
+                pairs.append((experiment, row.method, reference, REFERENCE_LABEL))
+    return pairs
+
+
+def savings_table(acot: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
+    """Energy savings of every D&C method against its baselines at each N both were run at (verified ACOT, and the
+    thesis's way, from the D&C claim)."""
+    frames = []
+    for experiment, method, baseline, kind in baselines(info):
+        ours = acot[(acot["experiment"] == experiment) & (acot["method"] == method)]
+        theirs = acot[(acot["experiment"] == experiment) & (acot["method"] == baseline)]
+        merged = ours[["N", "acot", "claimed_acot"]].merge(
+            theirs[["N", "acot"]].rename(columns={"acot": "baseline_acot"}), on="N", how="inner")
+        merged.insert(0, "experiment", experiment)
+        merged.insert(1, "method", method)
+        merged.insert(2, "baseline", baseline)
+        merged.insert(3, "baseline_kind", kind)
+        merged["savings_percent"] = savings_percent(merged["baseline_acot"], merged["acot"])
+        merged["claimed_savings_percent"] = savings_percent(merged["baseline_acot"], merged["claimed_acot"])
+        frames.append(merged)
+    if not frames:
+        return pd.DataFrame(columns=SAVINGS_COLUMNS)
+    return pd.concat(frames, ignore_index=True)[SAVINGS_COLUMNS]
+
+
+# --- the thesis's published values -------------------------------------------------------------------------------
+
+def published_comparison(minima: pd.DataFrame) -> pd.DataFrame:
+    """Each thesis method's published minimum ACOT (and its N) beside ours, with the differences."""
+    rows = []
+    for experiment, published in thesis_values.MINIMUM_ACOT.items():
+        ours = minima[minima["experiment"] == experiment]
+        if ours.empty:
+            continue
+        for thesis_method, (value, n_published) in published.items():
+            match = ours[ours["thesis_method"] == thesis_method]
+            row = {"experiment": experiment, "thesis_method": thesis_method, "method": None,
+                   "published_acot": value, "published_N": n_published, "acot": math.nan, "N_at_min": None,
+                   "difference": math.nan, "difference_percent": math.nan, "claimed_acot": math.nan,
+                   "claimed_difference": math.nan,
+                   "source": f"ch5 §2.3, {thesis_values.MINIMUM_ACOT_LINES[experiment]}"}
+            if not match.empty:
+                m = match.iloc[0]
+                ours_acot, claimed = m["min_acot"], m["claimed_acot_at_min"]
+                row |= {"method": m["method"], "acot": ours_acot, "N_at_min": m["N_at_min"],
+                        "difference": ours_acot - value, "difference_percent": 100 * (ours_acot - value) / value,
+                        "claimed_acot": claimed, "claimed_difference": claimed - value}
+            rows.append(row)
+    return _integers(pd.DataFrame(rows, columns=PUBLISHED_COLUMNS), "N_at_min")
+
+
+def published_savings(savings: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
+    """The published range of savings (min and max over N, with their N) beside ours."""
+    thesis = {(r.experiment, r.method): r.thesis_method for r in info.itertuples()}
+    rows = []
+    for experiment, quoted in thesis_values.SAVINGS.items():
+        for (dc, base), ((low, n_low), (high, n_high)) in quoted.items():
+            row = {"experiment": experiment, "comparison": f"{dc} vs {base}", "published_min_percent": low,
+                   "published_min_N": n_low, "published_max_percent": high, "published_max_N": n_high,
+                   "min_percent": math.nan, "min_N": None, "max_percent": math.nan, "max_N": None,
+                   "claimed_max_percent": math.nan, "claimed_max_N": None,
+                   "source": f"ch5 §2.3, {thesis_values.SAVINGS_LINES[experiment]}"}
+            ours = savings[(savings["experiment"] == experiment)
+                           & (savings["method"].map(lambda m, e=experiment: thesis.get((e, m))) == dc)
+                           & (savings["baseline"].map(lambda m, e=experiment: thesis.get((e, m))) == base)]
+            if ours.empty and not (info["experiment"] == experiment).any():
+                continue
+            values = ours.dropna(subset=["savings_percent"])
+            if not values.empty:
+                low_row = values.loc[values["savings_percent"].idxmin()]
+                high_row = values.loc[values["savings_percent"].idxmax()]
+                row |= {"min_percent": low_row["savings_percent"], "min_N": int(low_row["N"]),
+                        "max_percent": high_row["savings_percent"], "max_N": int(high_row["N"])}
+            claimed = ours.dropna(subset=["claimed_savings_percent"])
+            if not claimed.empty:
+                best = claimed.loc[claimed["claimed_savings_percent"].idxmax()]
+                row |= {"claimed_max_percent": best["claimed_savings_percent"], "claimed_max_N": int(best["N"])}
+            rows.append(row)
+    return _integers(pd.DataFrame(rows, columns=PUBLISHED_SAVINGS_COLUMNS), "min_N", "max_N", "claimed_max_N")
+
+
+# --- D&C claimed against verified --------------------------------------------------------------------------------
+
+def dc_claims(df: pd.DataFrame) -> pd.DataFrame:
+    """Every D&C case: the claimed ACOT (patchwork) beside the verified (polished) one, and how many chosen
+    trajectories satisfy the dynamics."""
+    rows = []
+    for _, case in df[df["is_dc"]].iterrows() if not df.empty else []:
+        details = _details(case["strategy_details"])
+        claimed = _number(details.get("claimed_acot", case["claimed_acot"]))
+        verified = _number(details.get("verified_acot"))
+        rows.append({"experiment": case["experiment"], "method": case["method"], "N": int(case["N"]),
+                     "case_key": case["case_key"], "status": case["status"], "claimed_acot": claimed,
+                     "verified_acot": verified,
+                     "difference_percent": 100 * (verified - claimed) / claimed if claimed else math.nan,
+                     "steps": len(details.get("chosen", [])) or None,
+                     "steps_satisfying_dynamics": details.get("steps_satisfying_dynamics"),
+                     "max_defect": case["max_defect"], "max_resim_error": case["max_resim_error"],
+                     "candidates": details.get("candidates"), "backtracks": details.get("backtracks")})
+    return _integers(pd.DataFrame(rows, columns=DC_CLAIMS_COLUMNS), "steps", "steps_satisfying_dynamics",
+                     "candidates", "backtracks")
+
+
+def _integers(table: pd.DataFrame, *columns: str) -> pd.DataFrame:
+    """Integer columns that may hold missing values (pandas' nullable Int64, written to CSV without ``.0``)."""
+    for column in columns:
+        table[column] = pd.to_numeric(table[column], errors="coerce").astype("Int64")
+    return table
+
+
+def _number(value: Any) -> float:
+    try:
+        return float(value) if value is not None else math.nan
+    except (TypeError, ValueError):
+        return math.nan
+
+
+# --- energetics, tracking, failures, provenance ------------------------------------------------------------------
+
+def energetics_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Energetics-study cases with their biped and gait parameters (Rm, Rl, V, D, θ) as columns."""
+    if df.empty:
+        return pd.DataFrame(columns=ENERGETICS_COLUMNS)
+    study = df[df["experiment_name"] == ENERGETICS]
+    rows = []
+    for _, case in study.iterrows():
+        options = case["experiment_options"] if isinstance(case["experiment_options"], dict) else {}
+        defaults = {"mass_ratio": 0.5, "length_ratio": 0.5, "speed": 0.4, "step_length": 0.8, "slope": 0.0}
+        rows.append({"method": case["method"], "N": int(case["N"]),
+                     **{key: float(options.get(key, defaults[key])) for key in ENERGETICS_OPTIONS},
+                     "status": case["status"], "acot": case["acot"], "claimed_acot": case["claimed_acot"],
+                     "cot_min": case["cot_min"], "cot_max": case["cot_max"], "case_key": case["case_key"]})
+    return pd.DataFrame(rows, columns=ENERGETICS_COLUMNS)
+
+
+def tracking_table(df: pd.DataFrame, summaries: dict[str, dict]) -> pd.DataFrame:
+    """Tracked cases: errors, ACOT under control against the reference, the thesis's published figures beside.
+
+    ``summaries`` maps case keys to their track.json contents (for ``acot_reference``); the store's columns are
+    used where a summary lacks a figure.
+    """
+    rows = []
+    tracked = df[df["tracking_path"].notna()] if not df.empty else df
+    for _, case in tracked.iterrows():
+        summary = summaries.get(case["case_key"], {})
+        published = thesis_values.TRACKING.get(case["experiment"])
+        rows.append({"experiment": case["experiment"], "method": case["method"], "N": int(case["N"]),
+                     "case_key": case["case_key"],
+                     "max_position_error": summary.get("max_position_error", case.get("max_position_error")),
+                     "max_velocity_error": summary.get("max_velocity_error", case.get("max_velocity_error")),
+                     "acot_reference": summary.get("acot_reference"),
+                     "acot_tracked": summary.get("acot_tracked", case.get("acot_tracked")),
+                     "acot_increase_percent": summary.get("acot_increase_percent",
+                                                          case.get("acot_increase_percent")),
+                     "fell": bool(summary.get("fell", case.get("fell"))),
+                     "published_increase_percent": published[3] if published else None,
+                     "published_position_error": published[1] if published else None,
+                     "published_velocity_error": published[2] if published else None})
+    return pd.DataFrame(rows, columns=TRACKING_COLUMNS)
+
+
+def failed_cases(df: pd.DataFrame) -> pd.DataFrame:
+    """Every case that did not solve, with its status and reason."""
+    if df.empty:
+        return pd.DataFrame(columns=FAILED_COLUMNS)
+    failed = df[df["status"] != "solved"]
+    return failed[FAILED_COLUMNS].reset_index(drop=True)
+
+
+def provenance_table(runs: Iterable[dict]) -> pd.DataFrame:
+    """Run by run: suite, executor, times and the machine and versions it ran with (``packages.NAME`` rows)."""
+    rows = []
+    for run in runs:
+        run_id = run.get("run_id")
+        for item in ("suite", "suite_path", "executor", "jobs", "cases_total", "cases_skipped", "cases_done",
+                     "cases_failed", "started_at", "finished_at"):
+            rows.append({"run_id": run_id, "item": item, "value": run.get(item)})
+        provenance = run.get("provenance") or {}
+        for key, value in provenance.items():
+            if isinstance(value, dict):
+                rows.extend({"run_id": run_id, "item": f"{key}.{name}", "value": version}
+                            for name, version in value.items())
+            else:
+                rows.append({"run_id": run_id, "item": key, "value": value})
+    return pd.DataFrame(rows, columns=PROVENANCE_COLUMNS)
+
+
+def cases_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Every stored case, its parameters and scalar results (verified ``acot``; see the module docstring)."""
+    if df.empty:
+        return pd.DataFrame(columns=CASES_COLUMNS)
+    return df[CASES_COLUMNS].reset_index(drop=True)
+
+
+def chosen_gaits(df: pd.DataFrame) -> dict[str, str]:
+    """Per sweep experiment, the key of the solved case with the lowest verified ACOT that has a stored walk."""
+    sweep = sweep_cases(df)
+    if sweep.empty:
+        return {}
+    candidates = sweep[(sweep["status"] == "solved") & sweep["acot"].notna() & sweep["walk_path"].notna()]
+    chosen = {}
+    for experiment, group in candidates.groupby("experiment", sort=False):
+        chosen[experiment] = group.loc[group["acot"].idxmin(), "case_key"]
+    return chosen
+
+
+def finite(value: Any) -> bool:
+    try:
+        return value is not None and np.isfinite(float(value))
+    except (TypeError, ValueError):
+        return False
+
+
+def write_csv(tables: dict[str, pd.DataFrame], out_dir) -> list:
+    """Every table as ``out_dir/<name>.csv`` (header even when empty); returns the paths."""
+    from pathlib import Path
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, table in tables.items():
+        path = out_dir / f"{name}.csv"
+        table.to_csv(path, index=False)
+        paths.append(path)
+    return paths

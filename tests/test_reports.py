@@ -1,0 +1,361 @@
+"""Reports (gaitbench/reports, `gaitbench report`): tables on hand-checked values, CSV columns, the HTML page's
+figures and tables, and the page in headless Chromium (no console errors, a screenshot that is not blank)."""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import os
+import queue
+import shutil
+import sqlite3
+import subprocess
+import threading
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from gaitbench.reports import build_report, tables, write_report
+
+CHROMIUM_MISSING = "chromium is not installed (Debian package chromium; .ci/run installs it)"
+
+
+# --- a small real store, built once ------------------------------------------------------------------------------
+
+@pytest.fixture(scope="session")
+def store(tmp_path_factory) -> Path:
+    """Forward experiment, 1 step, N = 8 and 10: OP-DC, OP-DM, D&C-DC, and a "reference" case that fails (an
+    unknown IPOPT option). About 30 s."""
+    from gaitbench.case import Case, PluginChoice
+    from gaitbench.executors import InProcessExecutor
+    from gaitbench.runner import run_suite
+
+    methods = (("hermite-simpson", "one-phase", "OP-DC"), ("dmoc", "one-phase", "OP-DM"),
+               ("hermite-simpson", "decrease-and-conquer", "D&C-DC"))
+    cases = [Case(PluginChoice("forward"), n, PluginChoice(t), PluginChoice("ipopt"), PluginChoice(s), steps=1,
+                  method=label, time_limit_s=60) for n in (8, 10) for t, s, label in methods]
+    cases.append(Case(PluginChoice("forward"), 8, PluginChoice("hermite-simpson"), PluginChoice("ipopt", {"bogus": 1}),
+                      PluginChoice("one-phase"), steps=1, method="reference", time_limit_s=60))
+    suite = SimpleNamespace(name="tiny", path=Path("tiny.toml"), text="# tiny test suite", cases=cases)
+    directory = tmp_path_factory.mktemp("store") / "tiny"
+    run_suite(suite, directory, InProcessExecutor())
+    return directory
+
+
+@pytest.fixture(scope="session")
+def report_dir(store, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("report") / "tiny"
+    write_report(store, out)
+    return out
+
+
+# --- tables on hand-made data ------------------------------------------------------------------------------------
+
+def _frame(rows):
+    base = {"experiment_options": {}, "transcription": "hermite-simpson", "solver": "ipopt", "status": "solved",
+            "message": "", "claimed_acot": None, "strategy_details": None, "cot_min": 0.1, "cot_max": 0.2,
+            "wall_time_s": 1.0, "iterations": 10, "max_defect": 1e-9, "max_resim_error": 1e-6, "walk_path": None,
+            "tracking_path": None, "experiment": "forward"}
+    frame = pd.DataFrame([base | row for row in rows])
+    frame["case_key"] = [f"k{i}" for i in range(len(frame))]
+    return tables.prepare(frame)
+
+
+def test_savings_formula_and_minimum_marking():
+    assert tables.savings_percent(0.5, 0.1) == pytest.approx(80.0)
+    # The thesis's forward D&C-DC vs OP-DC maximum: 85.41 % from 0.0695 against 0.4764 (ch5 §2.3, derived table).
+    assert tables.savings_percent(0.4764, 0.0695) == pytest.approx(85.41, abs=0.01)
+    rows = []
+    sweep = ((10, 0.40, 0.20, 0.10, 0.30), (20, 0.30, 0.15, 0.05, 0.25), (30, 0.30, 0.18, 0.09, None))
+    for n, op, dc, claim, ref in sweep:
+        rows.append({"method": "OP-DC", "strategy": "one-phase", "N": n, "acot": op})
+        rows.append({"method": "D&C-DC", "strategy": "decrease-and-conquer", "N": n, "acot": claim,
+                     "claimed_acot": claim, "strategy_details": {"claimed_acot": claim, "verified_acot": dc}})
+        rows.append({"method": "reference", "strategy": "one-phase", "N": n, "acot": ref,
+                     "status": "solved" if ref else "incomplete", "message": "" if ref else "step 1: failed"})
+    df = _frame(rows)
+    info = tables.method_info(df)
+    assert dict(zip(info["method"], info["thesis_method"], strict=True)) == {
+        "OP-DC": "OP-DC", "D&C-DC": "D&C-DC", "reference": "SNOPT"}
+    acot = tables.acot_table(df)
+    # D&C's verified ACOT is the polished one, its claim kept beside it.
+    dc = acot[acot["method"] == "D&C-DC"].set_index("N")
+    assert dc.loc[20, "acot"] == pytest.approx(0.15) and dc.loc[20, "claimed_acot"] == pytest.approx(0.05)
+    # The minimum is marked once per method, at the first N reaching it (OP-DC: 0.30 at N = 20 and 30 -> 20).
+    marked = acot[acot["is_minimum"]].set_index("method")["N"].to_dict()
+    assert marked == {"OP-DC": 20, "D&C-DC": 20, "reference": 20}
+    minima = tables.method_minima(acot, info).set_index("method")
+    assert minima.loc["OP-DC", "min_acot"] == pytest.approx(0.30) and minima.loc["OP-DC", "N_at_min"] == 20
+    savings = tables.savings_table(acot, info)
+    vs_op = savings[savings["baseline_kind"] == "one-phase"].set_index("N")
+    assert vs_op.loc[10, "savings_percent"] == pytest.approx(50.0)
+    assert vs_op.loc[30, "savings_percent"] == pytest.approx(40.0)
+    assert vs_op.loc[20, "claimed_savings_percent"] == pytest.approx(100 * (0.30 - 0.05) / 0.30)
+    vs_ref = savings[savings["baseline_kind"] == "reference"].set_index("N")
+    assert vs_ref.loc[10, "savings_percent"] == pytest.approx(100 * (0.30 - 0.20) / 0.30)
+    assert math.isnan(vs_ref.loc[30, "savings_percent"])  # the reference failed at N = 30
+    published = tables.published_comparison(minima.reset_index()).set_index("thesis_method")
+    assert published.loc["D&C-DC", "published_acot"] == 0.0695 and published.loc["D&C-DC", "published_N"] == 90
+    assert published.loc["D&C-DC", "difference"] == pytest.approx(0.15 - 0.0695)
+    assert published.loc["SNOPT", "method"] == "reference"
+    failed = tables.failed_cases(df)
+    assert list(failed["message"]) == ["step 1: failed"] and list(failed["N"]) == [30]
+
+
+def test_energetics_table_and_figures():
+    rows = [{"experiment": "energetics", "method": "D&C-DC", "strategy": "one-phase", "N": 10, "acot": 0.1 + d * rm,
+             "experiment_options": {"mass_ratio": rm, "length_ratio": 0.3, "speed": 0.4, "step_length": d,
+                                    "slope": 0}} for rm in (0.3, 0.5) for d in (0.5, 0.8)]
+    df = _frame(rows)
+    table = tables.energetics_table(df)
+    assert list(table.columns) == tables.ENERGETICS_COLUMNS and len(table) == 4
+    assert tables.experiments(df) == []  # the study is not an ACOT-vs-N sweep
+    from gaitbench.reports.figures import energetics_figures
+
+    assert [figure.id for figure in energetics_figures(table)] == ["fig-energetics-rm"]
+
+
+# --- the report of a real store ----------------------------------------------------------------------------------
+
+DOCUMENTED_CSV = {
+    "acot": tables.ACOT_COLUMNS, "acot_minima": tables.MINIMA_COLUMNS, "cot_bounds": tables.COT_BOUNDS_COLUMNS,
+    "savings": tables.SAVINGS_COLUMNS, "published_acot": tables.PUBLISHED_COLUMNS,
+    "published_savings": tables.PUBLISHED_SAVINGS_COLUMNS, "dc_claims": tables.DC_CLAIMS_COLUMNS,
+    "energetics": tables.ENERGETICS_COLUMNS, "tracking": tables.TRACKING_COLUMNS,
+    "failed_cases": tables.FAILED_COLUMNS, "provenance": tables.PROVENANCE_COLUMNS, "cases": tables.CASES_COLUMNS,
+}
+
+
+def test_csv_files_have_their_documented_columns(report_dir):
+    docs = (Path(__file__).parents[1] / "docs" / "reports.md").read_text()
+    for name, columns in DOCUMENTED_CSV.items():
+        frame = pd.read_csv(report_dir / f"{name}.csv")
+        assert list(frame.columns) == columns, name
+        assert f"`{name}.csv`" in docs, f"{name}.csv is not documented"
+        for column in columns:
+            assert f"`{column}`" in docs, f"column {column} of {name}.csv is not documented"
+    acot = pd.read_csv(report_dir / "acot.csv")
+    assert set(acot["method"]) == {"OP-DC", "OP-DM", "D&C-DC", "reference"}
+    assert acot.groupby("method")["is_minimum"].sum().drop("reference").eq(1).all()
+    savings = pd.read_csv(report_dir / "savings.csv")
+    vs_op = savings[savings["baseline_kind"] == "one-phase"]
+    assert sorted(vs_op["N"]) == [8, 10]
+    expected = 100 * (vs_op["baseline_acot"] - vs_op["acot"]) / vs_op["baseline_acot"]
+    assert np.allclose(vs_op["savings_percent"], expected)
+    failed = pd.read_csv(report_dir / "failed_cases.csv")
+    assert list(failed["method"]) == ["reference"] and list(failed["status"]) != ["solved"]
+    assert isinstance(failed["message"].iloc[0], str) and failed["message"].iloc[0].strip()
+
+
+def test_html_contains_every_figure_and_table(report_dir, store):
+    html = (report_dir / "index.html").read_text()
+    for element in ("fig-acot-forward", "fig-cot-bounds-forward", "fig-savings-forward", "tbl-minima-forward",
+                    "tbl-acot-forward", "tbl-savings-forward", "tbl-published-acot", "tbl-published-savings",
+                    "tbl-dc-claims", "tbl-failed", "tbl-provenance", 'id="gaits"', "fig-gait-angles-",
+                    "fig-gait-velocities-", "fig-gait-torques-", "fig-gait-grf-", "fig-gait-push-off-",
+                    "fig-animation-", "svg.stick-figure", "# tiny test suite"):
+        assert element in html, element
+    assert "data:image/svg+xml;base64," in html
+    assert "http://" not in html.replace("http://www.w3.org/2000/svg", "")  # self-contained: no network
+    for figure in ("fig-acot-forward", "fig-savings-forward"):
+        assert (report_dir / "figures" / f"{figure}.svg").is_file()
+    failed = pd.read_csv(report_dir / "failed_cases.csv")
+    assert failed["message"].iloc[0].split(":")[0] in html  # the failed case's reason is listed
+    assert "claimed ACOT" in html and "verified ACOT" in html
+
+
+def test_gait_choice_and_dc_claims(store):
+    report = build_report(store)
+    df = report.cases
+    solved = df[df["status"] == "solved"]
+    assert [section.gait.case_key for section in report.gaits] == [solved.loc[solved["acot"].idxmin(), "case_key"]]
+    dc_key = df[df["is_dc"]]["case_key"].iloc[0]
+    chosen = build_report(store, gait=dc_key[:8])
+    (section,) = chosen.gaits
+    assert section.dc_claim is not None and section.gait.steps[0].reaction is not None
+    assert any("patchwork" in note for note in section.gait.notes)
+    claims = report.tables["dc_claims"]
+    assert set(claims["case_key"]) == set(df[df["is_dc"]]["case_key"])
+    from gaitbench.reports import ReportError
+
+    with pytest.raises(ReportError, match="not a case"):
+        build_report(store, gait="zzzz")
+
+
+def test_tracking_section_from_track_files(store, tmp_path):
+    """A synthetic track.json/npz in the format of gaitbench.tracking.TrackingResult.save."""
+    copy = tmp_path / "tracked"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        (key, walk_path) = db.execute("SELECT case_key, walk_path FROM cases WHERE method = 'D&C-DC' AND N = 10"
+                                      ).fetchone()
+        track_path = walk_path.replace("walk.json", "track.json")
+        db.execute("UPDATE cases SET tracking_path = ?, max_position_error = 1e-4, acot_tracked = 0.0101, "
+                   "acot_increase_percent = 1.0, fell = 0 WHERE case_key = ?", (track_path, key))
+    t = np.linspace(0, 0.7343, 50)
+    q_d = np.c_[0.2 - 0.5 * t, -0.2 + 0.6 * t]
+    series = {"t": t, "step": np.ones_like(t), "q_desired": q_d, "q": q_d + 1e-4, "dq_desired": q_d,
+              "dq": q_d, "dq_estimated": q_d + 1e-4, "tau": q_d, "disturbance": q_d, "disturbance_estimated": q_d}
+    np.savez_compressed(copy / track_path.replace(".json", ".npz"), **series)
+    summary = {"max_position_error": 1e-4, "max_velocity_error": 1e-4, "acot_reference": 0.01,
+               "acot_tracked": 0.0101, "acot_increase_percent": 1.0, "fell": False, "fall": None,
+               "steps": [{"index": 1}], "series": "track.npz"}
+    (copy / track_path).write_text(json.dumps(summary))
+    out = write_report(copy, tmp_path / "out")
+    html = out.read_text()
+    for element in ('id="tracking"', "tbl-tracking", "fig-track-angles-", "fig-track-errors-", "fig-track-acot-"):
+        assert element in html, element
+    tracking = pd.read_csv(tmp_path / "out" / "tracking.csv")
+    assert tracking["acot_increase_percent"].iloc[0] == pytest.approx(1.0)
+    assert tracking["acot_reference"].iloc[0] == pytest.approx(0.01)
+
+
+def test_report_command(store, tmp_path):
+    from click.testing import CliRunner
+
+    from gaitbench.cli import main
+
+    result = CliRunner().invoke(main, ["report", str(store), "--out", str(tmp_path / "r"), "--reporter", "csv"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "r" / "acot.csv").is_file() and not (tmp_path / "r" / "index.html").exists()
+    result = CliRunner().invoke(main, ["report", str(tmp_path / "nowhere"), "--out", str(tmp_path / "x")])
+    assert result.exit_code != 0 and "no results store" in result.output
+
+
+# --- headless Chromium -------------------------------------------------------------------------------------------
+
+class DevTools:
+    """Chromium's DevTools protocol over ``--remote-debugging-pipe`` (fd 3: commands in, fd 4: replies out,
+    messages separated by NUL bytes): console errors and exceptions arrive as events, which is precise where
+    ``--enable-logging`` only prints every console message at one level."""
+
+    def __init__(self, browser: str, user_data: Path) -> None:
+        to_browser, self._write = os.pipe()
+        self._read, from_browser = os.pipe()
+
+        def wire() -> None:
+            os.dup2(to_browser, 3)
+            os.dup2(from_browser, 4)
+
+        self.process = subprocess.Popen(
+            [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             f"--user-data-dir={user_data}", "--remote-debugging-pipe", "about:blank"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            preexec_fn=wire, close_fds=False)
+        os.close(to_browser)
+        os.close(from_browser)
+        self._messages: queue.Queue = queue.Queue()
+        self._next = 0
+        self.events: list[dict] = []
+        threading.Thread(target=self._reader, daemon=True).start()
+
+    def _reader(self) -> None:
+        buffer = b""
+        while chunk := os.read(self._read, 65536):
+            buffer += chunk
+            *complete, buffer = buffer.split(b"\0")
+            for message in complete:
+                self._messages.put(json.loads(message))
+
+    def send(self, method: str, params: dict | None = None, session: str | None = None, timeout: float = 30):
+        self._next += 1
+        message = {"id": self._next, "method": method, "params": params or {}}
+        if session:
+            message["sessionId"] = session
+        os.write(self._write, json.dumps(message).encode() + b"\0")
+        deadline = time.monotonic() + timeout
+        while True:
+            reply = self._messages.get(timeout=max(0.01, deadline - time.monotonic()))
+            if reply.get("id") == self._next:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply.get("result", {})
+            self.events.append(reply)
+
+    def wait_for(self, event: str, timeout: float = 30) -> None:
+        deadline = time.monotonic() + timeout
+        while not any(e.get("method") == event for e in self.events):
+            self.events.append(self._messages.get(timeout=max(0.01, deadline - time.monotonic())))
+
+    def drain(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            try:
+                self.events.append(self._messages.get(timeout=0.05))
+            except queue.Empty:
+                continue
+
+    def close(self) -> None:
+        try:
+            self.send("Browser.close", timeout=5)
+        except Exception:
+            pass
+        try:
+            self.process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        os.close(self._write)
+
+
+def console_errors(events: list[dict]) -> list[str]:
+    errors = []
+    for event in events:
+        method, params = event.get("method"), event.get("params", {})
+        if method == "Runtime.exceptionThrown":
+            details = params.get("exceptionDetails", {})
+            errors.append(details.get("exception", {}).get("description") or details.get("text", "exception"))
+        elif method == "Runtime.consoleAPICalled" and params.get("type") in ("error", "assert"):
+            errors.append(" ".join(str(arg.get("value", arg.get("description"))) for arg in params.get("args", [])))
+        elif method == "Log.entryAdded" and params.get("entry", {}).get("level") == "error":
+            errors.append(params["entry"].get("text", ""))
+    return errors
+
+
+def open_in_chromium(page: Path, tmp_path: Path) -> tuple[list[str], bytes]:
+    """Load ``page`` in headless Chromium at 1280×2000; its console errors and a PNG screenshot."""
+    browser = shutil.which("chromium")
+    if browser is None:
+        pytest.skip(CHROMIUM_MISSING)
+    tools = DevTools(browser, tmp_path / "chromium-profile")
+    try:
+        target = tools.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+        session = tools.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        for domain in ("Runtime.enable", "Log.enable", "Page.enable"):
+            tools.send(domain, session=session)
+        tools.send("Emulation.setDeviceMetricsOverride",
+                   {"width": 1280, "height": 2000, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        tools.send("Page.navigate", {"url": page.resolve().as_uri()}, session=session)
+        tools.wait_for("Page.loadEventFired")
+        tools.drain(1.0)  # let the animation run a few frames
+        png = base64.b64decode(tools.send("Page.captureScreenshot", {"format": "png"}, session=session)["data"])
+    finally:
+        tools.close()
+    return console_errors(tools.events), png
+
+
+def test_console_errors_are_caught(tmp_path):
+    """The check itself: a page with a console.error and an uncaught exception fails it."""
+    page = tmp_path / "bad.html"
+    page.write_text('<html><body><p>x</p><script>console.error("boom"); undefinedFunction();</script></body></html>')
+    errors, _ = open_in_chromium(page, tmp_path)
+    assert any("boom" in error for error in errors) and any("undefinedFunction" in error for error in errors)
+
+
+def test_report_opens_in_headless_chromium(report_dir, tmp_path):
+    errors, png = open_in_chromium(report_dir / "index.html", tmp_path)
+    assert errors == []
+    shot = tmp_path / "report.png"
+    shot.write_bytes(png)
+    from PIL import Image
+
+    pixels = np.asarray(Image.open(shot).convert("L"), dtype=float)
+    assert pixels.shape == (2000, 1280)
+    assert pixels.std() > 10  # not blank: text, figures and tables on white
+    assert (pixels < 128).mean() > 0.01
