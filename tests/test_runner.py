@@ -251,3 +251,9 @@ def test_runs_commands_list_show_and_export(local_store: Path, tmp_path: Path) -
         assert len(frame) == 2 and set(frame.case_key) == set(rows_by_key(local_store))
     missing = subprocess.run([GAITBENCH, "runs", "show", str(tmp_path / "nowhere")], capture_output=True, text=True)
     assert missing.returncode == 1 and "no results store here" in missing.stderr
+
+
+def test_every_store_column_is_documented() -> None:
+    documented = (Path(__file__).parent.parent / "docs" / "results.md").read_text()
+    missing = [column for column in CASE_COLUMNS if f"`{column}`" not in documented]
+    assert not missing, f"docs/results.md does not describe: {', '.join(missing)}"
