@@ -4,69 +4,79 @@ Run: .venv/bin/python benchmarks/solvers.py [--time-limit S] [--solvers a,b] [--
 (writes benchmarks/results/solvers.json and .md). The problem is the upward-slope experiment's first step, Second
 Phase (4-DOF), with the thesis's cost and default options, from the transcription's standard initial guess, for
 ``hermite-simpson`` and ``dmoc`` at N = 25, 50, 100. Each solve has the same time limit and iteration limit; times
-are wall-clock seconds of the solve call (the first solve of a structure includes each solver's own build).
+are wall-clock seconds of the solve call (including each solver's own build). Each solve runs in a child process
+that is stopped at 1.5 × the time limit + 60 s, for solvers that cannot be interrupted (``killed`` rows). Rows
+are appended to ``solvers.jsonl`` as they finish, and a rerun skips what is there.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import platform
+import multiprocessing
 import time
-from importlib.metadata import PackageNotFoundError, version
+from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 
-from gaitbench import __version__
+from pebble import ProcessPool
+
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.plugins import load_registry
+from gaitbench.provenance import provenance
 
 EXPERIMENT = "upward-slope"
 TRANSCRIPTIONS = ("hermite-simpson", "dmoc")
 NODES = (25, 50, 100)
 OUT = Path(__file__).parent / "results"
-PACKAGES = ("casadi", "numpy", "scipy", "qpsolvers", "osqp", "cyipopt-wheels", "pyomo", "pyomo-ripopt")
 
 
-def problems(registry, nodes):
+def solve_one(solver_name: str, transcription_name: str, n_nodes: int, time_limit_s: float,
+              max_iterations: int) -> dict:
+    """Build the step's NLP and solve it once; runs in a child process so a solver that ignores its limit can
+    be stopped."""
+    registry = load_registry()
     experiment = registry.create("experiment", EXPERIMENT)
     geometry = experiment.terrain.steps[0]
-    for name in TRANSCRIPTIONS:
-        transcription = registry.create("transcription", name)
+    transcription = registry.create("transcription", transcription_name)
+    built = transcription.build(StepStructure("second", n_nodes, ProblemOptions(limits=experiment.limits)))
+    data = StepData(experiment.robot, experiment.stance_leg(1), experiment.initial_state[[0, 1, 4, 5]],
+                    geometry.D, geometry.theta, experiment.time_step(n_nodes))
+    solver = registry.create("solver", solver_name, time_limit_s=time_limit_s, max_iterations=max_iterations)
+    started = time.perf_counter()
+    result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+    return {"solver": solver_name, "transcription": transcription_name, "N": n_nodes,
+            "variables": built.nlp.n_variables, "status": result.status.value, "message": result.message,
+            "call_s": time.perf_counter() - started, "wall_time_s": result.wall_time_s,
+            "function_time_s": result.function_time_s, "iterations": result.iterations, "cot": result.objective,
+            "violation": result.constraint_violation}
+
+
+def run(solver_names, nodes, time_limit_s, max_iterations, log: Path) -> list[dict]:
+    """Every (transcription, N, solver) not yet in ``log`` (JSON lines, appended as each finishes), then all."""
+    done = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
+    seen = {(row["solver"], row["transcription"], row["N"]) for row in done}
+    hard_limit = 1.5 * time_limit_s + 60  # the solve's own limit, plus the build and a margin
+    for transcription in TRANSCRIPTIONS:
         for n_nodes in nodes:
-            built = transcription.build(StepStructure("second", n_nodes, ProblemOptions(limits=experiment.limits)))
-            data = StepData(experiment.robot, experiment.stance_leg(1), experiment.initial_state[[0, 1, 4, 5]],
-                            geometry.D, geometry.theta, experiment.time_step(n_nodes))
-            yield name, n_nodes, built, data
-
-
-def run(solver_names, nodes, time_limit_s, max_iterations):
-    registry = load_registry()
-    rows = []
-    for transcription, n_nodes, built, data in problems(registry, nodes):
-        for solver_name in solver_names:
-            solver = registry.create("solver", solver_name, time_limit_s=time_limit_s,
-                                     max_iterations=max_iterations)
-            started = time.perf_counter()
-            result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
-            rows.append({"solver": solver_name, "transcription": transcription, "N": n_nodes,
-                         "variables": built.nlp.n_variables, "status": result.status.value,
-                         "message": result.message, "call_s": time.perf_counter() - started,
-                         "wall_time_s": result.wall_time_s, "function_time_s": result.function_time_s,
-                         "iterations": result.iterations, "cot": result.objective,
-                         "violation": result.constraint_violation})
-            print(json.dumps(rows[-1]), flush=True)
-    return rows
-
-
-def machine() -> dict:
-    versions = {}
-    for package in PACKAGES:
-        try:
-            versions[package] = version(package)
-        except PackageNotFoundError:
-            versions[package] = None
-    return {"python": platform.python_version(), "gaitbench": __version__, "machine": platform.machine(),
-            "platform": platform.platform(), "cpus": __import__("os").cpu_count(), "packages": versions}
+            for solver_name in solver_names:
+                if (solver_name, transcription, n_nodes) in seen:
+                    continue
+                with ProcessPool(max_workers=1, context=multiprocessing.get_context("spawn")) as pool:
+                    future = pool.schedule(solve_one, (solver_name, transcription, n_nodes, time_limit_s,
+                                                       max_iterations), timeout=hard_limit)
+                    try:
+                        row = future.result()
+                    except FutureTimeout:
+                        row = {"solver": solver_name, "transcription": transcription, "N": n_nodes,
+                               "variables": None, "status": "killed",
+                               "message": f"ignored its {time_limit_s:g} s time limit; stopped after {hard_limit:g} s",
+                               "call_s": hard_limit, "wall_time_s": None, "function_time_s": None,
+                               "iterations": None, "cot": None, "violation": None}
+                with log.open("a") as stream:
+                    stream.write(json.dumps(row) + "\n")
+                print(json.dumps(row), flush=True)
+                done.append(row)
+    return done
 
 
 def markdown(results: dict) -> str:
@@ -79,8 +89,10 @@ def markdown(results: dict) -> str:
              "| solver | transcription | N | status | time (s) | iterations | COT | violation |",
              "|---|---|---|---|---|---|---|---|"]
     for r in results["rows"]:
+        cot = "—" if r["cot"] is None else f"{r['cot']:.4f}"
+        violation = "—" if r["violation"] is None else f"{r['violation']:.1e}"
         lines.append(f"| {r['solver']} | {r['transcription']} | {r['N']} | {r['status']} | {r['call_s']:.2f} | "
-                     f"{r['iterations']} | {r['cot']:.4f} | {r['violation']:.1e} |")
+                     f"{r['iterations']} | {cot} | {violation} |")
     return "\n".join(lines) + "\n"
 
 
@@ -94,10 +106,10 @@ def main() -> None:
     args = parser.parse_args()
     names = args.solvers.split(",") if args.solvers else load_registry().names("solver")
     nodes = [int(n) for n in args.nodes.split(",")]
-    rows = run(names, nodes, args.time_limit, args.max_iterations)
-    results = {"machine": machine(), "limits": {"time_limit_s": args.time_limit,
-                                                "max_iterations": args.max_iterations}, "rows": rows}
     OUT.mkdir(exist_ok=True)
+    rows = run(names, nodes, args.time_limit, args.max_iterations, OUT / f"{args.out}.jsonl")
+    results = {"machine": provenance(), "limits": {"time_limit_s": args.time_limit,
+                                                "max_iterations": args.max_iterations}, "rows": rows}
     (OUT / f"{args.out}.json").write_text(json.dumps(results, indent=2))
     (OUT / f"{args.out}.md").write_text(markdown(results))
 

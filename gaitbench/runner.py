@@ -90,9 +90,10 @@ def _solve_walk(case: Case):
 def _track(case: Case, walk):
     from gaitbench.tracking import track_walk
 
-    stage = case.tracking
+    stage, registry = case.tracking, _registry(case)
+    experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
     return track_walk(walk, controller=stage.controller, observer=stage.observer, disturbance=stage.disturbance,
-                      options=stage.options, registry=_registry(case))
+                      options=stage.options, registry=registry, experiment=experiment)
 
 
 def _saved_files(result, name: str) -> dict[str, bytes]:

@@ -257,3 +257,16 @@ def test_every_store_column_is_documented() -> None:
     documented = (Path(__file__).parent.parent / "docs" / "results.md").read_text()
     missing = [column for column in CASE_COLUMNS if f"`{column}`" not in documented]
     assert not missing, f"docs/results.md does not describe: {', '.join(missing)}"
+
+
+def test_tracking_stage_fills_the_tracking_columns(tmp_path: Path) -> None:
+    from gaitbench.case import TrackingStage
+
+    tracked = Case(PluginChoice("forward"), 10, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
+                   PluginChoice("one-phase"), steps=2, tracking=TrackingStage("thesis", "thesis", "friction"))
+    summary = run_suite(suite_of([tracked]), tmp_path, InProcessExecutor())
+    row = rows_by_key(tmp_path)[tracked.key]
+    assert summary.solved == 1, row["message"]
+    assert 0 < row["max_position_error"] < 1e-2 and row["fell"] == 0
+    assert row["acot_increase_percent"] > 5  # friction costs energy on top of the reference (measured: +65 %)
+    assert (tmp_path / row["tracking_path"]).exists() and (tmp_path / row["tracking_path"]).with_suffix(".npz").exists()

@@ -1,0 +1,219 @@
+"""Closed-loop tracking (issue 8): controllers, observers and disturbances on a solved forward walk.
+
+One small gait (forward, Hermite–Simpson + IPOPT, N = 15, two steps) is solved once for the module. Figures quoted
+in the comments were measured on it.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gaitbench.cli import main
+from gaitbench.plugins import UnknownPluginError, load_registry
+from gaitbench.tracking import (
+    SERIES_KEYS,
+    FallCriteria,
+    Reference,
+    TrackingInputError,
+    load_walk,
+    track,
+    track_walk,
+)
+from gaitbench.walk import WalkProblem
+from plugins.hermite_simpson import HermiteSimpson
+from plugins.ipopt import Ipopt
+from plugins.one_phase import OnePhase
+
+REGISTRY = load_registry()
+
+
+@pytest.fixture(scope="module")
+def walk():
+    experiment = REGISTRY.create("experiment", "forward")
+    result = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 15, steps=2))
+    assert result.complete, result.failure
+    return result
+
+
+@pytest.fixture(scope="module")
+def reference(walk):
+    return Reference.from_walk(walk, REGISTRY.create("experiment", "forward"))
+
+
+@pytest.fixture(scope="module")
+def saved(walk, tmp_path_factory):
+    return walk.save(tmp_path_factory.mktemp("walk") / "forward.json")
+
+
+def run(reference, controller="thesis", observer="thesis", disturbance="friction", *, controller_options=None,
+        disturbance_object=None, **kwargs):
+    model = reference.model
+    return track(
+        reference,
+        REGISTRY.create("controller", controller, model, reference, **(controller_options or {})),
+        REGISTRY.create("observer", observer, model),
+        disturbance_object or REGISTRY.create("disturbance", disturbance, reference.experiment),
+        **kwargs,
+    )
+
+
+def test_every_plugin_is_registered_and_builds(reference):
+    assert REGISTRY.names("controller") == ["computed-torque", "pd", "pfl", "thesis"]
+    assert REGISTRY.names("observer") == ["disturbance", "ideal", "thesis", "velocity"]
+    assert REGISTRY.names("disturbance") == ["friction", "none", "push"]
+    for name in REGISTRY.names("controller"):
+        assert hasattr(REGISTRY.create("controller", name, reference.model, reference), "torque")
+    for name in REGISTRY.names("observer"):
+        assert hasattr(REGISTRY.create("observer", name, reference.model), "estimate")
+    for name in REGISTRY.names("disturbance"):
+        assert hasattr(REGISTRY.create("disturbance", name, reference.experiment), "force")
+    with pytest.raises(ValueError, match="gains must be positive"):
+        REGISTRY.create("controller", "thesis", reference.model, reference, kp=-1)
+    with pytest.raises(ValueError, match="point"):
+        REGISTRY.create("disturbance", "push", reference.experiment, point="knee")
+
+
+@pytest.mark.parametrize(("controller", "steps"), [("thesis", 2), ("computed-torque", 1)])
+def test_exact_model_with_ideal_observer_tracks_to_integrator_tolerance(reference, controller, steps):
+    """Same model, true velocities, no disturbance: the robot follows the reference to the integrator's accuracy
+    (measured 3e-11 rad at rtol = atol = 1e-10), across push-off and heel strike, and pushes off with the planned
+    impulse."""
+    result = run(reference, controller, "ideal", "none", steps=steps)
+    data = result.as_dict()
+    assert not data["fell"] and data["steps_tracked"] == steps
+    assert data["max_position_error"] < 1e-8
+    assert data["max_velocity_tracking_error"] < 1e-6
+    for step in data["steps"]:
+        assert step["push_off_impulse"] == pytest.approx(step["push_off_impulse_reference"], rel=1e-6, abs=1e-9)
+        # Perfect tracking costs what the exact model's inverse dynamics along the reference cost.
+        assert step["cot_tracked"] == pytest.approx(step["cot_ideal"], rel=1e-2)
+
+
+def test_thesis_closed_form_contact_force_breaks_the_linearization(reference):
+    """PFL with the thesis's (3.39) contact force leaves q̈_a = M11⁻¹ M_a v_a: the swing foot misses the ground."""
+    result = run(reference, "pfl", "ideal", "none", controller_options={"contact_force": "thesis"}, steps=1)
+    assert result.as_dict()["max_position_error"] > 1e-2
+    assert result.fell and "missed the ground" in result.fall.reason
+
+
+def test_friction_with_observers_stays_bounded_and_costs_energy(reference):
+    """Friction with the thesis's observers: errors stay small (measured 2.0e-4 rad, 3.7e-3 rad/s), well below
+    the same loop without the disturbance estimate (3.7e-3 rad), and the ACOT increase is reported."""
+    observed = run(reference, "thesis", "thesis", "friction").as_dict()
+    assert not observed["fell"] and observed["steps_tracked"] == 2
+    assert observed["max_position_error"] < 1e-3
+    assert observed["max_velocity_error"] < 2e-2
+    assert observed["acot_tracked"] > observed["acot_reference"]
+    assert observed["acot_increase_percent"] == pytest.approx(
+        100 * (observed["acot_tracked"] / observed["acot_reference"] - 1))
+    unestimated = run(reference, "thesis", "ideal", "friction", steps=1).as_dict()
+    assert unestimated["max_position_error"] > 5 * observed["steps"][0]["max_position_error"]["leg2"]
+
+
+class ConstantDisturbance:
+    """d = (4, −6) N·m on the leg angles, constant over the walk (the thesis's Assumption 1, ḋ = 0)."""
+
+    value = np.array([4.0, -6.0])
+
+    def force(self, t, q, dq, step):
+        return np.r_[self.value, np.zeros(len(q) - 2)]
+
+    def impulse(self, q, dq, step):
+        return np.zeros(len(q))
+
+
+def test_observers_converge_on_a_constant_disturbance_and_survive_the_impact(reference):
+    """The working-form observers learn a constant disturbance (measured 4e-4 N·m after 0.3 s, 5e-7 N·m after
+    0.7 s) and keep it through push-off and heel strike (t = 0.7343 s), where they are reset consistently."""
+    result = run(reference, "thesis", "thesis", disturbance_object=ConstantDisturbance())
+    series = result.series
+    error = np.abs(series["disturbance_estimated"] - series["disturbance"]).max(axis=1)
+    velocity = np.abs(series["dq"] - series["dq_estimated"]).max(axis=1)
+    t = series["t"]
+    assert error[0] == pytest.approx(6.0)  # starts from d̂ = 0
+    assert error[t >= 0.3].max() < 2e-3
+    assert error[t >= 0.5].max() < 1e-5  # including the second step, after the impact
+    assert velocity[t >= 0.3].max() < 1e-6
+    assert not result.fell
+
+
+def test_zero_order_hold_holds_the_torque_and_costs_accuracy(reference):
+    """Sampled at 500 Hz the exact loop tracks to 3.1e-5 rad (measured), at 100 Hz to 1.5e-4 rad."""
+    fast = run(reference, "thesis", "ideal", "none", sample_rate=500.0, steps=1)
+    slow = run(reference, "thesis", "ideal", "none", sample_rate=100.0, steps=1)
+    fast_error, slow_error = fast.as_dict()["max_position_error"], slow.as_dict()["max_position_error"]
+    assert 1e-8 < fast_error < slow_error < 1e-3
+    t, tau = slow.series["t"], slow.series["tau"]
+    period = np.floor(t / 1e-2 + 1e-9)
+    inside = (period[1:] == period[:-1]) & (t[1:] - period[1:] * 1e-2 > 1e-9)  # same hold interval
+    assert np.array_equal(tau[1:][inside], tau[:-1][inside])
+    assert not np.array_equal(tau[1:], tau[:-1])
+
+
+def test_a_push_on_an_open_loop_robot_is_detected_as_a_fall(reference):
+    """PD with negligible gains is open loop; a 1500 N backward push at the hip makes it fall within the step."""
+    push = REGISTRY.create("disturbance", "push", reference.experiment, force=1500.0, angle=np.pi, time=0.1,
+                           duration=0.2)
+    result = run(reference, "pd", "ideal", controller_options={"kp": 1e-3, "kd": 1e-3}, disturbance_object=push)
+    fall = result.as_dict()["fall"]
+    assert result.fell and fall["step"] == 1
+    assert 0.1 < fall["time"] < reference.steps[0].info.duration
+    assert fall["reason"] in ("foot through the ground", "hip too low", "leg angle out of range")
+    assert result.as_dict()["acot_tracked"] is None  # no step completed
+    with pytest.raises(ValueError, match="hip_fraction"):
+        FallCriteria(hip_fraction=1.5)
+
+
+def test_stored_walk_gives_the_same_reference_and_a_complete_record(walk, reference, saved, tmp_path):
+    """The NPZ rebuilt through the transcription's interpolant is the in-memory reference; the result saves JSON and
+    the time series a report plots."""
+    loaded, _ = load_walk(saved, REGISTRY)
+    rebuilt = Reference.from_walk(loaded, reference.experiment)
+    for original, copy in zip(reference.steps, rebuilt.steps, strict=True):
+        for t in np.linspace(0, original.info.duration, 37):
+            for a, b in zip(original.desired(t), copy.desired(t), strict=True):
+                np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+    result = track_walk(saved, "thesis", "ideal", "none", options={"steps": 1}, registry=REGISTRY)
+    path = result.save(tmp_path / "track.json")
+    data = json.loads(path.read_text())
+    for key in ("max_position_error", "max_velocity_error", "acot_reference", "acot_tracked",
+                "acot_increase_percent", "fell", "fall", "steps"):
+        assert key in data
+    assert data["walk"]["source"] == str(saved)
+    series = np.load(tmp_path / data["series"])
+    assert set(series.files) == set(SERIES_KEYS)
+    assert series["q"].shape == series["q_desired"].shape == (len(series["t"]), 2)
+
+
+def test_bad_inputs_name_the_file_and_the_fix(saved, tmp_path):
+    with pytest.raises(TrackingInputError, match="no such result file.*gaitbench solve"):
+        load_walk(tmp_path / "missing.json", REGISTRY)
+    orphan = tmp_path / "orphan.json"
+    orphan.write_text(saved.read_text())
+    with pytest.raises(TrackingInputError, match=r"orphan\.json.*forward\.npz is missing"):
+        load_walk(orphan, REGISTRY)
+    (tmp_path / "broken.json").write_text('{"experiment": "forward"}')
+    with pytest.raises(TrackingInputError, match="broken.json: not a walk result, missing"):
+        load_walk(tmp_path / "broken.json", REGISTRY)
+    with pytest.raises(UnknownPluginError, match="unknown controller 'nope'"):
+        track_walk(saved, controller="nope", registry=REGISTRY)
+    with pytest.raises(ValueError, match="unknown tracking options"):
+        track_walk(saved, options={"sampling": 10}, registry=REGISTRY)
+
+
+def test_track_command(saved, tmp_path):
+    runner = CliRunner()
+    out = tmp_path / "track.json"
+    result = runner.invoke(main, ["track", str(saved), "--observer", "ideal", "--disturbance", "none", "--steps", "1",
+                                  "-c", "kp=400", "-c", "kv=40", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "ACOT tracked" in result.output
+    data = json.loads(out.read_text())
+    assert data["configuration"]["controller"] == {"name": "thesis", "options": {"kp": 400, "kv": 40}}
+    assert data["fell"] is False
+    missing = runner.invoke(main, ["track", str(tmp_path / "none.json")])
+    assert missing.exit_code == 2 and "no such result file" in missing.output
+    unknown = runner.invoke(main, ["track", str(saved), "--observer", "nope"])
+    assert unknown.exit_code == 2 and "unknown observer 'nope'" in unknown.output
