@@ -81,15 +81,20 @@ def run(solver_names, nodes, time_limit_s, max_iterations, log: Path) -> list[di
 
 def markdown(results: dict) -> str:
     limits = results["limits"]
+    limits, machine = results["limits"], results["machine"]
+    packages = ", ".join(f"{name} {ver}" for name, ver in machine["packages"].items() if ver)
     lines = [f"# Solvers on one 4-DOF gait step ({EXPERIMENT}, step 1, thesis cost)", "",
-             f"Machine: {results['machine']}", "",
+             f"Machine: {machine['cpus']} CPUs, {machine['platform']}, Python {machine['python']}; gaitbench "
+             f"{machine['gaitbench']} at {machine['git_commit']}; {packages}.", "",
+             *([results["note"], ""] if results.get("note") else []),
              f"Limits per solve: {limits['time_limit_s']} s, {limits['max_iterations']} iterations. "
              "COT is the optimizer's objective at the returned point (a failed solve's COT is not an optimum); "
-             "time is the wall-clock time of the solve call.", "",
+             "time is the wall-clock time of the solve call; `killed`: the solver ignored its time limit and its "
+             "process was stopped.", "",
              "| solver | transcription | N | status | time (s) | iterations | COT | violation |",
              "|---|---|---|---|---|---|---|---|"]
     for r in results["rows"]:
-        cot = "—" if r["cot"] is None else f"{r['cot']:.4f}"
+        cot = "—" if r["cot"] is None else f"{r['cot']:.4g}"
         violation = "—" if r["violation"] is None else f"{r['violation']:.1e}"
         lines.append(f"| {r['solver']} | {r['transcription']} | {r['N']} | {r['status']} | {r['call_s']:.2f} | "
                      f"{r['iterations']} | {cot} | {violation} |")
@@ -103,13 +108,15 @@ def main() -> None:
     parser.add_argument("--time-limit", type=float, default=60.0, help="seconds per solve")
     parser.add_argument("--max-iterations", type=int, default=3000)
     parser.add_argument("--out", default="solvers", help="file stem under benchmarks/results")
+    parser.add_argument("--note", help="a line for the summary, e.g. what else ran on the machine")
     args = parser.parse_args()
     names = args.solvers.split(",") if args.solvers else load_registry().names("solver")
     nodes = [int(n) for n in args.nodes.split(",")]
     OUT.mkdir(exist_ok=True)
     rows = run(names, nodes, args.time_limit, args.max_iterations, OUT / f"{args.out}.jsonl")
     results = {"machine": provenance(), "limits": {"time_limit_s": args.time_limit,
-                                                "max_iterations": args.max_iterations}, "rows": rows}
+                                                "max_iterations": args.max_iterations},
+               "note": args.note, "rows": rows}
     (OUT / f"{args.out}.json").write_text(json.dumps(results, indent=2))
     (OUT / f"{args.out}.md").write_text(markdown(results))
 
