@@ -256,6 +256,8 @@ def _row(values: dict[str, Any], columns: dict[str, str]) -> tuple:
 def _encode(column: str, value: Any) -> Any:
     if column in JSON_COLUMNS:
         return None if value is None else json.dumps(value, sort_keys=True, default=_json_default)
+    if hasattr(value, "item"):  # NumPy scalars (np.int64, np.bool_) that SQLite cannot bind
+        value = value.item()
     if isinstance(value, bool):
         return int(value)
     if isinstance(value, float) and not math.isfinite(value):

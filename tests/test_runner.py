@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 import gaitbench
@@ -102,7 +103,8 @@ def test_store_round_trip_and_messages(tmp_path: Path) -> None:
     outcome = CaseOutcome(case, "timeout", "stopped", 12.5, provenance={"hostname": "here"})
     with ResultStore.create(tmp_path) as store:
         store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
-        store.record_case(case_row(outcome, "s", "r1"), {"walk.json": b"{}"})
+        row = case_row(outcome, "s", "r1") | {"iterations": np.int64(7), "fell": np.bool_(False)}  # NumPy scalars
+        store.record_case(row, {"walk.json": b"{}"})
         assert store.finished_keys() == {case.key}
         assert store.finished_keys(retry_failed=True) == set()  # a timeout is the run's failure: retried
         assert store.resolve_run("r") == "r1"
@@ -112,6 +114,7 @@ def test_store_round_trip_and_messages(tmp_path: Path) -> None:
     assert list(frame.columns) == list(CASE_COLUMNS)
     row = frame.iloc[0]
     assert (row.case_key, row.status, row.N, row.provenance) == (case.key, "timeout", 8, {"hostname": "here"})
+    assert (row.iterations, row.fell) == (7, 0)
     assert (tmp_path / "cases" / case.key / "walk.json").read_bytes() == b"{}"
     with pytest.raises(StoreError, match="no results store here"):
         gaitbench.load_results(tmp_path / "missing")

@@ -64,6 +64,13 @@ def _integer_n(ax) -> None:
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
 
 
+def _by_method(data: pd.DataFrame) -> list[tuple[str, pd.DataFrame, str]]:
+    """(method, its rows, its colour) in order of first appearance: one line per method in a figure."""
+    methods = list(dict.fromkeys(data["method"]))
+    colors = _colors(methods)
+    return [(method, data[data["method"] == method], colors[method]) for method in methods]
+
+
 def _colors(methods: list[str]) -> dict[str, str]:
     cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     return {method: cycle[i % len(cycle)] for i, method in enumerate(methods)}
@@ -74,14 +81,11 @@ def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     data = acot[acot["experiment"] == experiment]
     if data["acot"].notna().sum() == 0 and data["claimed_acot"].notna().sum() == 0:
         return None
-    methods = list(dict.fromkeys(data["method"]))
-    colors = _colors(methods)
     fig, ax = plt.subplots(figsize=(7, 4))
-    for method in methods:
-        rows = data[data["method"] == method]
-        ax.plot(rows["N"], rows["acot"], "o-", color=colors[method], label=f"{method} (verified)", ms=4)
+    for method, rows, color in _by_method(data):
+        ax.plot(rows["N"], rows["acot"], "o-", color=color, label=f"{method} (verified)", ms=4)
         if rows["claimed_acot"].notna().any():
-            ax.plot(rows["N"], rows["claimed_acot"], "s--", color=colors[method], alpha=0.7, ms=3,
+            ax.plot(rows["N"], rows["claimed_acot"], "s--", color=color, alpha=0.7, ms=3,
                     label=f"{method} (claimed, patchwork)")
         best = rows[rows["is_minimum"]]
         if not best.empty:
@@ -106,13 +110,10 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     data = acot[acot["experiment"] == experiment]
     if data["cot_min"].notna().sum() == 0:
         return None
-    methods = list(dict.fromkeys(data["method"]))
-    colors = _colors(methods)
     fig, ax = plt.subplots(figsize=(7, 4))
-    for method in methods:
-        rows = data[data["method"] == method]
-        ax.plot(rows["N"], rows["cot_min"], "v-", color=colors[method], ms=4, label=f"{method} min")
-        ax.plot(rows["N"], rows["cot_max"], "^--", color=colors[method], ms=4, label=f"{method} max")
+    for method, rows, color in _by_method(data):
+        ax.plot(rows["N"], rows["cot_min"], "v-", color=color, ms=4, label=f"{method} min")
+        ax.plot(rows["N"], rows["cot_max"], "^--", color=color, ms=4, label=f"{method} max")
     ax.set_xlabel("N (nodes per step)")
     _integer_n(ax)
     ax.set_ylabel("per-step COT")
