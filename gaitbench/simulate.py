@@ -182,12 +182,10 @@ def simulate(
 
 def _swing_rhs(model, control, index, stance, t0):
     n = model.dof
-    functions = model.functions(stance)
 
     def rhs(t, x):
         tau = control.torque(t - t0, x[:n], x[n:], index)
-        ddq = functions.forward_dynamics(x[:n], x[n:], tau, model.parameters)[0]
-        return np.concatenate([x[n:], np.asarray(ddq).ravel()])
+        return np.concatenate([x[n:], model.forward_dynamics(x[:n], x[n:], tau, stance)[0]])
 
     return rhs
 
@@ -262,12 +260,8 @@ def _record(model, control, index, stance, slope, times, states, scuffed) -> Sim
     tau = np.array([control.torque(ti - t0, xi[:n], xi[n:], index) for ti, xi in zip(t, x, strict=True)])
     reaction = None
     if n == 4:
-        functions = model.functions(stance)
         reaction = np.array(
-            [
-                np.asarray(functions.forward_dynamics(xi[:n], xi[n:], ui, model.parameters)[1]).ravel()
-                for xi, ui in zip(x, tau, strict=True)
-            ]
+            [model.forward_dynamics(xi[:n], xi[n:], ui, stance)[1] for xi, ui in zip(x, tau, strict=True)]
         )
     return SimulatedStep(
         step=index,

@@ -39,6 +39,7 @@ from gaitbench.energetics import average_cot, cost_of_transport, hip_energy, hip
 from gaitbench.experiment import Experiment
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure, legs_to_roles
 from gaitbench.mechanics import BipedModel, other_leg
+from gaitbench.numeric import NumericFunction
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.terrain import clearance
 from gaitbench.transcription import Seed, StepTrajectory
@@ -822,7 +823,7 @@ class ModelTerms:
             q, dq, p = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("p", len(model.parameters))
             christoffel = ca.substitute(ca.jacobian(ca.vec(raw.coriolis(q, dq, p)), dq), dq, ca.SX.zeros(n))
             outputs = ca.vertcat(ca.vec(raw.mass(q, p)), ca.vec(christoffel), raw.gravity(q, p))
-            self._functions[stance] = ca.Function(f"terms_{stance}", [q, p], [outputs])
+            self._functions[stance] = NumericFunction(ca.Function(f"terms_{stance}", [q, p], [outputs]))
         self._key: bytes | None = None
         self._terms: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -831,7 +832,7 @@ class ModelTerms:
         key = bytes([stance]) + q.tobytes()
         if key != self._key:
             n = self.dof
-            values = np.asarray(self._functions[stance](q, self.parameters)).ravel()
+            values = self._functions[stance](q, self.parameters)
             self._key = key
             self._terms = (values[: n * n].reshape(n, n, order="F"),
                            values[n * n: n * n * (n + 1)].reshape(n * n, n, order="F"), values[n * n * (n + 1):])

@@ -317,9 +317,15 @@ def locate_interval(t: float, h: float, n_nodes: int) -> tuple[int, float]:
 
     A time equal to a node opens the interval starting there, which matters for piecewise-constant controls.
     """
-    times = np.arange(n_nodes) * h
-    k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, n_nodes - 2))
-    return k, float(np.clip((t - times[k]) / h, 0.0, 1.0))
+    # Scalar arithmetic, not a search over the node times: interpolants call this thousands of times per step.
+    # Node k's time is k * h exactly as the grid computes it, so the comparisons below match a search of the grid.
+    k = int(t // h)
+    if (k + 1) * h <= t:
+        k += 1
+    elif k * h > t:
+        k -= 1
+    k = min(max(k, 0), n_nodes - 2)
+    return k, min(max((t - k * h) / h, 0.0), 1.0)
 
 
 def cubic_hermite(y0: np.ndarray, y1: np.ndarray, m0: np.ndarray, m1: np.ndarray, s: float):

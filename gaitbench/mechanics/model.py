@@ -8,6 +8,7 @@ import casadi as ca
 import numpy as np
 
 from gaitbench.mechanics.biped import BipedFunctions, biped_functions
+from gaitbench.numeric import NumericFunction
 from gaitbench.robot import RobotParameters
 
 
@@ -39,6 +40,7 @@ class BipedModel:
         self.dof = dof
         self.parameters = robot.vector()
         self._functions = {stance: biped_functions(dof, stance) for stance in (1, 2)}
+        self._numeric: dict[tuple[str, int], NumericFunction] = {}
 
     def functions(self, stance: int) -> BipedFunctions:
         """The raw CasADi functions (parameters as last input) for building NLPs."""
@@ -48,12 +50,12 @@ class BipedModel:
         fn = getattr(self._functions[stance], name)
         if fn is None:
             raise NotImplementedError(f"the {self.dof}-DOF model has no {name.replace('_', ' ')}")
-        outputs = fn(*args, self.parameters)
         if any(isinstance(arg, (ca.SX, ca.MX)) for arg in args):
-            return outputs
-        if isinstance(outputs, tuple):
-            return tuple(_to_numpy(out) for out in outputs)
-        return _to_numpy(outputs)
+            return fn(*args, self.parameters)
+        key = (name, stance)
+        if key not in self._numeric:  # simulators call these thousands of times: evaluate through buffers
+            self._numeric[key] = NumericFunction(fn)
+        return self._numeric[key](*args, self.parameters)
 
     def mass_matrix(self, q, stance: int):
         return self._eval("mass", stance, q)
@@ -113,11 +115,6 @@ class BipedModel:
         q_next = np.concatenate([q[:2], foot])
         dq_next = np.concatenate([dq_plus[:2], np.zeros(2)])
         return HeelStrike(q=q_next, dq=dq_next, impulse=impulse, lift_off_velocity=float(dq_plus[3]))
-
-
-def _to_numpy(value) -> np.ndarray:
-    array = np.asarray(ca.DM(value).full(), dtype=float)
-    return array.ravel() if 1 in array.shape else array
 
 
 def _scalar(value):
