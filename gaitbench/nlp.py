@@ -4,7 +4,7 @@
 
 ``p`` carries everything that changes between solves of the same structure (initial state, step geometry,
 time step, robot parameters), so a built NLP — and a solver built on it — is reused without rebuilding.
-Exact sparse first and second derivatives come from CasADi and are built once, on first use.
+Exact sparse first and second derivatives come from CasADi, each built once, on first use.
 """
 
 from __future__ import annotations
@@ -16,15 +16,38 @@ import casadi as ca
 import numpy as np
 
 
-@dataclass(frozen=True)
 class NLPFunctions:
-    """Compiled callables over (x, p); ``hessian_lagrangian`` takes (x, p, σ_f, λ_g) and is lower-triangular."""
+    """Compiled callables over (x, p); ``hessian_lagrangian`` takes (x, p, σ_f, λ_g) and is lower-triangular.
 
-    objective: ca.Function
-    constraints: ca.Function
-    gradient: ca.Function
-    jacobian: ca.Function
-    hessian_lagrangian: ca.Function
+    Each is built on first use: checking a solution needs only ``constraints``, and the symbolic Hessian of a
+    large step costs seconds and a hundred megabytes that a solver building its own would pay twice.
+    """
+
+    def __init__(self, x: ca.SX, p: ca.SX, f: ca.SX, g: ca.SX) -> None:
+        self._x, self._p, self._f, self._g = x, p, f, g
+
+    @cached_property
+    def objective(self) -> ca.Function:
+        return ca.Function("f", [self._x, self._p], [self._f])
+
+    @cached_property
+    def constraints(self) -> ca.Function:
+        return ca.Function("g", [self._x, self._p], [self._g])
+
+    @cached_property
+    def gradient(self) -> ca.Function:
+        return ca.Function("grad_f", [self._x, self._p], [ca.gradient(self._f, self._x)])
+
+    @cached_property
+    def jacobian(self) -> ca.Function:
+        return ca.Function("jac_g", [self._x, self._p], [ca.jacobian(self._g, self._x)])
+
+    @cached_property
+    def hessian_lagrangian(self) -> ca.Function:
+        sigma = ca.SX.sym("sigma")
+        lam = ca.SX.sym("lam", self._g.numel())
+        hessian = ca.tril(ca.hessian(sigma * self._f + ca.dot(lam, self._g), self._x)[0])
+        return ca.Function("hess_l", [self._x, self._p, sigma, lam], [hessian])
 
 
 @dataclass
@@ -54,17 +77,7 @@ class NLP:
 
     @cached_property
     def functions(self) -> NLPFunctions:
-        sigma = ca.SX.sym("sigma")
-        lam = ca.SX.sym("lam", self.n_constraints)
-        lagrangian = sigma * self.f + ca.dot(lam, self.g)
-        hessian = ca.tril(ca.hessian(lagrangian, self.x)[0])
-        return NLPFunctions(
-            objective=ca.Function("f", [self.x, self.p], [self.f]),
-            constraints=ca.Function("g", [self.x, self.p], [self.g]),
-            gradient=ca.Function("grad_f", [self.x, self.p], [ca.gradient(self.f, self.x)]),
-            jacobian=ca.Function("jac_g", [self.x, self.p], [ca.jacobian(self.g, self.x)]),
-            hessian_lagrangian=ca.Function("hess_l", [self.x, self.p, sigma, lam], [hessian]),
-        )
+        return NLPFunctions(self.x, self.p, self.f, self.g)
 
     def casadi_problem(self) -> dict[str, ca.SX]:
         """The problem in the dictionary form of ``casadi.nlpsol``."""

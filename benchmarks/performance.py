@@ -1,0 +1,268 @@
+"""Where the time goes: NLP build, cold step solves against N, per-iteration split, sectional solves, D&C against
+one-phase, and whole-suite wall time.
+
+Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [walks] [suite]
+
+Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
+rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
+
+- ``steps``: the second-phase step 1 of the forward experiment per transcription and N, from the standard guess:
+  transcription and IPOPT build time, resident memory of the built solver, solve time, iterations, and each
+  iteration split into derivative evaluation (IPOPT's callbacks: f, g, their derivatives, the Hessian) and the
+  rest (linear algebra and IPOPT's own work); log–log slopes against N.
+- ``sections``: the sectional solves of decrease-and-conquer for one step, from the First Phase tail (the thesis's
+  guess, the default) and from the complete Second Phase tail.
+- ``walks``: decrease-and-conquer against one-phase, whole walks, with 1 and 2 sectional workers.
+- ``suite``: a sample of ``thesis-forward`` (every method at a few N) run with ``gaitbench run`` at 1 and 2 jobs;
+  the whole-suite time is extrapolated per method with a power law in N fitted to the sample, and labelled so.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gaitbench.gait_problem import StepData, sectional_structure
+from gaitbench.plugins import load_registry
+from gaitbench.provenance import provenance
+from gaitbench.store import load_results
+from gaitbench.walk import WalkProblem, solve_and_verify
+
+HERE = Path(__file__).parent
+RESULTS = HERE / "results" / "performance.json"
+SUMMARY = HERE / "results" / "performance.md"
+TRANSCRIPTIONS = ("hermite-simpson", "dmoc")
+STEP_NODES = (25, 50, 100, 200)
+SECTION_NODES = (25, 50)
+WALK_NODES = (20, 40)
+WALK_STEPS = 3
+SUITE_SAMPLE_NODES = (10, 20, 40)
+IPOPT_CALLBACKS = ("f", "g", "grad_f", "jac_g", "hess_l")
+
+
+def resident_mb() -> float:
+    return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def forward_step(registry, n_nodes: int):
+    experiment = registry.create("experiment", "forward")
+    problem = WalkProblem(experiment, registry.create("transcription", "hermite-simpson"),
+                          registry.create("solver", "ipopt"), n_nodes)
+    state = np.asarray(experiment.initial_state)[[0, 1, 4, 5]]
+    return problem, problem.step_data(1, state)
+
+
+def steps_part(registry) -> list[dict]:
+    rows = []
+    for name in TRANSCRIPTIONS:
+        for n_nodes in STEP_NODES:
+            problem, data = forward_step(registry, n_nodes)
+            transcription, solver = registry.create("transcription", name), registry.create("solver", "ipopt")
+            started = time.perf_counter()
+            built = transcription.build(problem.structure("second"))
+            transcribe_s = time.perf_counter() - started
+            memory = resident_mb()
+            started = time.perf_counter()
+            ipopt = solver._solver(built.nlp)  # what the first solve of a structure pays once
+            nlpsol_s = time.perf_counter() - started
+            solver_mb = resident_mb() - memory
+            result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+            stats = ipopt.stats()
+            derivative_s = sum(stats.get(f"t_wall_nlp_{f}", 0.0) for f in IPOPT_CALLBACKS)
+            iterations = max(result.iterations, 1)
+            rows.append({
+                "transcription": name, "N": n_nodes, "variables": built.nlp.n_variables,
+                "constraints": built.nlp.n_constraints, "transcribe_s": transcribe_s, "nlpsol_build_s": nlpsol_s,
+                "solver_memory_mb": solver_mb, "status": result.status.value, "solve_s": result.wall_time_s,
+                "iterations": result.iterations, "derivative_s": derivative_s,
+                "hessian_s": stats.get("t_wall_nlp_hess_l", 0.0),
+                "per_iteration_ms": 1e3 * result.wall_time_s / iterations,
+                "derivative_per_iteration_ms": 1e3 * derivative_s / iterations,
+                "rest_per_iteration_ms": 1e3 * (result.wall_time_s - derivative_s) / iterations,
+            })
+            print(rows[-1], flush=True)
+    return rows
+
+
+def sections_part(registry) -> list[dict]:
+    rows = []
+    for name in TRANSCRIPTIONS:
+        for n_nodes in SECTION_NODES:
+            problem, data = forward_step(registry, n_nodes)
+            problem.transcription = registry.create("transcription", name)
+            first = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("first")), data,
+                                     phase="first")
+            complete = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("second")), data,
+                                        seed=first.trajectory.seed())
+            h = data.time_step
+            for guess, source in (("first-phase", first), ("complete", complete)):
+                times, iterations, converged = [], [], 0
+                for k0 in range(2, n_nodes - 1):
+                    built = problem.transcription.build(sectional_structure(problem.structure("second"), k0))
+                    section = StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
+                                                                      first.trajectory.dq[k0 - 1]],
+                                       data.chord, data.slope, h)
+                    x0 = built.initial_guess(section, source.trajectory.seed((k0 - 1) * h))
+                    problem.solver.solve(built.nlp, section.parameter_vector(), x0)  # builds the solver
+                    result = problem.solver.solve(built.nlp, section.parameter_vector(), x0)
+                    times.append(result.wall_time_s)
+                    iterations.append(result.iterations)
+                    converged += result.converged
+                rows.append({"transcription": name, "N": n_nodes, "guess": guess, "sections": len(times),
+                             "converged": converged, "mean_s": float(np.mean(times)),
+                             "median_s": float(np.median(times)), "max_s": float(np.max(times)),
+                             "mean_iterations": float(np.mean(iterations))})
+                print(rows[-1], flush=True)
+    return rows
+
+
+def walks_part(registry) -> list[dict]:
+    rows = []
+    experiment = registry.create("experiment", "forward")
+    for name in TRANSCRIPTIONS:
+        for n_nodes in WALK_NODES:
+            runs = [("one-phase", {}), ("decrease-and-conquer", {"workers": 1}),
+                    ("decrease-and-conquer", {"workers": 2})]
+            for strategy, options in runs:
+                problem = WalkProblem(experiment, registry.create("transcription", name),
+                                      registry.create("solver", "ipopt"), n_nodes, steps=WALK_STEPS)
+                started = time.perf_counter()
+                walk = registry.create("strategy", strategy, **options).solve(problem)
+                wall = time.perf_counter() - started
+                rows.append({"transcription": name, "N": n_nodes, "steps": WALK_STEPS, "strategy": strategy,
+                             "workers": options.get("workers", 1), "complete": walk.complete,
+                             "acot": walk.strategy_details.get("verified_acot", walk.acot), "wall_s": wall})
+                print(rows[-1], flush=True)
+    return rows
+
+
+def suite_part(registry) -> list[dict]:
+    source = (HERE.parent / "suites" / "thesis-forward.toml").read_text()
+    sample = source.replace("N = { start = 10, stop = 200, step = 10 }", f"N = {list(SUITE_SAMPLE_NODES)}")
+    if sample == source:
+        raise SystemExit("suites/thesis-forward.toml no longer has the N range this benchmark replaces")
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        suite_file = Path(scratch) / "thesis-forward-sample.toml"
+        suite_file.write_text(sample)
+        for jobs in (1, 2):
+            store = Path(scratch) / f"store-{jobs}"
+            started = time.perf_counter()
+            subprocess.run([str(Path(sys.executable).parent / "gaitbench"), "run", str(suite_file), "--jobs", str(jobs),
+                            "--store", str(store), "--no-report"], check=False, stdout=subprocess.DEVNULL)
+            wall = time.perf_counter() - started
+            cases = load_results(store)
+            per_case = [{"method": row["method"], "N": int(row["N"]), "status": row["status"],
+                         "wall_s": float(row["wall_time_s"])} for row in cases.to_dict("records")]
+            rows.append({"suite": "thesis-forward", "sample_N": list(SUITE_SAMPLE_NODES), "jobs": jobs,
+                         "cases": len(per_case), "wall_s": wall, "per_case": per_case,
+                         "extrapolated": extrapolate(per_case, range(10, 201, 10), jobs)})
+            print({key: value for key, value in rows[-1].items() if key != "per_case"}, flush=True)
+    return rows
+
+
+def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
+    """Case time ≈ a·N^b per method, fitted to the sample; the suite's total over ``nodes``, divided by ``jobs``
+    (perfect packing: a lower bound for the wall time with that many jobs)."""
+    fits, total = {}, 0.0
+    for method in sorted({row["method"] for row in per_case}):
+        points = [(row["N"], row["wall_s"]) for row in per_case if row["method"] == method and row["wall_s"] > 0]
+        if len(points) < 2:
+            continue
+        slope, intercept = np.polyfit(np.log([n for n, _ in points]), np.log([t for _, t in points]), 1)
+        predicted = float(sum(np.exp(intercept) * n**slope for n in nodes))
+        fits[method] = {"exponent": float(slope), "suite_case_time_s": predicted}
+        total += predicted
+    return {"methods": fits, "case_time_s": total, "wall_s_lower_bound": total / jobs}
+
+
+def loglog_slope(rows: list[dict], key: str, transcription: str) -> float:
+    points = [(row["N"], row[key]) for row in rows if row["transcription"] == transcription and row[key] > 0]
+    return float(np.polyfit(np.log([n for n, _ in points]), np.log([v for _, v in points]), 1)[0])
+
+
+def write_summary(results: dict) -> None:
+    machine = results["provenance"]
+    lines = ["# Performance of the core", "",
+             f"Measured with `benchmarks/performance.py` on {machine['cpus']} CPUs, {machine['platform']}, Python "
+             f"{machine['python']}, gaitbench {machine['gaitbench']} at {machine['git_commit'][:12]}; "
+             + ", ".join(f"{name} {version}" for name, version in sorted(machine["packages"].items())
+                         if name in ("casadi", "numpy", "scipy", "cyipopt-wheels")) + ".",
+             "Times are wall-clock seconds of one process (OPENBLAS_NUM_THREADS=1); IPOPT through CasADi, exact "
+             "Hessian, MUMPS.", ""]
+    if "steps" in results:
+        rows = results["steps"]
+        lines += ["## One cold 4-DOF step (forward, step 1, standard guess)", "",
+                  "| transcription | N | vars | transcribe (s) | IPOPT build (s) | solver memory (MB) | status | "
+                  "solve (s) | iterations | ms/iteration | derivatives | rest |", "|" + "---|" * 12]
+        for r in rows:
+            lines.append(f"| {r['transcription']} | {r['N']} | {r['variables']} | {r['transcribe_s']:.2f} | "
+                         f"{r['nlpsol_build_s']:.2f} | {r['solver_memory_mb']:.0f} | {r['status']} | "
+                         f"{r['solve_s']:.2f} | {r['iterations']} | {r['per_iteration_ms']:.2f} | "
+                         f"{r['derivative_per_iteration_ms']:.2f} | {r['rest_per_iteration_ms']:.2f} |")
+        lines += ["", "Log–log slopes against N (1 = linear):", "",
+                  "| transcription | solve time | iterations | ms/iteration | derivatives/iteration | rest/iteration "
+                  "| IPOPT build | solver memory |", "|" + "---|" * 8]
+        for name in TRANSCRIPTIONS:
+            slopes = [loglog_slope(rows, key, name) for key in ("solve_s", "iterations", "per_iteration_ms",
+                                                                 "derivative_per_iteration_ms",
+                                                                 "rest_per_iteration_ms", "nlpsol_build_s",
+                                                                 "solver_memory_mb")]
+            lines.append(f"| {name} | " + " | ".join(f"{s:.2f}" for s in slopes) + " |")
+        lines.append("")
+    if "sections" in results:
+        lines += ["## Sectional solves of one decrease-and-conquer step (forward, step 1)", "",
+                  "| transcription | N | guess | sections | converged | mean (ms) | median (ms) | max (ms) | "
+                  "mean iterations |", "|" + "---|" * 9]
+        for r in results["sections"]:
+            lines.append(f"| {r['transcription']} | {r['N']} | {r['guess']} | {r['sections']} | {r['converged']} | "
+                         f"{1e3 * r['mean_s']:.0f} | {1e3 * r['median_s']:.0f} | {1e3 * r['max_s']:.0f} | "
+                         f"{r['mean_iterations']:.0f} |")
+        lines.append("")
+    if "walks" in results:
+        lines += [f"## Whole walks (forward, first {WALK_STEPS} steps)", "",
+                  "| transcription | N | strategy | workers | complete | ACOT | wall (s) |", "|" + "---|" * 7]
+        for r in results["walks"]:
+            acot = "—" if r["acot"] is None else f"{r['acot']:.5f}"
+            lines.append(f"| {r['transcription']} | {r['N']} | {r['strategy']} | {r['workers']} | {r['complete']} "
+                         f"| {acot} | {r['wall_s']:.1f} |")
+        lines.append("")
+    if "suite" in results:
+        lines += ["## Suite wall time", ""]
+        for r in results["suite"]:
+            fit = r["extrapolated"]
+            lines += [f"`thesis-forward` sampled at N = {r['sample_N']} ({r['cases']} cases), `--jobs {r['jobs']}`: "
+                      f"measured {r['wall_s']:.0f} s. Extrapolated to the whole suite (N = 10…200) with a power "
+                      f"law per method: {fit['case_time_s'] / 3600:.1f} h of case time, at least "
+                      f"{fit['wall_s_lower_bound'] / 3600:.1f} h of wall time with {r['jobs']} job(s) "
+                      "(exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
+                      + ").", ""]
+    SUMMARY.write_text("\n".join(lines))
+
+
+PARTS = {"steps": steps_part, "sections": sections_part, "walks": walks_part, "suite": suite_part}
+
+
+def main(argv: list[str]) -> None:
+    chosen = argv or list(PARTS)
+    unknown = [part for part in chosen if part not in PARTS]
+    if unknown:
+        raise SystemExit(f"unknown part(s) {unknown}; choose from {list(PARTS)}")
+    registry = load_registry()
+    results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    for part in chosen:
+        results[part] = PARTS[part](registry)
+        results["provenance"] = provenance()
+        RESULTS.write_text(json.dumps(results, indent=1, default=float) + "\n")
+        write_summary(results)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
