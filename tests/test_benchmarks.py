@@ -1,0 +1,39 @@
+"""The ACOT regression check must fail on a changed result, and its case set must stay a valid suite."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+from gaitbench.suite import load_suite
+
+BENCHMARKS = Path(__file__).parents[1] / "benchmarks"
+
+
+def _regression_module():
+    spec = importlib.util.spec_from_file_location("acot_regression", BENCHMARKS / "acot_regression.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _row(acot, status="solved", claimed=None):
+    return {"case": "c", "status": status, "message": "", "acot": acot, "claimed_acot": claimed}
+
+
+def test_differences_flag_status_acot_and_missing_cases():
+    check = _regression_module()
+    baseline = {"a": _row(0.05), "b": _row(0.07, claimed=0.06), "c": _row(None, "incomplete")}
+    assert check.differences(baseline, {"a": _row(0.05 + 1e-9), "b": _row(0.07, claimed=0.06),
+                                        "c": _row(None, "incomplete")}, 1e-6) == []
+    found = check.differences(baseline, {"a": _row(0.0501), "b": _row(0.07, "incomplete", 0.06)}, 1e-6)
+    assert any("acot 0.05 -> 0.0501" in line for line in found)
+    assert any("status solved -> incomplete" in line for line in found)
+    assert any("missing" in line for line in found)
+    assert check.differences({"b": _row(0.07, claimed=0.06)}, {"b": _row(0.07, claimed=None)}, 1e-6)
+
+
+def test_baseline_covers_the_regression_suite():
+    check = _regression_module()
+    suite = load_suite(check.SUITE)
+    baseline = json.loads(check.BASELINE.read_text())["cases"]
+    assert {case.key for case in suite.cases} == set(baseline)
