@@ -43,7 +43,7 @@ STEP_NODES = (25, 50, 100, 200)
 SECTION_NODES = (25, 50)
 WALK_NODES = (20, 40)
 WALK_STEPS = 3
-SUITE_SAMPLE_NODES = (10, 20, 40)
+SUITE_SAMPLE_NODES = (10, 20, 30)
 IPOPT_CALLBACKS = ("f", "g", "grad_f", "jac_g", "hess_l")
 
 

@@ -55,6 +55,18 @@ class Solver(Protocol):
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult: ...
 
 
+def prepare(solver: Solver, nlp: NLP) -> None:
+    """Build what ``solver`` reuses across solves of ``nlp`` (its ``nlp.solver_cache`` entry) ahead of the first solve.
+
+    Optional for solver plugins: one that defines ``prepare(nlp)`` lets a strategy build in one process before it
+    forks workers, which then inherit the built solver instead of each building its own. Without it, this does
+    nothing and the first solve builds as usual.
+    """
+    method = getattr(solver, "prepare", None)
+    if method is not None:
+        method(nlp)
+
+
 def options_key(name: str, options: dict) -> tuple:
     """A hashable, order-independent key for ``nlp.solver_cache``: a solver built with these options is reusable."""
     return (name, _freeze(options))

@@ -32,7 +32,7 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.energetics import candidate_cot, point_costs
 from gaitbench.gait_problem import StepData, legs_to_roles, sectional_structure
-from gaitbench.solver import SolverResult
+from gaitbench.solver import SolverResult, prepare
 from gaitbench.transcription import Interpolant, StepTrajectory, TranscribedStep, cubic_hermite, locate_interval
 from gaitbench.verify import verify_step
 from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, next_step_state, solve_and_verify, walk_step_by_step
@@ -139,7 +139,8 @@ class SectionalSolves:
 
     With ``workers`` > 1 the solves of a step run in a pool of forked processes. Forking, rather than sending
     the problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures
-    that do not pickle); each worker then keeps its own solver instances across steps. A process that is itself
+    that do not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once
+    rather than once per worker. A process that is itself
     a daemon (a suite's local pool worker) cannot have children: give the suite ``--jobs`` or the strategy
     ``workers``, not both.
     """
@@ -152,6 +153,8 @@ class SectionalSolves:
         self.solver = problem.solver
         self._pool: ProcessPoolExecutor | None = None
         if workers > 1 and len(self.starts) > 1:
+            for built in self.built.values():  # built once here and inherited, not once per worker
+                prepare(self.solver, built.nlp)
             global _FORKED
             _FORKED = self  # what the forked workers see: workers start on first submit, after this is set
             self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))

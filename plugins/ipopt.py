@@ -86,6 +86,10 @@ class Ipopt:
             multipliers=np.asarray(solution["lam_g"], dtype=float).ravel(),
         )
 
+    def prepare(self, nlp: NLP) -> None:
+        """Build the ``nlpsol`` for ``nlp`` now (see :meth:`gaitbench.solver.Solver.prepare`)."""
+        self._solver(nlp)
+
     def _solver(self, nlp: NLP) -> ca.Function:
         key = options_key("ipopt", self.options)
         if key not in nlp.solver_cache:
