@@ -20,7 +20,7 @@ from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.robot import RobotParameters
-from gaitbench.transcription import TranscribedStep
+from gaitbench.transcription import TranscribedStep, locate_interval
 
 ROBOT = RobotParameters(m1=20, m2=20, M=40, l=1, a=0.5)  # the forward experiment's robot
 MODEL = BipedModel(ROBOT, 2)
@@ -235,3 +235,17 @@ def test_interpolant_matches_the_nodal_values(name):
             np.testing.assert_allclose(dq, trajectory.dq[k], atol=1e-7, err_msg=f"q̇ at node {k}, t = {at!r}")
     for j, t in enumerate(trajectory.control_times):
         np.testing.assert_allclose(trajectory.control(t), trajectory.tau[j], atol=1e-12)
+
+
+def test_interval_lookup_matches_a_search_of_the_node_times():
+    """The scalar lookup must pick the interval a search of the grid ``k * h`` picks, nodes included (a node opens
+    the interval starting there), and clamp times outside the step."""
+    rng = np.random.default_rng(3)
+    for n_nodes in (3, 10, 30, 201):
+        for h in (0.01, 0.7 / 29, 1 / 3, 0.123456789 / 7):
+            grid = np.arange(n_nodes) * h
+            times = np.r_[grid, rng.uniform(-0.1, 1.1 * n_nodes * h, 500), np.linspace(0, grid[-1], 5 * n_nodes)]
+            for t in times:
+                k = int(np.clip(np.searchsorted(grid, t, side="right") - 1, 0, n_nodes - 2))
+                expected = (k, float(np.clip((t - grid[k]) / h, 0.0, 1.0)))
+                assert locate_interval(float(t), h, n_nodes) == expected, (n_nodes, h, t)
