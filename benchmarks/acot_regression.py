@@ -65,6 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--record", action="store_true", help="write the baseline instead of comparing")
     parser.add_argument("--tolerance", type=float, default=1e-6, help="largest accepted ACOT change")
     args = parser.parse_args(argv)
+    if not args.record and not BASELINE.exists():
+        parser.error(f"no baseline at {BASELINE}: record one with --record on the commit before your change")
     started = time.perf_counter()
     current = solve_cases()
     wall = time.perf_counter() - started
