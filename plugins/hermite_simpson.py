@@ -12,6 +12,7 @@ import casadi as ca
 import numpy as np
 
 from gaitbench import Registration, hookimpl
+from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT
 from gaitbench.transcription import (
     Discretization,
     Interpolant,
@@ -35,15 +36,23 @@ class HermiteSimpson(Transcription):
         dynamics = state_derivative(model)
         slopes = dynamics.map(n)(states, controls, ca.repmat(symbols.robot, 1, n))
         left, right = states[:, :-1], states[:, 1:]
-        f_left, f_right = slopes[:, :-1], slopes[:, 1:]
-        mid_states = 0.5 * (left + right) + h / 8 * (f_left - f_right)
-        mid_controls = 0.5 * (controls[:, :-1] + controls[:, 1:])
-        f_mid = dynamics.map(n - 1)(mid_states, mid_controls, ca.repmat(symbols.robot, 1, n - 1))
-        builder.constrain("dynamics", right - left - h / 6 * (f_left + 4 * f_mid + f_right))
+        interval = [left, right, controls[:, :-1], controls[:, 1:]]
+        builder.constrain_intervals(["dynamics"], simpson_defect(dynamics), interval, symbols.vector)
         builder.constrain("initial_state", states[:, 0] - symbols.initial_state)
 
         power_nodes = absolute_power(builder, structure, "power_nodes", controls, states[2:4, :])
-        power_mid = absolute_power(builder, structure, "power_midpoints", mid_controls, mid_states[2:4, :])
+        if structure.options.absolute_value == "slack":
+            # |P| at the midpoints by the same split as absolute_power, declared per interval for its Hessian.
+            positive = builder.variable("power_midpoints_positive", (1, n - 1), 0.0, np.inf)
+            negative = builder.variable("power_midpoints_negative", (1, n - 1), 0.0, np.inf)
+            builder.constrain_intervals(["power_midpoints_split"], midpoint_power_split(dynamics),
+                                        [*interval, positive, negative], symbols.vector)
+            power_mid = positive + negative
+        else:
+            f_left, f_right = slopes[:, :-1], slopes[:, 1:]
+            mid_states = 0.5 * (left + right) + h / 8 * (f_left - f_right)
+            mid_controls = 0.5 * (controls[:, :-1] + controls[:, 1:])
+            power_mid = absolute_power(builder, structure, "power_midpoints", mid_controls, mid_states[2:4, :])
         hip_energy = h / 6 * (ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:]) + 4 * ca.sum2(power_mid))
 
         def unpack(blocks):
@@ -66,6 +75,34 @@ class HermiteSimpson(Transcription):
         accelerations = [slopes[2:4, k] for k in range(n)]
         return Discretization(positions=states[:2, :], velocities=states[2:4, :], accelerations=accelerations,
                               hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
+
+
+def _interval_symbols():
+    """One interval's (x_k, x_k+1, u_k, u_k+1) and the step parameters, with the midpoint the scheme implies."""
+    left, right, u_left, u_right = ca.SX.sym("x_k", 4), ca.SX.sym("x_k1", 4), ca.SX.sym("u_k", 2), ca.SX.sym("u_k1", 2)
+    p = ca.SX.sym("p", N_STEP_PARAMETERS)
+    return left, right, u_left, u_right, p, p[PARAMETER_LAYOUT["robot"]], p[PARAMETER_LAYOUT["time_step"]]
+
+
+def simpson_defect(dynamics: ca.Function) -> ca.Function:
+    """The Simpson defect of one interval (8.79), with the Hermite midpoint state (8.80) substituted."""
+    left, right, u_left, u_right, p, robot, h = _interval_symbols()
+    f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
+    mid_state = 0.5 * (left + right) + h / 8 * (f_left - f_right)
+    f_mid = dynamics(mid_state, 0.5 * (u_left + u_right), robot)
+    defect = right - left - h / 6 * (f_left + 4 * f_mid + f_right)
+    return ca.Function("hermite_simpson_defect", [ca.vertcat(left, right, u_left, u_right), p], [defect])
+
+
+def midpoint_power_split(dynamics: ca.Function) -> ca.Function:
+    """P_mid − s⁺ + s⁻ of one interval: the hip power at the Hermite midpoint, split as in ``absolute_power``."""
+    left, right, u_left, u_right, p, robot, h = _interval_symbols()
+    positive, negative = ca.SX.sym("s_positive"), ca.SX.sym("s_negative")
+    f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
+    mid_state = 0.5 * (left + right) + h / 8 * (f_left - f_right)
+    power = ca.dot(0.5 * (u_left + u_right), mid_state[2:4])
+    return ca.Function("hermite_simpson_midpoint_power", [ca.vertcat(left, right, u_left, u_right, positive,
+                                                                     negative), p], [power - positive + negative])
 
 
 def hermite_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:

@@ -93,7 +93,13 @@ class Ipopt:
     def _solver(self, nlp: NLP) -> ca.Function:
         key = options_key("ipopt", self.options)
         if key not in nlp.solver_cache:
-            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.casadi_problem(), self.options)
+            options = dict(self.options)
+            if nlp.interval_blocks:
+                # Derivatives from the compiled per-interval functions, not the flat graph's. The flat problem stays
+                # the oracle: IPOPT's interface differentiates it once more for the final multipliers.
+                options |= {"jac_g": nlp.functions.constraints_and_jacobian,
+                            "hess_lag": nlp.functions.hessian_lagrangian_upper}
+            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.casadi_problem(), options)
         return nlp.solver_cache[key]
 
 

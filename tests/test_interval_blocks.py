@@ -1,0 +1,90 @@
+"""Interval blocks: constraints and derivatives assembled from compiled per-interval functions must equal those of
+the flat expression graph they replace, and the compiled-function cache must fall back safely."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from gaitbench import compiled as compiled_module
+from gaitbench.gait_problem import ProblemOptions, StepStructure
+from gaitbench.nlp import NLPBuilder
+from gaitbench.plugins import load_registry
+
+
+def _dense(matrix) -> np.ndarray:
+    return np.asarray(ca.densify(ca.DM(matrix)))
+
+
+@pytest.mark.parametrize("phase", ["first", "second"])
+@pytest.mark.parametrize("absolute_value", ["slack", "smooth"])
+def test_hermite_simpson_structured_functions_equal_the_flat_graph(phase, absolute_value):
+    transcription = load_registry().create("transcription", "hermite-simpson")
+    nlp = transcription.build(StepStructure(phase, 9, ProblemOptions(absolute_value=absolute_value))).nlp
+    assert nlp.interval_blocks, "Hermite–Simpson declares its defects per interval"
+    rng = np.random.default_rng(3)
+    x, lam = rng.normal(size=nlp.n_variables), rng.normal(size=nlp.n_constraints)
+    p = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09]
+    sigma = ca.SX.sym("sigma")
+    multipliers = ca.SX.sym("lam", nlp.n_constraints)
+    flat_hessian = ca.hessian(sigma * nlp.f + ca.dot(multipliers, nlp.g), nlp.x)[0]
+    reference = {
+        "g": ca.Function("g", [nlp.x, nlp.p], [nlp.g])(x, p),
+        "jacobian": ca.Function("j", [nlp.x, nlp.p], [ca.jacobian(nlp.g, nlp.x)])(x, p),
+        "hessian": ca.Function("h", [nlp.x, nlp.p, sigma, multipliers], [ca.tril(flat_hessian)])(x, p, 0.7, lam),
+    }
+    functions = nlp.functions
+    structured = {
+        "g": functions.constraints(x, p),
+        "jacobian": functions.jacobian(x, p),
+        "hessian": functions.hessian_lagrangian(x, p, 0.7, lam),
+    }
+    for name, value in structured.items():
+        np.testing.assert_allclose(_dense(value), _dense(reference[name]), rtol=1e-12, atol=1e-12, err_msg=name)
+    upper = functions.hessian_lagrangian_upper(x, p, 0.7, lam)
+    np.testing.assert_allclose(_dense(upper), _dense(reference["hessian"]).T, rtol=1e-12, atol=1e-12)
+    g, jacobian = functions.constraints_and_jacobian(x, p)
+    np.testing.assert_allclose(_dense(g), _dense(reference["g"]), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_dense(jacobian), _dense(reference["jacobian"]), rtol=1e-12, atol=1e-12)
+
+
+def test_interval_variables_must_be_decision_variables():
+    builder = NLPBuilder()
+    states = builder.variable("states", (2, 3))
+    z = ca.SX.sym("z", 2)
+    square = ca.Function("square", [z, ca.SX.sym("p", 1)], [z * z])
+    builder.constrain_intervals(["ok"], square, [states], ca.SX.sym("p", 1))
+    builder.constrain_intervals(["bad"], square, [2 * states], ca.SX.sym("p", 1))
+    with pytest.raises(ValueError, match="bad.*decision-variable symbol"):
+        builder.build(ca.SX.sym("p", 1), ca.sumsqr(states))
+
+
+def test_compiled_function_matches_and_is_cached(tmp_path, monkeypatch):
+    monkeypatch.setenv("GAITBENCH_CACHE", str(tmp_path))
+    z = ca.SX.sym("z", 3)
+    function = ca.Function("cache_probe", [z], [ca.sin(z) * z[0]])
+    fast = compiled_module.compiled(function)
+    if not isinstance(fast, ca.Function) or fast.class_name() != "External":
+        pytest.skip("no working C compiler here")
+    libraries = list((tmp_path / "compiled").glob("cache_probe-*.so"))
+    assert len(libraries) == 1
+    value = np.array([0.3, -1.2, 2.0])
+    np.testing.assert_array_equal(np.asarray(fast(value)), np.asarray(function(value)))
+    stamp = libraries[0].stat().st_mtime_ns
+    compiled_module.compiled(function)  # found in the cache, not compiled again
+    assert libraries[0].stat().st_mtime_ns == stamp
+
+
+def test_without_a_compiler_the_function_is_interpreted(tmp_path, monkeypatch):
+    monkeypatch.setenv("GAITBENCH_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", "no-such-compiler-gaitbench")
+    compiled_module._compiler.cache_clear()
+    compiled_module._warn_once.cache_clear()
+    try:
+        z = ca.SX.sym("z", 2)
+        function = ca.Function("no_compiler_probe", [z], [z * 2])
+        with pytest.warns(RuntimeWarning, match="no C compiler"):
+            assert compiled_module.compiled(function) is function
+    finally:
+        compiled_module._compiler.cache_clear()
