@@ -24,12 +24,26 @@ def test_differences_flag_status_acot_and_missing_cases():
     check = _regression_module()
     baseline = {"a": _row(0.05), "b": _row(0.07, claimed=0.06), "c": _row(None, "incomplete")}
     assert check.differences(baseline, {"a": _row(0.05 + 1e-9), "b": _row(0.07, claimed=0.06),
-                                        "c": _row(None, "incomplete")}, 1e-6) == []
-    found = check.differences(baseline, {"a": _row(0.0501), "b": _row(0.07, "incomplete", 0.06)}, 1e-6)
+                                        "c": _row(None, "incomplete")}, 1e-6) == ([], [])
+    found, within = check.differences(baseline, {"a": _row(0.0501), "b": _row(0.07, "incomplete", 0.06)}, 1e-6)
+    assert within == []
     assert any("acot 0.05 -> 0.0501" in line for line in found)
     assert any("status solved -> incomplete" in line for line in found)
     assert any("missing" in line for line in found)
-    assert check.differences({"b": _row(0.07, claimed=0.06)}, {"b": _row(0.07, claimed=None)}, 1e-6)
+    assert check.differences({"b": _row(0.07, claimed=0.06)}, {"b": _row(0.07, claimed=None)}, 1e-6)[0]
+
+
+def test_rounding_band_admits_only_what_perturbed_runs_of_the_baseline_reached():
+    check = _regression_module()
+    baseline = {"a": _row(0.05), "b": _row(None, "incomplete")}
+    perturbed = [{"a": _row(0.052), "b": _row(0.3)}, {"a": _row(0.049), "b": _row(None, "incomplete")}]
+    band = check.rounding_band([baseline, *perturbed])
+    assert band["a"]["acot"] == [0.049, 0.052] and band["b"]["statuses"] == ["incomplete", "solved"]
+    found, within = check.differences(baseline, {"a": _row(0.051), "b": _row(0.3)}, 1e-6, band)
+    assert found == [] and len(within) == 3  # a moved inside its band; b flipped status (and ACOT) as when nudged
+    found, within = check.differences(baseline, {"a": _row(0.06), "b": _row(None, "error")}, 1e-6, band)
+    assert len(found) == 2 and within == []
+    assert any("band 0.049" in line for line in found)
 
 
 def test_baseline_covers_the_regression_suite():
