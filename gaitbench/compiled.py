@@ -31,8 +31,19 @@ def cache_directory() -> Path:
     return Path(os.environ.get("GAITBENCH_CACHE", Path.home() / ".cache" / "gaitbench")) / "compiled"
 
 
+_LOADED: dict[str, ca.Function] = {}
+"""Libraries already loaded by this process, by the function's serialization: cheaper than generating its C."""
+
+
 def compiled(function: ca.Function) -> ca.Function:
     """``function`` evaluated by compiled C, built on first use on this machine; interpreted if no compiler works."""
+    key = function.serialize()
+    if key not in _LOADED:
+        _LOADED[key] = _compile(function)
+    return _LOADED[key]
+
+
+def _compile(function: ca.Function) -> ca.Function:
     compiler = _compiler()
     if compiler is None:
         _warn_once("no C compiler found (set CC): interval derivatives are interpreted, several times slower")
