@@ -122,9 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not args.record and not BASELINE.exists():
         parser.error(f"no baseline at {BASELINE}: record one with --record on the commit before your change")
-    started = time.perf_counter()
     if args.record_band:
         return record_band(args.record_band, args.perturbation)
+    started = time.perf_counter()
     current = solve_cases()
     wall = time.perf_counter() - started
     commit = provenance()["git_commit"]

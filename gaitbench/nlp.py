@@ -300,11 +300,15 @@ def _interval_block(x: ca.SX, constraint_blocks: dict[str, slice], names: tuple[
     index = np.empty(z.numel(), dtype=int)
     index[np.asarray(rows)] = cols
     n_intervals = z.shape[1]
+    index = index.reshape(z.shape[0], n_intervals, order="F")
+    if any(len(set(column)) < len(column) for column in index.T):
+        # The Hessian is folded entry by entry into the global triangle, which is exact only for distinct variables.
+        raise ValueError(f"interval block {names}: a variable appears twice in one interval's variables")
     block_rows = []
     for name in names:
         block = constraint_blocks[name]
         block_rows.append(np.arange(block.start, block.stop).reshape(-1, n_intervals, order="F"))
-    return IntervalBlock(function, index.reshape(z.shape[0], n_intervals, order="F"), tuple(block_rows))
+    return IntervalBlock(function, index, tuple(block_rows))
 
 
 def _expand(bound, shape: tuple[int, int]) -> np.ndarray:

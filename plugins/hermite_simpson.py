@@ -77,32 +77,34 @@ class HermiteSimpson(Transcription):
                               hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
 
 
-def _interval_symbols():
-    """One interval's (x_k, x_k+1, u_k, u_k+1) and the step parameters, with the midpoint the scheme implies."""
+def _interval(dynamics: ca.Function):
+    """One interval's symbols (x_k, x_k+1, u_k, u_k+1, p), its end slopes and its Hermite midpoint (8.80)."""
     left, right, u_left, u_right = ca.SX.sym("x_k", 4), ca.SX.sym("x_k1", 4), ca.SX.sym("u_k", 2), ca.SX.sym("u_k1", 2)
     p = ca.SX.sym("p", N_STEP_PARAMETERS)
-    return left, right, u_left, u_right, p, p[PARAMETER_LAYOUT["robot"]], p[PARAMETER_LAYOUT["time_step"]]
+    robot, h = p[PARAMETER_LAYOUT["robot"]], p[PARAMETER_LAYOUT["time_step"]]
+    f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
+    mid_state = 0.5 * (left + right) + h / 8 * (f_left - f_right)
+    mid_control = 0.5 * (u_left + u_right)
+    return ca.vertcat(left, right, u_left, u_right), p, f_left, f_right, mid_state, mid_control
 
 
 def simpson_defect(dynamics: ca.Function) -> ca.Function:
-    """The Simpson defect of one interval (8.79), with the Hermite midpoint state (8.80) substituted."""
-    left, right, u_left, u_right, p, robot, h = _interval_symbols()
-    f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
-    mid_state = 0.5 * (left + right) + h / 8 * (f_left - f_right)
-    f_mid = dynamics(mid_state, 0.5 * (u_left + u_right), robot)
+    """The Simpson defect of one interval (8.79), with the Hermite midpoint state substituted."""
+    z, p, f_left, f_right, mid_state, mid_control = _interval(dynamics)
+    left, right = z[0:4], z[4:8]
+    h = p[PARAMETER_LAYOUT["time_step"]]
+    f_mid = dynamics(mid_state, mid_control, p[PARAMETER_LAYOUT["robot"]])
     defect = right - left - h / 6 * (f_left + 4 * f_mid + f_right)
-    return ca.Function("hermite_simpson_defect", [ca.vertcat(left, right, u_left, u_right), p], [defect])
+    return ca.Function("hermite_simpson_defect", [z, p], [defect])
 
 
 def midpoint_power_split(dynamics: ca.Function) -> ca.Function:
     """P_mid − s⁺ + s⁻ of one interval: the hip power at the Hermite midpoint, split as in ``absolute_power``."""
-    left, right, u_left, u_right, p, robot, h = _interval_symbols()
+    z, p, _, _, mid_state, mid_control = _interval(dynamics)
     positive, negative = ca.SX.sym("s_positive"), ca.SX.sym("s_negative")
-    f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
-    mid_state = 0.5 * (left + right) + h / 8 * (f_left - f_right)
-    power = ca.dot(0.5 * (u_left + u_right), mid_state[2:4])
-    return ca.Function("hermite_simpson_midpoint_power", [ca.vertcat(left, right, u_left, u_right, positive,
-                                                                     negative), p], [power - positive + negative])
+    power = ca.dot(mid_control, mid_state[2:4])
+    return ca.Function("hermite_simpson_midpoint_power", [ca.vertcat(z, positive, negative), p],
+                       [power - positive + negative])
 
 
 def hermite_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:

@@ -60,6 +60,16 @@ def test_interval_variables_must_be_decision_variables():
         builder.build(ca.SX.sym("p", 1), ca.sumsqr(states))
 
 
+def test_a_variable_twice_in_one_interval_is_refused():
+    builder = NLPBuilder()
+    states = builder.variable("states", (2, 3))
+    z = ca.SX.sym("z", 4)
+    product = ca.Function("product", [z, ca.SX.sym("p", 1)], [z[0] * z[2]])
+    builder.constrain_intervals(["twice"], product, [states, states], ca.SX.sym("p", 1))
+    with pytest.raises(ValueError, match="twice.*appears twice"):
+        builder.build(ca.SX.sym("p", 1), ca.sumsqr(states))
+
+
 def test_compiled_function_matches_and_is_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("GAITBENCH_CACHE", str(tmp_path))
     z = ca.SX.sym("z", 3)
@@ -72,6 +82,7 @@ def test_compiled_function_matches_and_is_cached(tmp_path, monkeypatch):
     value = np.array([0.3, -1.2, 2.0])
     np.testing.assert_array_equal(np.asarray(fast(value)), np.asarray(function(value)))
     stamp = libraries[0].stat().st_mtime_ns
+    compiled_module._LOADED.clear()  # a new process: only the disk cache remains
     compiled_module.compiled(function)  # found in the cache, not compiled again
     assert libraries[0].stat().st_mtime_ns == stamp
 
