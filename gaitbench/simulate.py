@@ -180,31 +180,49 @@ def simulate(
     return trajectory
 
 
-def _swing_rhs(model, control, index, stance, t0):
+def _swing_rhs(model, control, index, stance, t0, inside: tuple[float, float] | None = None):
+    """The swing ODE; with ``inside`` = (a, b), controls are read at times clamped a hair inside [a, b]."""
     n = model.dof
+    if inside is None:
+        def control_time(t):
+            return t
+    else:
+        margin = _INSIDE * (inside[1] - inside[0])
+        low, high = inside[0] + margin, inside[1] - margin
+
+        def control_time(t):
+            return min(max(t, low), high)
 
     def rhs(t, x):
-        tau = control.torque(t - t0, x[:n], x[n:], index)
+        tau = control.torque(control_time(t) - t0, x[:n], x[n:], index)
         return np.concatenate([x[n:], model.forward_dynamics(x[:n], x[n:], tau, stance)[0]])
 
     return rhs
 
 
+_INSIDE = 1e-9
+"""How far inside a piece (relative to its length) its controls are read: far enough to be on the piece's own
+side of a jump at its ends, near enough that a smooth control moves by ~1e-9 of its change over the piece."""
+
+
 def _simulate_clocked_step(model, control, index, stance, slope, t0, q, dq, local_times, rtol, atol):
+    """Integrate piece by piece between consecutive reporting times.
+
+    An optimized gait's controls are smooth within an interval and kink or jump at its nodes (DMOC's torques are
+    piecewise constant); one integration across the whole step spends most of its effort rejecting steps at
+    those corners. Each piece reads its controls just inside itself: read at its end, a jump at the node enters
+    DOP853's error estimate and makes it reject step after step (DMOC at N = 100: 0.75 s per step instead of 0.03 s).
+    """
     times = t0 + local_times
-    solution = solve_ivp(
-        _swing_rhs(model, control, index, stance, t0),
-        (times[0], times[-1]),
-        np.concatenate([q, dq]),
-        method="DOP853",
-        t_eval=times,
-        rtol=rtol,
-        atol=atol,
-    )
-    step = _record(model, control, index, stance, slope, [solution.t], [solution.y.T], False)
-    if solution.status != 0:
-        return step, f"step {index}: integration failed ({solution.message})"
-    return step, None
+    states = [np.concatenate([q, dq])]
+    for a, b in zip(times[:-1], times[1:], strict=True):
+        solution = solve_ivp(_swing_rhs(model, control, index, stance, t0, inside=(a, b)), (a, b), states[-1],
+                             method="DOP853", rtol=rtol, atol=atol)
+        if solution.status != 0:
+            step = _record(model, control, index, stance, slope, [times[: len(states)]], [np.array(states)], False)
+            return step, f"step {index}: integration failed at t = {a - t0:.4g} s ({solution.message})"
+        states.append(solution.y[:, -1])
+    return _record(model, control, index, stance, slope, [times], [np.array(states)], False), None
 
 
 def _simulate_step(model, control, index, stance, slope, t0, q, dq, max_duration, rtol, atol, max_solver_step):

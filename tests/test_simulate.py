@@ -110,3 +110,31 @@ def test_a_step_without_heel_strike_fails_with_its_number_and_keeps_earlier_step
     assert not walk.completed
     assert walk.failure.startswith("step 2:")
     assert len(walk.steps) == 2 and walk.steps[0].heel_strike is not None
+
+
+def test_clocked_step_integrates_piecewise_constant_torques_from_each_interval_own_side():
+    """DMOC's torques jump at the nodes: the clocked re-simulation must use interval k's torque on all of [t_k, t_k+1],
+    which a reference built from one constant-torque integration per interval pins down."""
+    from scipy.integrate import solve_ivp
+
+    robot = RobotParameters(m1=7.0, m2=3.0, M=12.0, l=0.9, a=0.35, I1=0.4, I2=0.15)
+    model = BipedModel(robot, 2)
+    times = np.linspace(0.0, 0.3, 7)
+    torques = np.array([[3.0, -2.0], [-4.0, 1.0], [2.5, 2.5], [-1.0, -3.0], [0.5, 4.0], [-2.0, 0.0]])
+
+    def piecewise(t, step):  # at a node, the next interval's value, as a DMOC interpolant gives it
+        return torques[min(int(np.searchsorted(times, t, side="right")) - 1, len(torques) - 1)]
+
+    q0, dq0 = np.array([0.25, -0.3]), np.array([-1.2, 0.8])
+    walk = simulate(model, [0.0], q0, dq0, OpenLoop(piecewise), step_times=[times])
+    assert walk.completed, walk.failure
+
+    x, reference = np.r_[q0, dq0], [np.r_[q0, dq0]]
+    for (a, b), tau in zip(zip(times[:-1], times[1:], strict=True), torques, strict=True):
+        def rhs(t, state, tau=tau):
+            return np.r_[state[2:], model.forward_dynamics(state[:2], state[2:], tau, 1)[0]]
+        x = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1]
+        reference.append(x)
+    step = walk.steps[0]
+    np.testing.assert_allclose(np.hstack([step.q, step.dq]), np.array(reference), atol=1e-8)
+    np.testing.assert_allclose(step.t, times)
