@@ -258,6 +258,9 @@ class NLPBuilder:
         return next(symbol for block, symbol, _, _ in self._variables if block == name)
 
     def constrain(self, name: str, expression, lower=0.0, upper=0.0) -> None:
+        """Rows ``lower ≤ expression ≤ upper`` (column-major). Declared again right after itself, a block grows by
+        the new part: a block whose rows come partly from an interval function and partly from elsewhere (DMOC's
+        momentum balance, with different equations at the two end nodes) keeps one name."""
         expression = ca.vec(ca.SX(expression))
         n = expression.numel()
         self._constraints.append((name, expression, np.broadcast_to(lower, n).astype(float),
@@ -268,47 +271,49 @@ class NLPBuilder:
         """Equality blocks ``names[o]`` = output o of ``function(z_k, p)`` over intervals k = 0 … M−1, where z_k
         stacks column k of each matrix in ``variables`` (decision-variable symbols, M columns each).
 
-        The blocks are ordinary constraints (interval by interval, column-major like :meth:`constrain`); declaring
-        them this way also gives the NLP their per-interval structure (:class:`IntervalBlock`).
+        The blocks are ordinary constraints (interval by interval, column-major like :meth:`constrain`), each
+        possibly one part of a block declared in consecutive parts; declaring them this way also gives the NLP
+        their per-interval structure (:class:`IntervalBlock`).
         """
         z = ca.vertcat(*variables)
         n_intervals = z.shape[1]
         outputs = function.map(n_intervals)(z, ca.repmat(parameters, 1, n_intervals))
         outputs = [outputs] if function.n_out() == 1 else outputs
+        parts = []
         for name, output in zip(names, outputs, strict=True):
+            parts.append(len(self._constraints))
             self.constrain(name, output)
-        self._interval_blocks.append((tuple(names), function, z))
+        self._interval_blocks.append((tuple(names), function, z, tuple(parts)))
 
     def build(self, parameters: ca.SX, objective: ca.SX) -> NLP:
-        x, lbx, ubx, variable_blocks = _stack(self._variables)
-        g, lbg, ubg, constraint_blocks = _stack(self._constraints)
-        interval_blocks = tuple(_interval_block(x, constraint_blocks, *block) for block in self._interval_blocks)
+        x, lbx, ubx, variable_blocks, _ = _stack(self._variables, in_parts=False)
+        g, lbg, ubg, constraint_blocks, part_rows = _stack(self._constraints, in_parts=True)
+        interval_blocks = tuple(_interval_block(x, names, function, z, [part_rows[part] for part in parts])
+                                for names, function, z, parts in self._interval_blocks)
         return NLP(x=x, p=parameters, f=objective, g=g, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
                    variable_blocks=variable_blocks, constraint_blocks=constraint_blocks,
                    interval_blocks=interval_blocks)
 
 
-def _interval_block(x: ca.SX, constraint_blocks: dict[str, slice], names: tuple[str, ...], function: ca.Function,
-                    z: ca.SX) -> IntervalBlock:
-    """Locate an interval block's variables in x (each z entry is one of x's symbols) and its rows in g."""
+def _interval_block(x: ca.SX, names: tuple[str, ...], function: ca.Function, z: ca.SX,
+                    rows: list[slice]) -> IntervalBlock:
+    """Locate an interval block's variables in x (each z entry is one of x's symbols); ``rows`` are its outputs'
+    rows in g."""
     flat = ca.vec(z)
     if not all(flat[i].is_symbolic() for i in range(flat.numel())):
         raise ValueError(f"interval block {names}: every entry of its variables must be a decision-variable symbol")
-    rows, cols = ca.jacobian(flat, x).sparsity().get_triplet()
-    if sorted(rows) != list(range(flat.numel())):
+    found, cols = ca.jacobian(flat, x).sparsity().get_triplet()
+    if sorted(found) != list(range(flat.numel())):
         raise ValueError(f"interval block {names}: its variables are not all among the NLP's decision variables")
     index = np.empty(z.numel(), dtype=int)
-    index[np.asarray(rows)] = cols
+    index[np.asarray(found)] = cols
     n_intervals = z.shape[1]
     index = index.reshape(z.shape[0], n_intervals, order="F")
     if any(len(set(column)) < len(column) for column in index.T):
         # The Hessian is folded entry by entry into the global triangle, which is exact only for distinct variables.
         raise ValueError(f"interval block {names}: a variable appears twice in one interval's variables")
-    block_rows = []
-    for name in names:
-        block = constraint_blocks[name]
-        block_rows.append(np.arange(block.start, block.stop).reshape(-1, n_intervals, order="F"))
-    return IntervalBlock(function, index, tuple(block_rows))
+    block_rows = tuple(np.arange(part.start, part.stop).reshape(-1, n_intervals, order="F") for part in rows)
+    return IntervalBlock(function, index, block_rows)
 
 
 def _expand(bound, shape: tuple[int, int]) -> np.ndarray:
@@ -320,18 +325,24 @@ def _expand(bound, shape: tuple[int, int]) -> np.ndarray:
     return np.broadcast_to(bound, shape).flatten(order="F")
 
 
-def _stack(blocks):
+def _stack(blocks, in_parts: bool):
+    """Blocks stacked in declaration order: (vector, lower, upper, name → slice, each declaration's slice).
+
+    With ``in_parts``, a name declared in consecutive parts is one block; any other repeated name is an error."""
     if not blocks:
-        return ca.SX(0, 1), np.zeros(0), np.zeros(0), {}
-    expressions, lower, upper, names, start = [], [], [], {}, 0
+        return ca.SX(0, 1), np.zeros(0), np.zeros(0), {}, []
+    expressions, lower, upper, names, parts, start, previous = [], [], [], {}, [], 0, None
     for name, expression, lo, hi in blocks:
         flat = ca.vec(expression)
         n = flat.numel()
-        if name in names:
-            raise ValueError(f"NLP block {name!r} declared twice")
-        names[name] = slice(start, start + n)
+        if name in names and not (in_parts and name == previous):
+            raise ValueError(f"NLP block {name!r} declared twice" +
+                             (" apart: declare a block's parts one after another" if in_parts else ""))
+        names[name] = slice(names[name].start if name in names else start, start + n)
+        parts.append(slice(start, start + n))
         start += n
+        previous = name
         expressions.append(flat)
         lower.append(lo)
         upper.append(hi)
-    return ca.vertcat(*expressions), np.concatenate(lower), np.concatenate(upper), names
+    return ca.vertcat(*expressions), np.concatenate(lower), np.concatenate(upper), names, parts

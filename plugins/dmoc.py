@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.gait_problem import PARAMETER_LAYOUT, StepStructure
+from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepStructure
 from gaitbench.mechanics import BipedFunctions
 from gaitbench.nlp import NLPBuilder
 from gaitbench.transcription import (
@@ -52,7 +52,12 @@ class DiscreteMechanics(Transcription):
         momentum = _momentum(model)
         arriving = ca.horzcat(momentum(q[:, 0], dq_start, robot), d2 + h / 2 * tau)
         leaving = ca.horzcat(-d1 - h / 2 * tau, momentum(q[:, -1], dq_end, robot))
-        builder.constrain("dynamics", arriving - leaving)
+        # Node by node in g's order: the start node, the interior nodes as one function of their neighbourhood
+        # (which gives the NLP its per-node structure, so IPOPT's derivatives come from that function), the end node.
+        builder.constrain("dynamics", arriving[:, 0] - leaving[:, 0])
+        builder.constrain_intervals(["dynamics"], momentum_balance(model),
+                                    [q[:, :-2], q[:, 1:-1], q[:, 2:], tau[:, :-1], tau[:, 1:]], symbols.vector)
+        builder.constrain("dynamics", arriving[:, -1] - leaving[:, -1])
         builder.constrain("initial_state", ca.vertcat(q[:, 0], dq_start) - symbols.initial_state)
 
         # DMOC velocities live on the intervals (App. A §3.2); the thesis bounds these finite differences.
@@ -98,6 +103,21 @@ def _discrete_lagrangian_slopes(model: BipedFunctions) -> ca.Function:
     discrete_lagrangian = h * (model.kinetic_energy(q_mid, v, p) - model.potential_energy(q_mid, p))
     return ca.Function("discrete_lagrangian_slopes", [q_a, q_b, h, p],
                        [ca.gradient(discrete_lagrangian, q_a), ca.gradient(discrete_lagrangian, q_b)])
+
+
+def momentum_balance(model: BipedFunctions) -> ca.Function:
+    """The forced discrete Euler–Lagrange equation at an interior node k, arriving minus leaving momentum, as a
+    function of (q_k−1, q_k, q_k+1, τ_k−1, τ_k): D2 L_d(q_k−1, q_k) + (h/2) τ_k−1 + D1 L_d(q_k, q_k+1) + (h/2) τ_k."""
+    q_before, q_node, q_after = ca.SX.sym("q_before", 2), ca.SX.sym("q_node", 2), ca.SX.sym("q_after", 2)
+    tau_before, tau_after = ca.SX.sym("tau_before", 2), ca.SX.sym("tau_after", 2)
+    p = ca.SX.sym("p", N_STEP_PARAMETERS)
+    robot, h = p[PARAMETER_LAYOUT["robot"]], p[TIME_STEP]
+    slopes = _discrete_lagrangian_slopes(model)
+    _, arriving = slopes(q_before, q_node, h, robot)
+    leaving, _ = slopes(q_node, q_after, h, robot)
+    balance = (arriving + h / 2 * tau_before) - (-leaving - h / 2 * tau_after)
+    return ca.Function("dmoc_momentum_balance", [ca.vertcat(q_before, q_node, q_after, tau_before, tau_after), p],
+                       [balance])
 
 
 def _momentum(model: BipedFunctions) -> ca.Function:

@@ -17,12 +17,13 @@ def _dense(matrix) -> np.ndarray:
     return np.asarray(ca.densify(ca.DM(matrix)))
 
 
+@pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
 @pytest.mark.parametrize("phase", ["first", "second"])
 @pytest.mark.parametrize("absolute_value", ["slack", "smooth"])
-def test_hermite_simpson_structured_functions_equal_the_flat_graph(phase, absolute_value):
-    transcription = load_registry().create("transcription", "hermite-simpson")
+def test_structured_functions_equal_the_flat_graph(transcription, phase, absolute_value):
+    transcription = load_registry().create("transcription", transcription)
     nlp = transcription.build(StepStructure(phase, 9, ProblemOptions(absolute_value=absolute_value))).nlp
-    assert nlp.interval_blocks, "Hermite–Simpson declares its defects per interval"
+    assert nlp.interval_blocks, "Hermite–Simpson declares its defects per interval, DMOC its interior momentum balance"
     rng = np.random.default_rng(3)
     x, lam = rng.normal(size=nlp.n_variables), rng.normal(size=nlp.n_constraints)
     p = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09]
@@ -99,3 +100,31 @@ def test_without_a_compiler_the_function_is_interpreted(tmp_path, monkeypatch):
             assert compiled_module.compiled(function) is function
     finally:
         compiled_module._compiler.cache_clear()
+
+
+def test_a_block_grows_by_parts_declared_one_after_another_and_its_interval_part_keeps_its_rows():
+    builder = NLPBuilder()
+    states = builder.variable("states", (1, 4))
+    z, p = ca.SX.sym("z", 2), ca.SX.sym("p", 1)
+    difference = ca.Function("difference", [z, p], [z[1] - z[0] - p])
+    builder.constrain("other", states[0])
+    builder.constrain("balance", states[0] - 1)
+    builder.constrain_intervals(["balance"], difference, [states[:, :-1], states[:, 1:]], p)
+    builder.constrain("balance", states[3] + 1)
+    nlp = builder.build(p, ca.sumsqr(states))
+    assert nlp.constraint_blocks["balance"] == slice(1, 6)
+    (block,) = nlp.interval_blocks
+    np.testing.assert_array_equal(block.rows[0], [[2, 3, 4]])
+    x, parameter = np.array([1.0, 2.5, 4.5, 8.0]), np.array([0.5])
+    np.testing.assert_allclose(np.asarray(nlp.functions.constraints(x, parameter)).ravel(),
+                               [1.0, 0.0, 1.0, 1.5, 3.0, 9.0])
+
+
+def test_a_block_declared_again_after_another_is_refused():
+    builder = NLPBuilder()
+    states = builder.variable("states", (1, 2))
+    builder.constrain("balance", states[0])
+    builder.constrain("other", states[1])
+    builder.constrain("balance", states[1])
+    with pytest.raises(ValueError, match="'balance' declared twice apart"):
+        builder.build(ca.SX.sym("p", 1), ca.sumsqr(states))
