@@ -87,7 +87,7 @@ class NLPFunctions:
         values = [ca.Function("jac_flat", [self._x, self._p], [ca.vertcat(*flat.nonzeros())])(x, p)]
         rows, cols = [np.asarray(self._flat_rows, dtype=int)[rows]], [np.asarray(cols, dtype=int)]
         for block in self._blocks:
-            local, (local_rows, local_cols) = _interval_jacobian(block.function)
+            local, (local_rows, local_cols) = _derived(block.function, _interval_jacobian)
             values.append(ca.vec(local.map(block.variables.shape[1])(*self._interval_inputs(block))))
             stacked = np.vstack(block.rows)  # rows of the stacked outputs, interval by interval
             rows.append(stacked[local_rows].ravel(order="F"))
@@ -135,7 +135,7 @@ class NLPFunctions:
             x, p, s, multipliers)]
         rows, cols = [np.asarray(rows, dtype=int)], [np.asarray(cols, dtype=int)]
         for block in self._blocks:
-            local, (local_rows, local_cols) = _interval_hessian(block.function)
+            local, (local_rows, local_cols) = _derived(block.function, _interval_hessian)
             values.append(ca.vec(local.map(block.variables.shape[1])(*self._interval_inputs(block, multipliers))))
             a, b = block.variables[local_rows].ravel(order="F"), block.variables[local_cols].ravel(order="F")
             rows.append(np.minimum(a, b) if upper else np.maximum(a, b))  # folded into the triangle
@@ -166,6 +166,20 @@ def _interval_symbols(function: ca.Function) -> tuple[ca.SX, ca.SX, ca.SX]:
     """Symbols for one interval's (z, p) and its outputs stacked."""
     z, p = ca.SX.sym("z", function.size1_in(0)), ca.SX.sym("p", function.size1_in(1))
     return z, p, ca.vertcat(*_as_list(function(z, p)))
+
+
+def _derived(function: ca.Function, derive) -> tuple[ca.Function, tuple[np.ndarray, np.ndarray]]:
+    """``derive(function)``, once per process for each distinct interval function (by its serialization).
+
+    Every build of a structure, and every sectional problem of a walk, declares the same interval function anew:
+    differentiating it and hashing the derivative's C source again would cost more than the rest of the build."""
+    key = (derive.__name__, function.serialize())
+    if key not in _DERIVED:
+        _DERIVED[key] = derive(function)
+    return _DERIVED[key]
+
+
+_DERIVED: dict[tuple[str, str], tuple[ca.Function, tuple[np.ndarray, np.ndarray]]] = {}
 
 
 def _interval_jacobian(function: ca.Function) -> tuple[ca.Function, tuple[np.ndarray, np.ndarray]]:

@@ -128,3 +128,17 @@ def test_a_block_declared_again_after_another_is_refused():
     builder.constrain("balance", states[1])
     with pytest.raises(ValueError, match="'balance' declared twice apart"):
         builder.build(ca.SX.sym("p", 1), ca.sumsqr(states))
+
+
+def test_an_interval_function_declared_anew_reuses_its_derivatives():
+    """Each structure (each sectional problem of a walk) declares its interval function anew; its compiled
+    derivatives must come from the first declaration, not be derived and hashed again."""
+    from gaitbench.nlp import _derived, _interval_hessian
+
+    def declare():
+        z, p = ca.SX.sym("z", 2), ca.SX.sym("p", 1)
+        return ca.Function("reuse_probe", [z, p], [ca.sin(z[0]) * z[1] * p])
+
+    first, second = _derived(declare(), _interval_hessian), _derived(declare(), _interval_hessian)
+    assert first[0] is second[0]
+    np.testing.assert_array_equal(first[1][0], second[1][0])
