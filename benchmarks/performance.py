@@ -1,7 +1,7 @@
 """Where the time goes: NLP build, cold step solves against N, per-iteration split, sectional solves, D&C against
 one-phase, and whole-suite wall time.
 
-Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [walks] [suite]
+Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [walks] [suite] [suite-all]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -14,7 +14,8 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   guess, the default) and from the complete Second Phase tail.
 - ``walks``: decrease-and-conquer against one-phase, whole walks, with 1 and 2 sectional workers.
 - ``suite``: a sample of ``thesis-forward`` (every method at a few N) run with ``gaitbench run`` at 1 and 2 jobs;
-  the whole-suite time is extrapolated per method with a power law in N fitted to the sample, and labelled so.
+  the whole-suite time is extrapolated per experiment and method with a power law in N fitted to the sample, and
+  labelled so. ``suite-all``: the same for ``thesis-all`` (all four experiments).
 """
 
 from __future__ import annotations
@@ -141,14 +142,14 @@ def walks_part(registry) -> list[dict]:
     return rows
 
 
-def suite_part(registry) -> list[dict]:
-    source = (HERE.parent / "suites" / "thesis-forward.toml").read_text()
+def suite_part(registry, suite: str = "thesis-forward") -> list[dict]:
+    source = (HERE.parent / "suites" / f"{suite}.toml").read_text()
     sample = source.replace("N = { start = 10, stop = 200, step = 10 }", f"N = {list(SUITE_SAMPLE_NODES)}")
     if sample == source:
-        raise SystemExit("suites/thesis-forward.toml no longer has the N range this benchmark replaces")
+        raise SystemExit(f"suites/{suite}.toml no longer has the N range this benchmark replaces")
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        suite_file = Path(scratch) / "thesis-forward-sample.toml"
+        suite_file = Path(scratch) / f"{suite}-sample.toml"
         suite_file.write_text(sample)
         for jobs in (1, 2):
             store = Path(scratch) / f"store-{jobs}"
@@ -157,26 +158,32 @@ def suite_part(registry) -> list[dict]:
                             "--store", str(store), "--no-report"], check=False, stdout=subprocess.DEVNULL)
             wall = time.perf_counter() - started
             cases = load_results(store)
-            per_case = [{"method": row["method"], "N": int(row["N"]), "status": row["status"],
-                         "wall_s": float(row["wall_time_s"])} for row in cases.to_dict("records")]
-            rows.append({"suite": "thesis-forward", "sample_N": list(SUITE_SAMPLE_NODES), "jobs": jobs,
+            per_case = [{"experiment": row["experiment"], "method": row["method"], "N": int(row["N"]),
+                         "status": row["status"], "wall_s": float(row["wall_time_s"])}
+                        for row in cases.to_dict("records")]
+            rows.append({"suite": suite, "sample_N": list(SUITE_SAMPLE_NODES), "jobs": jobs,
                          "cases": len(per_case), "wall_s": wall, "per_case": per_case,
                          "extrapolated": extrapolate(per_case, range(10, 201, 10), jobs)})
             print({key: value for key, value in rows[-1].items() if key != "per_case"}, flush=True)
     return rows
 
 
+def suite_all_part(registry) -> list[dict]:
+    return suite_part(registry, "thesis-all")
+
+
 def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
-    """Case time ≈ a·N^b per method, fitted to the sample; the suite's total over ``nodes``, divided by ``jobs``
-    (perfect packing: a lower bound for the wall time with that many jobs)."""
+    """Case time ≈ a·N^b per experiment and method, fitted to the sample; the suite's total over ``nodes``,
+    divided by ``jobs`` (perfect packing: a lower bound for the wall time with that many jobs)."""
     fits, total = {}, 0.0
-    for method in sorted({row["method"] for row in per_case}):
-        points = [(row["N"], row["wall_s"]) for row in per_case if row["method"] == method and row["wall_s"] > 0]
+    for experiment, method in sorted({(row["experiment"], row["method"]) for row in per_case}):
+        points = [(row["N"], row["wall_s"]) for row in per_case
+                  if (row["experiment"], row["method"]) == (experiment, method) and row["wall_s"] > 0]
         if len(points) < 2:
             continue
         slope, intercept = np.polyfit(np.log([n for n, _ in points]), np.log([t for _, t in points]), 1)
         predicted = float(sum(np.exp(intercept) * n**slope for n in nodes))
-        fits[method] = {"exponent": float(slope), "suite_case_time_s": predicted}
+        fits[f"{experiment} {method}"] = {"exponent": float(slope), "suite_case_time_s": predicted}
         total += predicted
     return {"methods": fits, "case_time_s": total, "wall_s_lower_bound": total / jobs}
 
@@ -232,20 +239,27 @@ def write_summary(results: dict) -> None:
             lines.append(f"| {r['transcription']} | {r['N']} | {r['strategy']} | {r['workers']} | {r['complete']} "
                          f"| {acot} | {r['wall_s']:.1f} |")
         lines.append("")
-    if "suite" in results:
+    suites = [r for part in ("suite", "suite-all") for r in results.get(part, [])]
+    if suites:
         lines += ["## Suite wall time", ""]
-        for r in results["suite"]:
+        for r in suites:
             fit = r["extrapolated"]
-            lines += [f"`thesis-forward` sampled at N = {r['sample_N']} ({r['cases']} cases), `--jobs {r['jobs']}`: "
+            methods = {}
+            for label, value in fit["methods"].items():
+                methods.setdefault(label.split(" ")[-1], []).append(value["suite_case_time_s"])
+            lines += [f"`{r.get('suite', 'thesis-forward')}` sampled at N = {r['sample_N']} ({r['cases']} cases), "
+                      f"`--jobs {r['jobs']}`: "
                       f"measured {r['wall_s']:.0f} s. Extrapolated to the whole suite (N = 10…200) with a power "
                       f"law per method: {fit['case_time_s'] / 3600:.1f} h of case time, at least "
-                      f"{fit['wall_s_lower_bound'] / 3600:.1f} h of wall time with {r['jobs']} job(s) "
-                      "(exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
-                      + ").", ""]
+                      f"{fit['wall_s_lower_bound'] / 3600:.1f} h of wall time with {r['jobs']} job(s). Case time "
+                      "by method: " + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
+                      + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
+                      + ".", ""]
     SUMMARY.write_text("\n".join(lines))
 
 
-PARTS = {"steps": steps_part, "sections": sections_part, "walks": walks_part, "suite": suite_part}
+PARTS = {"steps": steps_part, "sections": sections_part, "walks": walks_part, "suite": suite_part,
+         "suite-all": suite_all_part}
 
 
 def main(argv: list[str]) -> None:

@@ -51,3 +51,18 @@ def test_baseline_covers_the_regression_suite():
     suite = load_suite(check.SUITE)
     baseline = json.loads(check.BASELINE.read_text())["cases"]
     assert {case.key for case in suite.cases} == set(baseline)
+
+
+def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own():
+    spec = importlib.util.spec_from_file_location("performance", BENCHMARKS / "performance.py")
+    performance = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(performance)
+    laws = {("forward", "OP-DC"): (0.01, 1.0), ("stairs", "OP-DC"): (0.002, 2.0), ("stairs", "reference"): (0.5, 1.5)}
+    sample = [{"experiment": experiment, "method": method, "N": n, "status": "solved", "wall_s": a * n**b}
+              for (experiment, method), (a, b) in laws.items() for n in (10, 20, 30)]
+    fit = performance.extrapolate(sample, range(10, 201, 10), jobs=2)
+    expected = {f"{experiment} {method}": sum(a * n**b for n in range(10, 201, 10))
+                for (experiment, method), (a, b) in laws.items()}
+    for label, total in expected.items():
+        assert abs(fit["methods"][label]["suite_case_time_s"] - total) < 1e-6 * total
+    assert abs(fit["wall_s_lower_bound"] - sum(expected.values()) / 2) < 1e-6 * sum(expected.values())
