@@ -31,19 +31,23 @@ def cache_directory() -> Path:
     return Path(os.environ.get("GAITBENCH_CACHE", Path.home() / ".cache" / "gaitbench")) / "compiled"
 
 
-_LOADED: dict[str, ca.Function] = {}
+_LOADED: dict[tuple[str, bool], ca.Function] = {}
 """Libraries already loaded by this process, by the function's serialization: cheaper than generating its C."""
 
 
-def compiled(function: ca.Function) -> ca.Function:
-    """``function`` evaluated by compiled C, built on first use on this machine; interpreted if no compiler works."""
-    key = function.serialize()
+def compiled(function: ca.Function, differentiable: bool = False) -> ca.Function:
+    """``function`` evaluated by compiled C, built on first use on this machine; interpreted if no compiler works.
+
+    A compiled function has no derivatives of its own; ``differentiable`` compiles its reverse derivative into the
+    same library, where CasADi finds it, so an expression graph that calls it can be differentiated once (as an
+    NLP oracle is, for the gradient of the Lagrangian)."""
+    key = (function.serialize(), differentiable)
     if key not in _LOADED:
-        _LOADED[key] = _compile(function)
+        _LOADED[key] = _compile(function, differentiable)
     return _LOADED[key]
 
 
-def _compile(function: ca.Function) -> ca.Function:
+def _compile(function: ca.Function, differentiable: bool) -> ca.Function:
     compiler = _compiler()
     if compiler is None:
         _warn_once("no C compiler found (set CC): interval derivatives are interpreted, several times slower")
@@ -52,6 +56,8 @@ def _compile(function: ca.Function) -> ca.Function:
     with tempfile.TemporaryDirectory() as work:
         generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         generator.add(function)
+        if differentiable:
+            generator.add(function.reverse(1))
         source = Path(generator.generate(work + os.sep))
         text = source.read_bytes()
         digest = hashlib.sha256(text + " ".join((*compiler, *COMPILE_FLAGS)).encode()).hexdigest()[:20]

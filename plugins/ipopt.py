@@ -95,11 +95,10 @@ class Ipopt:
         if key not in nlp.solver_cache:
             options = dict(self.options)
             if nlp.interval_blocks:
-                # Derivatives from the compiled per-interval functions, not the flat graph's. The flat problem stays
-                # the oracle: IPOPT's interface differentiates it once more for the final multipliers.
+                # g and its derivatives from the compiled per-interval functions, not the flat graph's.
                 options |= {"jac_g": nlp.functions.constraints_and_jacobian,
                             "hess_lag": nlp.functions.hessian_lagrangian_upper}
-            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.casadi_problem(), options)
+            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.functions.oracle, options)
         return nlp.solver_cache[key]
 
 

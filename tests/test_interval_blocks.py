@@ -142,3 +142,28 @@ def test_an_interval_function_declared_anew_reuses_its_derivatives():
     first, second = _derived(declare(), _interval_hessian), _derived(declare(), _interval_hessian)
     assert first[0] is second[0]
     np.testing.assert_array_equal(first[1][0], second[1][0])
+
+
+@pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
+def test_ipopt_on_the_compiled_oracle_takes_the_flat_problem_s_iterates(transcription):
+    """The ipopt plugin's oracle evaluates g through the compiled interval functions: with the same derivatives,
+    IPOPT must walk the same path as on the flat SX problem's g, to the same solution."""
+    import casadi as ca
+
+    from gaitbench.walk import WalkProblem
+
+    registry = load_registry()
+    experiment = registry.create("experiment", "forward")
+    solver = registry.create("solver", "ipopt")
+    problem = WalkProblem(experiment, registry.create("transcription", transcription), solver, 12)
+    data = problem.step_data(1, np.asarray(experiment.initial_state)[[0, 1, 4, 5]])
+    built = problem.transcription.build(problem.structure("second"))
+    nlp, p, x0 = built.nlp, data.parameter_vector(), built.initial_guess(data)
+    assert isinstance(nlp.functions.oracle["g"], ca.MX)
+    result = solver.solve(nlp, p, x0)
+    derivatives = {"jac_g": nlp.functions.constraints_and_jacobian, "hess_lag": nlp.functions.hessian_lagrangian_upper}
+    flat = ca.nlpsol("flat", "ipopt", nlp.casadi_problem(), solver.options | derivatives)
+    reference = flat(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+    assert result.converged
+    assert result.iterations == flat.stats()["iter_count"]
+    np.testing.assert_allclose(result.x, np.asarray(reference["x"]).ravel(), rtol=1e-9, atol=1e-9)
