@@ -50,7 +50,8 @@ def compiled(function: ca.Function, differentiable: bool = False) -> ca.Function
 def _compile(function: ca.Function, differentiable: bool) -> ca.Function:
     compiler = _compiler()
     if compiler is None:
-        _warn_once("no C compiler found (set CC): interval derivatives are interpreted, several times slower")
+        _warn_once("no C compiler found (set CC): interval functions and derivatives are interpreted, several times "
+                   "slower")
         return function
     name = function.name()
     with tempfile.TemporaryDirectory() as work:
@@ -69,7 +70,7 @@ def _compile(function: ca.Function, differentiable: bool) -> ca.Function:
             result = subprocess.run(command, capture_output=True, text=True)
             if result.returncode != 0:
                 _warn_once(f"compiling {name} failed ({shlex.join(command)}): {result.stderr.strip()[:500]}; "
-                           "interval derivatives are interpreted")
+                           "it is interpreted")
                 return function
             # Copy then rename within the cache: workers compiling the same function at once never see half a file.
             staged = library.with_suffix(f".{os.getpid()}.tmp")
