@@ -261,7 +261,7 @@ def write_summary(results: dict) -> None:
             lines += [f"`{r.get('suite', 'thesis-forward')}` sampled at N = {r['sample_N']} ({r['cases']} cases"
                       f"{limit}), `--jobs {r['jobs']}`: "
                       f"measured {r['wall_s']:.0f} s. Extrapolated to the whole suite (N = 10…200) with a power "
-                      f"law per method: {fit['case_time_s'] / 3600:.1f} h of case time, at least "
+                      f"law per experiment and method: {fit['case_time_s'] / 3600:.1f} h of case time, at least "
                       f"{fit['wall_s_lower_bound'] / 3600:.1f} h of wall time with {r['jobs']} job(s). Case time "
                       "by method: " + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
                       + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())

@@ -5,8 +5,9 @@
 ``p`` carries everything that changes between solves of the same structure (initial state, step geometry,
 time step, robot parameters), so a built NLP — and a solver built on it — is reused without rebuilding.
 Exact sparse first and second derivatives come from CasADi, each built once, on first use. Constraint blocks that
-repeat one small function over the grid's intervals (:class:`IntervalBlock`) get their second derivatives from that
-function's compiled Hessian, summed into the NLP's: the same Hessian, without differentiating the flat graph.
+repeat one small function over the grid's intervals (:class:`IntervalBlock`) get their values, Jacobian and Hessian
+from that function and its derivatives, compiled and mapped over the intervals: the same numbers, without
+evaluating or differentiating the flat graph for those rows.
 """
 
 from __future__ import annotations
@@ -273,7 +274,8 @@ class NLPBuilder:
     def __init__(self) -> None:
         self._variables: list[tuple[str, ca.SX, np.ndarray, np.ndarray]] = []
         self._constraints: list[tuple[str, ca.SX, np.ndarray, np.ndarray]] = []
-        self._interval_blocks: list[tuple[tuple[str, ...], ca.Function, ca.SX]] = []
+        self._interval_blocks: list[tuple[tuple[str, ...], ca.Function, ca.SX, tuple[int, ...]]] = []
+        """(names, function, z, index in ``_constraints`` of each output's part) per interval declaration."""
 
     def variable(self, name: str, shape: tuple[int, int], lower=-np.inf, upper=np.inf) -> ca.SX:
         """A (rows × cols) block of decision variables, column-major, with scalar or per-row bounds."""
@@ -305,8 +307,7 @@ class NLPBuilder:
         """
         z = ca.vertcat(*variables)
         n_intervals = z.shape[1]
-        outputs = function.map(n_intervals)(z, ca.repmat(parameters, 1, n_intervals))
-        outputs = [outputs] if function.n_out() == 1 else outputs
+        outputs = _as_list(function.map(n_intervals)(z, ca.repmat(parameters, 1, n_intervals)))
         parts = []
         for name, output in zip(names, outputs, strict=True):
             parts.append(len(self._constraints))
