@@ -3,6 +3,8 @@
 Run:    .venv/bin/python benchmarks/acot_regression.py            (compare; exit status 1 on any difference)
         .venv/bin/python benchmarks/acot_regression.py --record   (write the baseline; do this only before a change)
         .venv/bin/python benchmarks/acot_regression.py --record-band 6   (add the rounding band; same commit)
+        .venv/bin/python benchmarks/acot_regression.py --solver-option nlp_scaling_obj_target_gradient=1
+                        (what a solver option does to the results: the same comparison, with the option on every case)
 
 The case set is ``benchmarks/suites/regression.toml``, solved in this process case by case with the suite
 runner's own ``run_case``, so every layer a suite run goes through (builds, caches, strategies, verification) is
@@ -25,7 +27,9 @@ the rounding band" and does not fail; one outside it, or with a status never see
 from __future__ import annotations
 
 import argparse
+import ast
 import contextlib
+import dataclasses
 import json
 import sys
 import time
@@ -45,11 +49,17 @@ HISTORY = HERE / "results" / "acot_regression.jsonl"
 COMPARED = ("acot", "claimed_acot")
 
 
-def solve_cases() -> dict[str, dict]:
+def solve_cases(solver_options: dict | None = None) -> dict[str, dict]:
+    """Every case's outcome under its key in the suite; ``solver_options`` are added to each case's solver (the
+    rows keep the suite's keys, so they compare with the baseline)."""
     suite = load_suite(SUITE)
     rows = {}
     for case in suite.cases:
-        outcome = run_case(case)
+        solved = case
+        if solver_options:
+            solver = dataclasses.replace(case.solver, options={**case.solver.options, **solver_options})
+            solved = dataclasses.replace(case, solver=solver)
+        outcome = run_case(solved)
         rows[case.key] = {"case": case.label, "status": outcome.status, "message": outcome.message,
                           "wall_time_s": round(outcome.wall_time_s, 3),
                           **{name: outcome.metrics.get(name) for name in (*COMPARED, "iterations")}}
@@ -119,13 +129,19 @@ def main(argv: list[str] | None = None) -> int:
                         help="add to the baseline the rounding band of K perturbed runs (run at the baseline's code)")
     parser.add_argument("--perturbation", type=float, default=1e-14, help="relative size of the band's nudges")
     parser.add_argument("--tolerance", type=float, default=1e-6, help="largest accepted ACOT change")
+    parser.add_argument("--solver-option", action="append", default=[], metavar="NAME=VALUE", type=solver_option,
+                        help="add this option to every case's solver, to see how it moves the results "
+                             "(repeatable; not with --record)")
     args = parser.parse_args(argv)
+    solver_options = dict(args.solver_option)
+    if solver_options and (args.record or args.record_band):
+        parser.error("--solver-option measures an option against the baseline; it cannot record one")
     if not args.record and not BASELINE.exists():
         parser.error(f"no baseline at {BASELINE}: record one with --record on the commit before your change")
     if args.record_band:
         return record_band(args.record_band, args.perturbation)
     started = time.perf_counter()
-    current = solve_cases()
+    current = solve_cases(solver_options)
     wall = time.perf_counter() - started
     commit = provenance()["git_commit"]
     if args.record:
@@ -140,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     with HISTORY.open("a") as history:
         history.write(json.dumps({"commit": commit, "baseline_commit": baseline["commit"], "wall_time_s": wall,
                                   "baseline_wall_time_s": baseline["wall_time_s"], "largest_change": largest,
+                                  **({"solver_options": solver_options} if solver_options else {}),
                                   "differences": found, "within_rounding_band": within}) + "\n")
     print(f"{len(current)} cases in {wall:.0f} s (baseline {baseline['wall_time_s']:.0f} s at "
           f"{baseline['commit'][:12]}); largest ACOT change {largest:.2e}")
@@ -147,7 +164,29 @@ def main(argv: list[str] | None = None) -> int:
         print("within the rounding band:", line)
     for line in found:
         print("DIFFERENT:", line)
+    if solver_options:
+        lower, higher = directions(baseline["cases"], current, args.tolerance)
+        print(f"with {solver_options}: ACOT lower in {lower} and higher in {higher} of {len(current)} cases "
+              "(the verified ACOT; a case solved in only one run counts as neither)")
     return 1 if found else 0
+
+
+def solver_option(text: str) -> tuple[str, object]:
+    """NAME=VALUE, the value read as a Python literal (a number, True) or else kept as text."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE")
+    try:
+        return name, ast.literal_eval(value)
+    except (ValueError, SyntaxError):
+        return name, value
+
+
+def directions(baseline: dict[str, dict], current: dict[str, dict], tolerance: float) -> tuple[int, int]:
+    """How many cases' ACOT went down and up by more than ``tolerance``: whether a change finds better optima."""
+    pairs = [(row["acot"], current[key]["acot"]) for key, row in baseline.items()
+             if key in current and row["acot"] is not None and current[key]["acot"] is not None]
+    return sum(new < old - tolerance for old, new in pairs), sum(new > old + tolerance for old, new in pairs)
 
 
 def record_band(runs: int, scale: float) -> int:

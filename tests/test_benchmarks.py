@@ -46,6 +46,15 @@ def test_rounding_band_admits_only_what_perturbed_runs_of_the_baseline_reached()
     assert any("band 0.049" in line for line in found)
 
 
+def test_solver_options_are_read_as_literals_and_their_effect_counted_by_direction():
+    check = _regression_module()
+    assert check.solver_option("nlp_scaling_obj_target_gradient=1") == ("nlp_scaling_obj_target_gradient", 1)
+    assert check.solver_option("mu_strategy=adaptive") == ("mu_strategy", "adaptive")
+    baseline = {"a": _row(0.05), "b": _row(0.07), "c": _row(0.3), "d": _row(None, "incomplete")}
+    current = {"a": _row(0.04), "b": _row(0.07 + 1e-9), "c": _row(0.31), "d": _row(0.2)}
+    assert check.directions(baseline, current, 1e-6) == (1, 1)  # b unchanged, d solved in one run only
+
+
 def test_baseline_covers_the_regression_suite():
     check = _regression_module()
     suite = load_suite(check.SUITE)
