@@ -1,7 +1,8 @@
 """Where the time goes: NLP build, cold step solves against N, per-iteration split, sectional solves, D&C against
 one-phase, and whole-suite wall time.
 
-Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [walks] [suite] [suite-all]
+Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
+        [suite-all]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -12,6 +13,9 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   rest (linear algebra and IPOPT's own work); log–log slopes against N.
 - ``sections``: the sectional solves of decrease-and-conquer for one step, from the First Phase tail (the thesis's
   guess, the default) and from the complete Second Phase tail.
+- ``scaling``: cold steps and sections solved by IPOPT as configured by default and with the objective scaled
+  (``OBJECTIVE_SCALING``): time, iterations and the objective each reaches. What the scaling does to the results
+  of whole walks is measured by ``acot_regression.py --solver-option``.
 - ``walks``: decrease-and-conquer against one-phase, whole walks, with 1 and 2 sectional workers.
 - ``suite``: a sample of ``thesis-forward`` (every method at a few N) run with ``gaitbench run`` at 1 and 2 jobs;
   the whole-suite time is extrapolated per experiment and method with a power law in N fitted to the sample, and
@@ -45,6 +49,11 @@ STEP_NODES = (25, 50, 100, 200)
 SECTION_NODES = (25, 50)
 WALK_NODES = (20, 40)
 WALK_STEPS = 3
+SCALING_STEP_NODES = (50, 100)
+SCALING_SECTION_NODES = 50
+OBJECTIVE_SCALING = {"nlp_scaling_obj_target_gradient": 1.0}
+"""IPOPT scales the objective so that its gradient at the starting point has max-norm 1. The step costs are COTs
+of 1e-8 … 1e-1, their gradients as small, so unscaled the barrier and the constraints steer IPOPT's path."""
 SUITE_SAMPLE_NODES = (10, 20, 30)
 SUITE_SAMPLE_TIME_LIMIT_S = 600
 """The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver, can spend the
@@ -56,10 +65,10 @@ def resident_mb() -> float:
     return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def forward_step(registry, n_nodes: int, transcription: str = "hermite-simpson"):
+def forward_step(registry, n_nodes: int, transcription: str = "hermite-simpson", **solver_options):
     experiment = registry.create("experiment", "forward")
     problem = WalkProblem(experiment, registry.create("transcription", transcription),
-                          registry.create("solver", "ipopt"), n_nodes)
+                          registry.create("solver", "ipopt", **solver_options), n_nodes)
     state = np.asarray(experiment.initial_state)[[0, 1, 4, 5]]
     return problem, problem.step_data(1, state)
 
@@ -100,29 +109,67 @@ def sections_part(registry) -> list[dict]:
     for name in TRANSCRIPTIONS:
         for n_nodes in SECTION_NODES:
             problem, data = forward_step(registry, n_nodes, name)
-            first = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("first")), data,
-                                     phase="first")
-            complete = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("second")), data,
-                                        seed=first.trajectory.seed())
-            h = data.time_step
+            first, complete = first_and_complete(problem, data)
             for guess, source in (("first-phase", first), ("complete", complete)):
-                times, iterations, converged = [], [], 0
-                for k0 in range(2, n_nodes - 1):
-                    built = problem.transcription.build(sectional_structure(problem.structure("second"), k0))
-                    section = StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
-                                                                      first.trajectory.dq[k0 - 1]],
-                                       data.chord, data.slope, h)
-                    x0 = built.initial_guess(section, source.trajectory.seed((k0 - 1) * h))
-                    prepare(problem.solver, built.nlp)  # timed below: the solve, not the build
-                    result = problem.solver.solve(built.nlp, section.parameter_vector(), x0)
-                    times.append(result.wall_time_s)
-                    iterations.append(result.iterations)
-                    converged += result.converged
-                rows.append({"transcription": name, "N": n_nodes, "guess": guess, "sections": len(times),
-                             "converged": converged, "mean_s": float(np.mean(times)),
-                             "median_s": float(np.median(times)), "max_s": float(np.max(times)),
-                             "mean_iterations": float(np.mean(iterations))})
+                results = sectional_solves(problem, data, first, source)
+                rows.append({"transcription": name, "N": n_nodes, "guess": guess, **section_summary(results)})
                 print(rows[-1], flush=True)
+    return rows
+
+
+def first_and_complete(problem: WalkProblem, data: StepData):
+    """Step 1's First Phase and complete Second Phase solutions: what the sectional problems start from."""
+    first = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("first")), data, phase="first")
+    complete = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("second")), data,
+                                seed=first.trajectory.seed())
+    return first, complete
+
+
+def section_summary(results: list) -> dict:
+    times = [result.wall_time_s for result in results]
+    return {"sections": len(times), "converged": sum(result.converged for result in results),
+            "mean_s": float(np.mean(times)), "median_s": float(np.median(times)), "max_s": float(np.max(times)),
+            "mean_iterations": float(np.mean([result.iterations for result in results]))}
+
+
+def sectional_solves(problem: WalkProblem, data: StepData, first, source) -> list:
+    """The solver results of sections k0 = 2 … N−2, each from the First Phase state at k0 and ``source``'s tail."""
+    h, results = data.time_step, []
+    for k0 in range(2, problem.n_nodes - 1):
+        built = problem.transcription.build(sectional_structure(problem.structure("second"), k0))
+        section = StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1], first.trajectory.dq[k0 - 1]],
+                           data.chord, data.slope, h)
+        x0 = built.initial_guess(section, source.trajectory.seed((k0 - 1) * h))
+        prepare(problem.solver, built.nlp)  # timed below: the solve, not the build
+        results.append(problem.solver.solve(built.nlp, section.parameter_vector(), x0))
+    return results
+
+
+def scaling_part(registry) -> list[dict]:
+    """IPOPT with and without objective scaling (:data:`OBJECTIVE_SCALING`) on the same cold steps and sections.
+
+    Both solve the same problems from the same guesses; the sections start from the default solver's First Phase.
+    """
+    rows = []
+    for name in TRANSCRIPTIONS:
+        for n_nodes in SCALING_STEP_NODES:
+            for label, options in (("default", {}), ("scaled", OBJECTIVE_SCALING)):
+                problem, data = forward_step(registry, n_nodes, name, **options)
+                built = problem.transcription.build(problem.structure("second"))
+                prepare(problem.solver, built.nlp)
+                result = problem.solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+                rows.append({"transcription": name, "N": n_nodes, "problem": "cold step", "ipopt": label,
+                             "converged": int(result.converged), "mean_s": result.wall_time_s,
+                             "mean_iterations": result.iterations, "objectives": [result.objective]})
+                print(rows[-1], flush=True)
+        problem, data = forward_step(registry, SCALING_SECTION_NODES, name)
+        first, _ = first_and_complete(problem, data)
+        for label, options in (("default", {}), ("scaled", OBJECTIVE_SCALING)):
+            solving, _ = forward_step(registry, SCALING_SECTION_NODES, name, **options)
+            results = sectional_solves(solving, data, first, first)
+            rows.append({"transcription": name, "N": SCALING_SECTION_NODES, "problem": "sections", "ipopt": label,
+                         **section_summary(results), "objectives": [result.objective for result in results]})
+            print({key: value for key, value in rows[-1].items() if key != "objectives"}, flush=True)
     return rows
 
 
@@ -240,6 +287,25 @@ def write_summary(results: dict) -> None:
                          f"{1e3 * r['mean_s']:.0f} | {1e3 * r['median_s']:.0f} | {1e3 * r['max_s']:.0f} | "
                          f"{r['mean_iterations']:.0f} |")
         lines.append("")
+    if "scaling" in results:
+        lines += ["## Objective scaling (IPOPT `nlp_scaling_obj_target_gradient = 1`) against the default", "",
+                  "Same problems, same guesses (forward, step 1). Objective: the cold step's, or the median over the "
+                  "sections; \"lower\" counts the sections whose objective the scaled solve brought below the "
+                  "default's by more than 1e-9 (relative).", "",
+                  "| transcription | N | problem | IPOPT | converged | mean (ms) | mean iterations | objective | "
+                  "lower |", "|" + "---|" * 9]
+        rows = results["scaling"]
+        for r in rows:
+            default = next(d for d in rows if d["ipopt"] == "default" and d["problem"] == r["problem"]
+                           and d["transcription"] == r["transcription"] and d["N"] == r["N"])
+            lower = sum(new < old - 1e-9 * abs(old) for old, new in zip(default["objectives"], r["objectives"],
+                                                                         strict=True))
+            compared = "—" if r is default else f"{lower} of {len(r['objectives'])}"
+            lines.append(f"| {r['transcription']} | {r['N']} | {r['problem']} | {r['ipopt']} | {r['converged']} | "
+                         f"{1e3 * r['mean_s']:.0f} | {r['mean_iterations']:.0f} | "
+                         f"{np.median(r['objectives']):.3g} | "
+                         f"{compared} |")
+        lines.append("")
     if "walks" in results:
         lines += [f"## Whole walks (forward, first {WALK_STEPS} steps)", "",
                   "| transcription | N | strategy | workers | complete | ACOT | wall (s) |", "|" + "---|" * 7]
@@ -269,8 +335,8 @@ def write_summary(results: dict) -> None:
     SUMMARY.write_text("\n".join(lines))
 
 
-PARTS = {"steps": steps_part, "sections": sections_part, "walks": walks_part, "suite": suite_part,
-         "suite-all": suite_all_part}
+PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
+         "suite": suite_part, "suite-all": suite_all_part}
 
 
 def main(argv: list[str]) -> None:
