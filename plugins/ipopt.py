@@ -38,6 +38,8 @@ class Ipopt:
     solver shares. Any other keyword is passed to IPOPT unchanged, for example ``linear_solver="ma57"``,
     ``mu_strategy="adaptive"``, ``acceptable_tol=1e-6`` or ``hessian_approximation="limited-memory"``; see
     https://coin-or.github.io/Ipopt/OPTIONS.html. An option IPOPT rejects makes every solve return ERROR.
+    ``nlp_scaling_obj_target_gradient=1`` scales the step costs, whose gradients are tiny, up to a unit gradient:
+    about half the iterations, but other optima (docs/performance.md, "Objective scaling"), so not a default.
     """
 
     name = "ipopt"
