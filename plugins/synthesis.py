@@ -36,8 +36,14 @@ def relation_holds(candidate: np.ndarray, previous: np.ndarray, reference: np.nd
     The thesis's "typical value relation" (L10054–10089) is not defined further; this is the reading of ch3b
     §6.4: the signs of the increments agree, with changes within ``tolerance`` counting as "equal".
     """
-    return bool(np.array_equal(_direction(candidate - previous, tolerance),
-                               _direction(reference - reference_previous, tolerance)))
+    return bool(relations_hold(candidate[None], previous, _direction(reference - reference_previous, tolerance),
+                               tolerance)[0])
+
+
+def relations_hold(candidates: np.ndarray, previous: np.ndarray, reference_direction: np.ndarray,
+                   tolerance: float) -> np.ndarray:
+    """:func:`relation_holds` for each row of ``candidates`` (C, V) at once, given the reference's direction."""
+    return np.all(_direction(candidates - previous, tolerance) == reference_direction, axis=1)
 
 
 def _direction(change: np.ndarray, tolerance: float) -> np.ndarray:
@@ -51,7 +57,8 @@ def synthesize(point_costs: np.ndarray, values: np.ndarray, *, tolerance: float 
     ``point_costs`` is (J, N) and ``values`` (J, N, V), NaN where a candidate is not defined (before its start
     node); candidate 0 is the reference and must be defined everywhere. The all-reference path satisfies the
     relation with itself, so the search always ends with a path; it is exponential in the worst case, and after
-    ``max_checks`` relation checks every node takes the reference.
+    ``max_checks`` relation checks every node takes the reference. Each (node, previous candidate) pair's relations
+    are computed once, for all of the node's candidates together: backtracking revisits them.
     """
     point_costs = np.asarray(point_costs, dtype=float)
     values = np.asarray(values, dtype=float)
@@ -59,24 +66,30 @@ def synthesize(point_costs: np.ndarray, values: np.ndarray, *, tolerance: float 
     if np.isnan(point_costs[REFERENCE]).any() or np.isnan(values[REFERENCE]).any():
         raise ValueError("the reference candidate (row 0) must be defined at every node")
     ranked = [_ranked(point_costs[:, k]) for k in range(n_nodes)]
+    reference_direction = _direction(np.diff(values[REFERENCE], axis=0), tolerance)  # row k − 1: node k − 1 → k
+    fits: dict[tuple[int, int], np.ndarray] = {}  # (node, previous node's candidate) → relation for ranked[node]
+
+    def fitting(k: int, previous: int) -> np.ndarray:
+        """Whether each of node k's ranked candidates keeps the relation after ``previous`` at node k − 1."""
+        if (k, previous) not in fits:
+            fits[k, previous] = relations_hold(values[ranked[k], k], values[previous, k - 1],
+                                               reference_direction[k - 1], tolerance)
+        return fits[k, previous]
+
     selection = [REFERENCE] * n_nodes
     tried = [0] * n_nodes
     backtracks = checks = 0
     k = 1
     while k < n_nodes:
-        found = False
-        while tried[k] < len(ranked[k]):
-            j = ranked[k][tried[k]]
-            checks += 1
-            if relation_holds(values[j, k], values[selection[k - 1], k - 1], values[REFERENCE, k],
-                              values[REFERENCE, k - 1], tolerance):
-                selection[k] = j
-                found = True
-                break
-            tried[k] += 1
+        holding = np.flatnonzero(fitting(k, selection[k - 1])[tried[k]:])
+        found = holding.size > 0
+        examined = holding[0] + 1 if found else len(ranked[k]) - tried[k]  # the first that fits, or all left
+        checks += int(examined)
         if checks > max_checks:
             return Synthesis([REFERENCE] * n_nodes, backtracks, checks, exhausted=True)
         if found:
+            tried[k] += int(holding[0])
+            selection[k] = ranked[k][tried[k]]
             k += 1
             if k < n_nodes:
                 tried[k] = 0

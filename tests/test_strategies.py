@@ -70,6 +70,53 @@ def test_the_search_budget_falls_back_to_the_reference():
     assert budget.exhausted and budget.selection == [0, 0, 0]
 
 
+def _search_one_check_at_a_time(costs, values, max_checks):
+    """The synthesis as the thesis describes it, one relation check at a time: what the batched search must equal."""
+    n_nodes = costs.shape[1]
+    ranked = [[int(j) for j in np.flatnonzero(~np.isnan(costs[:, k]))[np.argsort(
+        costs[~np.isnan(costs[:, k]), k], kind="stable")]] for k in range(n_nodes)]
+    selection, tried, backtracks, checks, k = [0] * n_nodes, [0] * n_nodes, 0, 0, 1
+    while k < n_nodes:
+        found = False
+        while tried[k] < len(ranked[k]):
+            j = ranked[k][tried[k]]
+            checks += 1
+            if relation_holds(values[j, k], values[selection[k - 1], k - 1], values[0, k], values[0, k - 1]):
+                selection[k], found = j, True
+                break
+            tried[k] += 1
+        if checks > max_checks:
+            return [0] * n_nodes, backtracks, checks, True
+        if found:
+            k += 1
+            if k < n_nodes:
+                tried[k] = 0
+            continue
+        tried[k], k, backtracks = 0, k - 1, backtracks + 1
+        tried[k] += 1
+    return selection, backtracks, checks, False
+
+
+def test_the_batched_search_makes_the_same_choices_and_counts_as_checking_one_at_a_time():
+    rng = np.random.default_rng(7)
+    seen_backtracks = seen_exhausted = 0
+    for trial in range(300):
+        n_candidates, n_nodes = rng.integers(2, 9), rng.integers(3, 14)
+        starts = np.r_[0, np.sort(rng.integers(1, n_nodes - 1, n_candidates - 1))]
+        values = np.cumsum(rng.normal(size=(n_candidates, n_nodes, 2)), axis=1)
+        values[:, :, 1] = np.round(values[:, :, 1])  # equal neighbours too: direction 0
+        costs = rng.random((n_candidates, n_nodes))
+        for j, start in enumerate(starts):
+            values[j, :start], costs[j, :start] = NAN, NAN
+        max_checks = int(rng.choice([5, 20, 1_000_000]))
+        found = synthesize(costs, values, max_checks=max_checks)
+        expected = _search_one_check_at_a_time(costs, values, max_checks)
+        assert (found.selection, found.backtracks, found.checks, found.exhausted) == expected, trial
+        seen_backtracks += found.backtracks > 0
+        seen_exhausted += found.exhausted
+    assert seen_backtracks > 20 and seen_exhausted > 20  # both branches of the search were exercised
+
+
 def test_sections_are_completed_from_the_candidates_starting_earlier():
     values = _values([0, 1, 2, 3], [NAN, 11, 12, 13], [NAN, NAN, 22, 23])
     completed = complete_sections(values, [0, 1, 2])
