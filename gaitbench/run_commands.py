@@ -26,6 +26,9 @@ from gaitbench.plugins import PLUGINS_DIR_ENV
               "(implies --executor dask); without it a local cluster of --jobs workers is started.")
 @click.option("--store", "store_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Results directory [default: the suite's `output`].")
+@click.option("--method", "methods", multiple=True, metavar="LABEL",
+              help="Run only this method's cases (repeatable), e.g. --method OP-DC --method D&C-DC; a later run "
+                   "with --resume does the rest.")
 @click.option("--resume", is_flag=True, help="Skip the cases the store already holds.")
 @click.option("--retry-failed", is_flag=True,
               help="With --resume, run again the cases that errored, timed out or crashed.")
@@ -33,7 +36,7 @@ from gaitbench.plugins import PLUGINS_DIR_ENV
               help="Write the HTML and CSV report (`gaitbench report`) to reports/<store name> at the end.")
 @click.pass_obj
 def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
-        resume: bool, retry_failed: bool, write_report: bool) -> None:
+        methods: tuple[str, ...], resume: bool, retry_failed: bool, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
@@ -51,6 +54,11 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         invalid = click.ClickException(str(error))
         invalid.exit_code = 2
         raise invalid from None
+    if methods:
+        try:
+            suite = suite.with_methods(methods)
+        except ValueError as error:
+            raise click.BadParameter(str(error), param_hint="--method") from None
     if scheduler:
         executor = "dask"
     store_dir = store_dir or suite.output

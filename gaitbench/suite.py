@@ -9,8 +9,10 @@ experiments × N × methods × repetitions, in file order, minus the exclusions.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,6 +52,17 @@ class Suite:
     cases: list[Case]
     methods: tuple[str, ...] = ()
     """The method labels, in file order."""
+
+    def with_methods(self, labels: Iterable[str]) -> Suite:
+        """This suite with only the cases of the methods ``labels``: a long sweep run one part at a time (the
+        cases keep their keys, so a later run of the whole suite with ``--resume`` skips them)."""
+        chosen = set(labels)
+        unknown = sorted(chosen - set(self.methods))
+        if unknown:
+            raise ValueError(f"{self.path} has no method {', '.join(map(repr, unknown))}; its methods are "
+                             + ", ".join(self.methods))
+        return dataclasses.replace(self, cases=[case for case in self.cases if case.method in chosen],
+                                   methods=tuple(label for label in self.methods if label in chosen))
 
 
 @dataclass(frozen=True)

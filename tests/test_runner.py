@@ -196,6 +196,44 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path: Path) -> None:
     assert [run["cases_skipped"] for run in runs] == [0, len(before)]  # the killed run, the resumed one
 
 
+def test_a_suite_runs_one_method_at_a_time_and_resume_does_the_rest(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from gaitbench.cli import main
+
+    suite_file = tmp_path / "parts.toml"
+    suite_file.write_text(textwrap.dedent("""
+        [suite]
+        name = "parts"
+        steps = 1
+        [sweep]
+        experiments = ["forward"]
+        N = [8, 9]
+        [[method]]
+        label = "OP-DC"
+        transcription = "hermite-simpson"
+        solver = "ipopt"
+        strategy = "one-phase"
+        [[method]]
+        label = "OP-DM"
+        transcription = "dmoc"
+        solver = "ipopt"
+        strategy = "one-phase"
+    """))
+    store = tmp_path / "store"
+    command = ["run", str(suite_file), "--store", str(store), "--executor", "inprocess", "--no-report"]
+    unknown = CliRunner().invoke(main, [*command, "--method", "OP-XX"])
+    assert unknown.exit_code == 2 and "no method 'OP-XX'" in unknown.output and "OP-DC, OP-DM" in unknown.output
+    part = CliRunner().invoke(main, [*command, "--method", "OP-DM"])
+    assert part.exit_code == 0, part.output
+    assert {row["method"] for row in rows_by_key(store).values()} == {"OP-DM"}
+    rest = CliRunner().invoke(main, [*command, "--resume"])
+    assert rest.exit_code == 0, rest.output
+    assert sorted(row["method"] for row in rows_by_key(store).values()) == ["OP-DC", "OP-DC", "OP-DM", "OP-DM"]
+    with ResultStore.open(store) as opened:
+        assert [run["cases_skipped"] for run in opened.runs()] == [0, 2]
+
+
 def _stored(store: Path) -> int:
     if not (store / DATABASE).exists():
         return 0
