@@ -14,9 +14,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 import gaitbench
 from gaitbench.case import Case, PluginChoice
+from gaitbench.cli import main
 from gaitbench.executors import DaskExecutor, InProcessExecutor, LocalPoolExecutor
 from gaitbench.runner import CaseOutcome, RunRefused, case_row, run_suite
 from gaitbench.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
@@ -197,10 +199,6 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path: Path) -> None:
 
 
 def test_a_suite_runs_one_method_at_a_time_and_resume_does_the_rest(tmp_path: Path) -> None:
-    from click.testing import CliRunner
-
-    from gaitbench.cli import main
-
     suite_file = tmp_path / "parts.toml"
     suite_file.write_text(textwrap.dedent("""
         [suite]
