@@ -205,7 +205,7 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                 "pass --resume to run only the missing ones, or --store to write somewhere else"
             )
         pending = [case for case in suite.cases if case.key not in finished]
-        run_id = f"{datetime.now(timezone.utc):%Y%m%d-%H%M%S}-{suite.name}"
+        run_id = _new_run_id(store, suite.name)
         store.start_run({"run_id": run_id, "suite": suite.name, "suite_path": str(suite.path),
                          "suite_text": suite.text, "executor": executor.name, "jobs": executor.jobs,
                          "cases_total": len(suite.cases), "cases_skipped": len(present),
@@ -222,6 +222,14 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
         store.finish_run(run_id, _now())
     return RunSummary(run_id, Path(store_dir), len(suite.cases), len(present), solved, failed,
                       time.perf_counter() - started)
+
+
+def _new_run_id(store: ResultStore, suite_name: str) -> str:
+    """``<UTC time to the second>-<suite>``, with ``-2``, ``-3``, ... when runs of the suite start within a second."""
+    stem = f"{datetime.now(timezone.utc):%Y%m%d-%H%M%S}-{suite_name}"
+    taken = {run["run_id"] for run in store.runs()}
+    return next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
+                if run_id not in taken)
 
 
 class RunRefused(Exception):

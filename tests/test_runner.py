@@ -154,6 +154,19 @@ def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:
     assert row["status"] == "error" and "bogus_option" in row["message"]
 
 
+def test_runs_started_within_one_second_get_distinct_ids(tmp_path: Path, monkeypatch) -> None:
+    import gaitbench.runner as runner
+
+    class Frozen(runner.datetime):
+        @classmethod
+        def now(cls, tz=None):
+            return runner.datetime(2026, 12, 1, 21, 0, 0, tzinfo=tz)
+
+    monkeypatch.setattr(runner, "datetime", Frozen)
+    ids = [run_suite(suite_of([]), tmp_path, InProcessExecutor(), resume=True).run_id for _ in range(3)]
+    assert ids == ["20261201-210000-test", "20261201-210000-test-2", "20261201-210000-test-3"]
+
+
 def test_refuses_to_mix_without_resume(local_store: Path) -> None:
     with pytest.raises(RunRefused, match="pass --resume"):
         run_suite(suite_of([walk_case(8)]), local_store, InProcessExecutor())
