@@ -184,6 +184,15 @@ class Transcription(ABC):
             self._built[structure] = self._build(structure)
         return self._built[structure]
 
+    def builds_like(self, other: Transcription) -> bool:
+        """Whether ``other`` builds the same NLP for every structure: the same class configured the same (equal
+        attributes, the build cache aside), so one instance's builds can serve the other's problems."""
+        return type(other) is type(self) and _configuration(other) == _configuration(self)
+
+    def keep_builds(self, keep: Callable[[StepStructure], bool]) -> None:
+        """Forget the built structures ``keep`` rejects, and with them their NLPs and built solvers."""
+        self._built = {structure: built for structure, built in self._built.items() if keep(structure)}
+
     @abstractmethod
     def discretize(
         self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols, model: BipedFunctions
@@ -208,6 +217,10 @@ class Transcription(ABC):
         return TranscribedStep(
             structure=structure, nlp=builder.build(symbols.vector, cot), discretization=discretization
         )
+
+
+def _configuration(transcription: Transcription) -> dict:
+    return {name: value for name, value in vars(transcription).items() if name != "_built"}
 
 
 def heel_strike_angles(symbols: StepSymbols) -> tuple[ca.SX, ca.SX]:

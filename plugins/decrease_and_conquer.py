@@ -31,9 +31,16 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.energetics import candidate_cot, point_costs
-from gaitbench.gait_problem import StepData, legs_to_roles, sectional_structure
+from gaitbench.gait_problem import StepData, StepStructure, legs_to_roles, sectional_structure
 from gaitbench.solver import SolverResult, prepare
-from gaitbench.transcription import Interpolant, StepTrajectory, TranscribedStep, cubic_hermite, locate_interval
+from gaitbench.transcription import (
+    Interpolant,
+    StepTrajectory,
+    TranscribedStep,
+    Transcription,
+    cubic_hermite,
+    locate_interval,
+)
 from gaitbench.verify import verify_step
 from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, next_step_state, solve_and_verify, walk_step_by_step
 from plugins.synthesis import complete_sections, synthesize
@@ -148,8 +155,9 @@ class SectionalSolves:
     def __init__(self, problem: WalkProblem, workers: int = 1) -> None:
         structure = problem.structure("second")
         self.starts = list(range(2, problem.n_nodes - 1))
+        builder = sectional_builder(problem.transcription, structure)
         self.built: dict[int, TranscribedStep] = {
-            k0: problem.transcription.build(sectional_structure(structure, k0)) for k0 in self.starts}
+            k0: builder.build(sectional_structure(structure, k0)) for k0 in self.starts}
         self.solver = problem.solver
         self._pool: ProcessPoolExecutor | None = None
         if workers > 1 and len(self.starts) > 1:
@@ -178,6 +186,25 @@ class SectionalSolves:
 
 
 _FORKED: SectionalSolves | None = None
+
+_SECTION_BUILDERS: list[Transcription] = []
+"""Per process, the transcription instances whose sectional builds later walks reuse: one per configuration."""
+
+
+def sectional_builder(transcription: Transcription, structure: StepStructure) -> Transcription:
+    """The instance that builds this walk's sections, kept for the walks this process runs next.
+
+    A section of M nodes is the step structure of M nodes whatever the walk's N, so a suite's worker, running
+    D&C at N = 10, 20, ..., builds only the sizes it has not built yet, and the NLPs come with their built
+    solvers. It keeps only the sections of the walk's problem options (another experiment's limits make other
+    structures), so it holds at most the sections of its largest N per transcription: what that walk needed anyway.
+    """
+    builder = next((kept for kept in _SECTION_BUILDERS if kept.builds_like(transcription)), None)
+    if builder is None:
+        _SECTION_BUILDERS.append(builder := transcription)
+    for kept in _SECTION_BUILDERS:
+        kept.keep_builds(lambda section: section.options == structure.options)
+    return builder
 
 
 def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:

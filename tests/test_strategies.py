@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli import main
+from gaitbench.gait_problem import ProblemOptions
 from gaitbench.plugins import load_registry
 from gaitbench.verify import verify_step
 from gaitbench.walk import WalkProblem
@@ -165,6 +167,35 @@ def test_parallel_sectional_solves_give_the_sequential_walk(forward):
     np.testing.assert_array_equal(parallel.steps[0].trajectory.q, sequential.steps[0].trajectory.q)
     with pytest.raises(ValueError, match="workers = 0"):
         DecreaseAndConquer(workers=0)
+
+
+def test_later_walks_in_a_process_build_only_the_sections_not_built_yet(forward, monkeypatch):
+    import plugins.decrease_and_conquer as dc
+    from gaitbench.transcription import Transcription
+
+    monkeypatch.setattr(dc, "_SECTION_BUILDERS", [])
+    built, build = [], Transcription._build
+    monkeypatch.setattr(Transcription, "_build",
+                        lambda self, structure: built.append(structure) or build(self, structure))
+
+    def walk(n, **options):
+        problem = WalkProblem(forward, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"),
+                              n, steps=1, options=dataclasses.replace(ProblemOptions(limits=forward.limits), **options))
+        built.clear()
+        result = DecreaseAndConquer(polish=False).solve(problem)
+        return result, sorted(structure.n_nodes for structure in built if structure.phase == "second")
+
+    _, sizes = walk(8)
+    assert sizes == [3, 4, 5, 6, 7, 8]  # the sections k0 = 2 … 6, and the complete step
+    shared, sizes = walk(10)
+    assert sizes == [9, 10]  # the 3 … 8-node sections: built by the walk at N = 8 (8 nodes: its complete step)
+    monkeypatch.setattr(dc, "_SECTION_BUILDERS", [])
+    alone, _ = walk(10)
+    for key in ("candidates", "failed_sections", "selection", "candidate_cots", "chosen", "claimed_cot"):
+        assert shared.steps[0].details[key] == alone.steps[0].details[key], key
+    walk(8, torque_regularization=1e-3)  # other problem options: other structures, and the kept ones are dropped
+    _, sizes = walk(8)
+    assert sizes == [3, 4, 5, 6, 7, 8]
 
 
 def test_verification_tells_a_solution_from_a_patchwork(forward):
