@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -105,6 +105,8 @@ class StepTrajectory:
     push_off: float
     stance: int
     _interpolant: Interpolant
+    _seed_samples: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(
+        default_factory=dict, repr=False, compare=False)
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q, dq = self._interpolant.state(t)
@@ -117,13 +119,18 @@ class StepTrajectory:
         """This trajectory from time ``offset`` on, as the initial guess of another step problem.
 
         Meant for problems with the same stance leg: a First-Phase trajectory seeding the Second Phase, or the
-        tail of a complete trajectory seeding a sectional problem that starts ``offset`` seconds in.
+        tail of a complete trajectory seeding a sectional problem that starts ``offset`` seconds in. The samples
+        are kept per time: Decrease & Conquer seeds its N − 3 sections from one trajectory, mostly at the same
+        node times.
         """
-        interpolant = self._interpolant
+        interpolant, samples = self._interpolant, self._seed_samples
 
         def seed(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            q, dq = interpolant.state(t + offset)
-            return q, dq, interpolant.control(t + offset)
+            time = t + offset
+            if time not in samples:
+                q, dq = interpolant.state(time)
+                samples[time] = (q, dq, interpolant.control(time))
+            return tuple(values.copy() for values in samples[time])  # the caller's to change
 
         return seed
 

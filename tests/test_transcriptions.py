@@ -8,7 +8,7 @@ variables: the scheme is then an implicit integrator, solved here by Newton and 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 
 import casadi as ca
@@ -235,6 +235,27 @@ def test_interpolant_matches_the_nodal_values(name):
             np.testing.assert_allclose(dq, trajectory.dq[k], atol=1e-7, err_msg=f"q̇ at node {k}, t = {at!r}")
     for j, t in enumerate(trajectory.control_times):
         np.testing.assert_allclose(trajectory.control(t), trajectory.tau[j], atol=1e-12)
+
+
+def test_seeds_of_one_trajectory_share_their_samples_and_hand_out_copies():
+    built, data, x, _ = solve_forward_step("dmoc", "first", 21)
+    trajectory = built.trajectory(x, data)
+    calls = []
+    state = trajectory._interpolant.state
+    trajectory._interpolant = replace(trajectory._interpolant, state=lambda t: calls.append(t) or state(t))
+    h = data.time_step
+    first = [trajectory.seed(2 * h)(k * h) for k in range(5)]
+    again = trajectory.seed(2 * h)
+    assert len(calls) == 5
+    q, dq, tau = again(0.0)
+    assert len(calls) == 5  # the same time: the kept sample
+    expected_q, expected_dq = state(2 * h)
+    np.testing.assert_array_equal(q, expected_q)
+    np.testing.assert_array_equal(dq, expected_dq)
+    q += 1.0
+    first[0][1][:] = 0.0
+    np.testing.assert_array_equal(again(0.0)[0], expected_q)  # changing a sample handed out changes no later one
+    np.testing.assert_array_equal(again(0.0)[1], expected_dq)
 
 
 def test_interval_lookup_matches_a_search_of_the_node_times():
