@@ -40,6 +40,7 @@ from gaitbench.provenance import provenance
 from gaitbench.solver import prepare
 from gaitbench.store import load_results
 from gaitbench.walk import WalkProblem, solve_and_verify
+from plugins.decrease_and_conquer import release_sections
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "performance.json"
@@ -181,6 +182,7 @@ def walks_part(registry) -> list[dict]:
             runs = [("one-phase", {}), ("decrease-and-conquer", {"workers": 1}),
                     ("decrease-and-conquer", {"workers": 2})]
             for strategy, options in runs:
+                release_sections()  # each walk builds its sections, as the first D&C case of a worker does
                 problem = WalkProblem(experiment, registry.create("transcription", name),
                                       registry.create("solver", "ipopt"), n_nodes, steps=WALK_STEPS)
                 started = time.perf_counter()

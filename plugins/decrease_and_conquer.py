@@ -207,6 +207,12 @@ def sectional_builder(transcription: Transcription, structure: StepStructure) ->
     return builder
 
 
+def release_sections() -> None:
+    """Drop the sections kept for later walks, and their memory: the next walk builds its own, as a fresh
+    process would (how ``benchmarks/performance.py`` times each walk as a case of its own)."""
+    _SECTION_BUILDERS.clear()
+
+
 def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
     return _FORKED.solve_one(task)
 

@@ -14,7 +14,7 @@ from gaitbench.gait_problem import ProblemOptions
 from gaitbench.plugins import load_registry
 from gaitbench.verify import verify_step
 from gaitbench.walk import WalkProblem
-from plugins.decrease_and_conquer import DYNAMICS_TOLERANCE, DecreaseAndConquer, NodeValues
+from plugins.decrease_and_conquer import DYNAMICS_TOLERANCE, DecreaseAndConquer, NodeValues, release_sections
 from plugins.synthesis import complete_sections, relation_holds, synthesize
 
 NAN = np.nan
@@ -170,10 +170,9 @@ def test_parallel_sectional_solves_give_the_sequential_walk(forward):
 
 
 def test_later_walks_in_a_process_build_only_the_sections_not_built_yet(forward, monkeypatch):
-    import plugins.decrease_and_conquer as dc
     from gaitbench.transcription import Transcription
 
-    monkeypatch.setattr(dc, "_SECTION_BUILDERS", [])
+    release_sections()
     built, build = [], Transcription._build
     monkeypatch.setattr(Transcription, "_build",
                         lambda self, structure: built.append(structure) or build(self, structure))
@@ -189,7 +188,7 @@ def test_later_walks_in_a_process_build_only_the_sections_not_built_yet(forward,
     assert sizes == [3, 4, 5, 6, 7, 8]  # the sections k0 = 2 … 6, and the complete step
     shared, sizes = walk(10)
     assert sizes == [9, 10]  # the 3 … 8-node sections: built by the walk at N = 8 (8 nodes: its complete step)
-    monkeypatch.setattr(dc, "_SECTION_BUILDERS", [])
+    release_sections()
     alone, _ = walk(10)
     for key in ("candidates", "failed_sections", "selection", "candidate_cots", "chosen", "claimed_cot"):
         assert shared.steps[0].details[key] == alone.steps[0].details[key], key
