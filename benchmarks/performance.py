@@ -2,7 +2,7 @@
 one-phase, and whole-suite wall time.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
-        [suite-all]
+        [suite-all] [suite-all-large]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -19,7 +19,9 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
 - ``walks``: decrease-and-conquer against one-phase, whole walks, with 1 and 2 sectional workers.
 - ``suite``: a sample of ``thesis-forward`` (every method at a few N) run with ``gaitbench run`` at 1 and 2 jobs;
   the whole-suite time is extrapolated per experiment and method with a power law in N fitted to the sample, and
-  labelled so. ``suite-all``: the same for ``thesis-all`` (all four experiments).
+  labelled so. ``suite-all``: the same for ``thesis-all`` (all four experiments). ``suite-all-large``: ``thesis-all``
+  without its reference column at N = 50, 100, 150, 200 with 2 jobs and the suite's own case limit, where the
+  sweep costs most.
 """
 
 from __future__ import annotations
@@ -60,6 +62,9 @@ SUITE_SAMPLE_TIME_LIMIT_S = 600
 """The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver, can spend the
 whole limit in one step's solve (stairs, N = 20: over 13 minutes), which would make the sample take hours. A case
 that reaches it makes the extrapolation a lower bound, and the summary says how many did."""
+LARGE_SAMPLE_NODES = (50, 100, 150, 200)
+IPOPT_METHODS = ("OP-DC", "OP-DM", "D&C-DC", "D&C-DM")
+"""``thesis-all``'s methods solved by IPOPT through gaitbench's core: all but the reference column."""
 
 
 def resident_mb() -> float:
@@ -195,31 +200,36 @@ def walks_part(registry) -> list[dict]:
     return rows
 
 
-def suite_part(registry, suite: str = "thesis-forward") -> list[dict]:
+def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPLE_NODES, jobs_runs=(1, 2),
+               methods: tuple[str, ...] = (), time_limit_s: int = SUITE_SAMPLE_TIME_LIMIT_S) -> list[dict]:
+    """``suite`` at ``sample_nodes`` only, run with ``gaitbench run`` once per entry of ``jobs_runs``; with
+    ``methods``, only those methods' cases (``--method``)."""
     source = (HERE.parent / "suites" / f"{suite}.toml").read_text()
     sample = source
-    for full, sampled in (("N = { start = 10, stop = 200, step = 10 }", f"N = {list(SUITE_SAMPLE_NODES)}"),
-                          ("time_limit_s = 3600", f"time_limit_s = {SUITE_SAMPLE_TIME_LIMIT_S}")):
+    for full, sampled in (("N = { start = 10, stop = 200, step = 10 }", f"N = {list(sample_nodes)}"),
+                          ("time_limit_s = 3600", f"time_limit_s = {time_limit_s}")):
         if full not in sample:
             raise SystemExit(f"suites/{suite}.toml no longer has the line `{full}` this benchmark replaces")
         sample = sample.replace(full, sampled)
+    selected = [argument for method in methods for argument in ("--method", method)]
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
         suite_file = Path(scratch) / f"{suite}-sample.toml"
         suite_file.write_text(sample)
-        for jobs in (1, 2):
+        for jobs in jobs_runs:
             store = Path(scratch) / f"store-{jobs}"
             started = time.perf_counter()
             subprocess.run([str(Path(sys.executable).parent / "gaitbench"), "run", str(suite_file), "--jobs", str(jobs),
-                            "--store", str(store), "--no-report"], check=False, stdout=subprocess.DEVNULL)
+                            "--store", str(store), "--no-report", *selected], check=False, stdout=subprocess.DEVNULL)
             wall = time.perf_counter() - started
             cases = load_results(store)
             per_case = [{"experiment": row["experiment"], "method": row["method"], "N": int(row["N"]),
-                         "status": row["status"], "wall_s": float(row["wall_time_s"])}
+                         "status": row["status"], "steps_solved": int(row["steps_solved"] or 0),
+                         "wall_s": float(row["wall_time_s"])}
                         for row in cases.to_dict("records")]
-            rows.append({"suite": suite, "sample_N": list(SUITE_SAMPLE_NODES), "jobs": jobs,
-                         "time_limit_s": SUITE_SAMPLE_TIME_LIMIT_S, "cases": len(per_case),
-                         "at_time_limit": sum(row["wall_s"] >= SUITE_SAMPLE_TIME_LIMIT_S for row in per_case),
+            rows.append({"suite": suite, "sample_N": list(sample_nodes), "jobs": jobs, "methods": list(methods),
+                         "time_limit_s": time_limit_s, "cases": len(per_case),
+                         "at_time_limit": sum(row["wall_s"] >= time_limit_s for row in per_case),
                          "wall_s": wall, "per_case": per_case,
                          "extrapolated": extrapolate(per_case, range(10, 201, 10), jobs)})
             print({key: value for key, value in rows[-1].items() if key != "per_case"}, flush=True)
@@ -228,6 +238,12 @@ def suite_part(registry, suite: str = "thesis-forward") -> list[dict]:
 
 def suite_all_part(registry) -> list[dict]:
     return suite_part(registry, "thesis-all")
+
+
+def suite_all_large_part(registry) -> list[dict]:
+    """``thesis-all`` without its reference column at N = 50 … 200, 2 jobs, the suite's own case limit: the
+    part of the sweep that is gaitbench's own, measured where it costs most rather than extrapolated from N ≤ 30."""
+    return suite_part(registry, "thesis-all", LARGE_SAMPLE_NODES, (2,), IPOPT_METHODS, 3600)
 
 
 def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
@@ -316,7 +332,7 @@ def write_summary(results: dict) -> None:
             lines.append(f"| {r['transcription']} | {r['N']} | {r['strategy']} | {r['workers']} | {r['complete']} "
                          f"| {acot} | {r['wall_s']:.1f} |")
         lines.append("")
-    suites = [r for part in ("suite", "suite-all") for r in results.get(part, [])]
+    suites = [r for part in ("suite", "suite-all", "suite-all-large") for r in results.get(part, [])]
     if suites:
         lines += ["## Suite wall time", ""]
         for r in suites:
@@ -326,19 +342,23 @@ def write_summary(results: dict) -> None:
                 methods.setdefault(label.split(" ")[-1], []).append(value["suite_case_time_s"])
             limit = (f", case time limit {r['time_limit_s']} s, reached by {r['at_time_limit']}"
                      if "time_limit_s" in r else "")
+            only = f", methods {', '.join(r['methods'])} only" if r.get("methods") else ""
+            case_time = sum(row["wall_s"] for row in r["per_case"])
             lines += [f"`{r.get('suite', 'thesis-forward')}` sampled at N = {r['sample_N']} ({r['cases']} cases"
-                      f"{limit}), `--jobs {r['jobs']}`: "
-                      f"measured {r['wall_s']:.0f} s. Extrapolated to the whole suite (N = 10…200) with a power "
-                      f"law per experiment and method: {fit['case_time_s'] / 3600:.1f} h of case time, at least "
-                      f"{fit['wall_s_lower_bound'] / 3600:.1f} h of wall time with {r['jobs']} job(s). Case time "
-                      "by method: " + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
+                      f"{only}{limit}), `--jobs {r['jobs']}`: "
+                      f"measured {r['wall_s']:.0f} s ({case_time:.0f} s of case time). Extrapolated to the whole "
+                      f"suite (N = 10…200) with a power law per experiment and method: "
+                      f"{fit['case_time_s'] / 3600:.1f} h of case time, at least "
+                      f"{fit['wall_s_lower_bound'] / 3600:.1f} h of wall time with {r['jobs']} job(s). "
+                      "Case time by method: "
+                      + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
                       + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
                       + ".", ""]
     SUMMARY.write_text("\n".join(lines))
 
 
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
-         "suite": suite_part, "suite-all": suite_all_part}
+         "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part}
 
 
 def main(argv: list[str]) -> None:
