@@ -187,6 +187,11 @@ class SectionalSolves:
 
 _FORKED: SectionalSolves | None = None
 
+
+def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
+    return _FORKED.solve_one(task)
+
+
 _SECTION_BUILDERS: list[Transcription] = []
 """Per process, the transcription instances whose sectional builds later walks reuse: one per configuration."""
 
@@ -211,10 +216,6 @@ def release_sections() -> None:
     """Drop the sections kept for later walks, and their memory: the next walk builds its own, as a fresh
     process would (how ``benchmarks/performance.py`` times each walk as a case of its own)."""
     _SECTION_BUILDERS.clear()
-
-
-def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
-    return _FORKED.solve_one(task)
 
 
 def _label(start: int) -> str:
