@@ -56,7 +56,7 @@ SCALING_STEP_NODES = (50, 100)
 SCALING_SECTION_NODES = 50
 OBJECTIVE_SCALING = {"nlp_scaling_obj_target_gradient": 1.0}
 """IPOPT scales the objective so that its gradient at the starting point has max-norm 1. The step costs are COTs
-of 1e-8 … 1e-1, their gradients as small, so unscaled the barrier and the constraints steer IPOPT's path."""
+of 1e-8 … 0.5, their gradients as small, so unscaled the barrier and the constraints steer IPOPT's path."""
 SUITE_SAMPLE_NODES = (10, 20, 30)
 SUITE_SAMPLE_TIME_LIMIT_S = 600
 """The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver, can spend the
@@ -123,9 +123,14 @@ def sections_part(registry) -> list[dict]:
     return rows
 
 
+def first_phase(problem: WalkProblem, data: StepData):
+    """Step 1's First Phase solution: the sectional problems' initial states."""
+    return solve_and_verify(problem, 1, problem.transcription.build(problem.structure("first")), data, phase="first")
+
+
 def first_and_complete(problem: WalkProblem, data: StepData):
     """Step 1's First Phase and complete Second Phase solutions: what the sectional problems start from."""
-    first = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("first")), data, phase="first")
+    first = first_phase(problem, data)
     complete = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("second")), data,
                                 seed=first.trajectory.seed())
     return first, complete
@@ -169,7 +174,7 @@ def scaling_part(registry) -> list[dict]:
                              "mean_iterations": result.iterations, "objectives": [result.objective]})
                 print(rows[-1], flush=True)
         problem, data = forward_step(registry, SCALING_SECTION_NODES, name)
-        first, _ = first_and_complete(problem, data)
+        first = first_phase(problem, data)
         for label, options in (("default", {}), ("scaled", OBJECTIVE_SCALING)):
             solving, _ = forward_step(registry, SCALING_SECTION_NODES, name, **options)
             results = sectional_solves(solving, data, first, first)

@@ -183,6 +183,10 @@ def _interval_symbols(function: ca.Function) -> tuple[ca.SX, ca.SX, ca.SX]:
     return z, p, ca.vertcat(*_as_list(function(z, p)))
 
 
+_DERIVED: dict[tuple[str, str], tuple[ca.Function, tuple[np.ndarray, np.ndarray]]] = {}
+"""Interval derivatives already derived in this process, by derivation and the function's serialization."""
+
+
 def _derived(function: ca.Function, derive) -> tuple[ca.Function, tuple[np.ndarray, np.ndarray]]:
     """``derive(function)``, once per process for each distinct interval function (by its serialization).
 
@@ -192,9 +196,6 @@ def _derived(function: ca.Function, derive) -> tuple[ca.Function, tuple[np.ndarr
     if key not in _DERIVED:
         _DERIVED[key] = derive(function)
     return _DERIVED[key]
-
-
-_DERIVED: dict[tuple[str, str], tuple[ca.Function, tuple[np.ndarray, np.ndarray]]] = {}
 
 
 def _interval_jacobian(function: ca.Function) -> tuple[ca.Function, tuple[np.ndarray, np.ndarray]]:
