@@ -13,6 +13,7 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.nlp import NLP
+from gaitbench.scaling import ScaledProblem, nominal_factors
 from gaitbench.solver import SolverResult, SolverStatus, options_key
 
 IPOPT_STATUSES = {
@@ -29,6 +30,10 @@ Diverging_Iterates, ...) is an error."""
 _FUNCTIONS = ("f", "g", "grad_f", "jac_g", "hess_l")
 """The NLP callbacks IPOPT evaluates, named as in :class:`gaitbench.nlp.NLPFunctions`."""
 
+SCALINGS = ("none", "nominal")
+"""``none``: IPOPT's own scaling only. ``nominal``: variables and constraint rows scaled first
+(:mod:`gaitbench.scaling`), from each solve's initial guess."""
+
 
 class Ipopt:
     """IPOPT with the exact Hessian of the Lagrangian.
@@ -40,12 +45,17 @@ class Ipopt:
     https://coin-or.github.io/Ipopt/OPTIONS.html. An option IPOPT rejects makes every solve return ERROR.
     ``nlp_scaling_obj_target_gradient=1`` scales the step costs, whose gradients are tiny, up to a unit gradient:
     about half the iterations, but other optima (docs/performance.md, "Objective scaling"), so not a default.
+    ``scaling="nominal"`` scales the variables and constraint rows as well (:mod:`gaitbench.scaling`; measured in
+    docs/performance.md, "Variable and constraint scaling").
     """
 
     name = "ipopt"
 
     def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, **ipopt_options) -> None:
+                 print_level: int = 0, scaling: str = "none", **ipopt_options) -> None:
+        if scaling not in SCALINGS:
+            raise ValueError(f"scaling = {scaling!r}: expected one of {', '.join(SCALINGS)}")
+        self.scaling = scaling
         ipopt = {"max_iter": max_iterations, "tol": tolerance, "print_level": print_level}
         if time_limit_s is not None:
             ipopt["max_wall_time"] = time_limit_s
@@ -63,9 +73,16 @@ class Ipopt:
         start = time.perf_counter()
         try:
             solver = self._solver(nlp)
-            solution = solver(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+            if self.scaling == "nominal":
+                factors = nominal_factors(nlp, x0, p)
+                d, c = factors.variables, factors.constraints
+                solution = solver(x0=x0 / d, p=factors.parameters(p), lbx=nlp.lbx / d, ubx=nlp.ubx / d,
+                                  lbg=nlp.lbg / c, ubg=nlp.ubg / c)
+            else:
+                d, c = 1.0, 1.0
+                solution = solver(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
             stats = solver.stats()
-            x = np.asarray(solution["x"], dtype=float).ravel()
+            x = d * np.asarray(solution["x"], dtype=float).ravel()
             # Evaluated here rather than taken from IPOPT, which reports f = 0 when it fails at the initial point.
             objective = float(nlp.functions.objective(x, p))
             violation = nlp.violation(x, p)
@@ -85,7 +102,7 @@ class Ipopt:
             function_time_s=float(sum(stats.get(f"t_wall_nlp_{name}", 0.0) for name in _FUNCTIONS)),
             evaluations={name: int(stats[f"n_call_nlp_{name}"]) for name in _FUNCTIONS
                          if f"n_call_nlp_{name}" in stats},
-            multipliers=np.asarray(solution["lam_g"], dtype=float).ravel(),
+            multipliers=np.asarray(solution["lam_g"], dtype=float).ravel() / c,
         )
 
     def prepare(self, nlp: NLP) -> None:
@@ -93,14 +110,15 @@ class Ipopt:
         self._solver(nlp)
 
     def _solver(self, nlp: NLP) -> ca.Function:
-        key = options_key("ipopt", self.options)
+        key = options_key("ipopt", self.options | {"scaling": self.scaling})
         if key not in nlp.solver_cache:
-            options = dict(self.options)
-            if nlp.interval_blocks:
+            options, problem = dict(self.options), nlp.functions
+            if self.scaling == "nominal":
+                problem = ScaledProblem(nlp)
+            if self.scaling == "nominal" or nlp.interval_blocks:
                 # g and its derivatives from the compiled per-interval functions, not the flat graph's.
-                options |= {"jac_g": nlp.functions.constraints_and_jacobian,
-                            "hess_lag": nlp.functions.hessian_lagrangian_upper}
-            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", nlp.functions.oracle, options)
+                options |= {"jac_g": problem.constraints_and_jacobian, "hess_lag": problem.hessian_lagrangian_upper}
+            nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", problem.oracle, options)
         return nlp.solver_cache[key]
 
 
