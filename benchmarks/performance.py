@@ -13,8 +13,9 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   rest (linear algebra and IPOPT's own work); log–log slopes against N.
 - ``sections``: the sectional solves of decrease-and-conquer for one step, from the First Phase tail (the thesis's
   guess, the default) and from the complete Second Phase tail.
-- ``scaling``: cold steps and sections solved by IPOPT as configured by default and with the objective scaled
-  (``OBJECTIVE_SCALING``): time, iterations and the objective each reaches. What the scaling does to the results
+- ``scaling``: cold steps and sections solved by IPOPT as configured by default and with each scaling of
+  ``SCALINGS`` (the objective, the variables and constraints, both): time, iterations and the objective each
+  reaches. What the scaling does to the results
   of whole walks is measured by ``acot_regression.py --solver-option``.
 - ``walks``: decrease-and-conquer against one-phase, whole walks, with 1 and 2 sectional workers.
 - ``suite``: a sample of ``thesis-forward`` (every method at a few N) run with ``gaitbench run`` at 1 and 2 jobs;
@@ -57,6 +58,10 @@ SCALING_SECTION_NODES = 50
 OBJECTIVE_SCALING = {"nlp_scaling_obj_target_gradient": 1.0}
 """IPOPT scales the objective so that its gradient at the starting point has max-norm 1. The step costs are COTs
 of 1e-8 … 0.5, their gradients as small, so unscaled the barrier and the constraints steer IPOPT's path."""
+SCALINGS = {"default": {}, "objective": OBJECTIVE_SCALING, "nominal": {"scaling": "nominal"},
+            "nominal + objective": {"scaling": "nominal"} | OBJECTIVE_SCALING}
+"""IPOPT's defaults and the scalings compared with them. ``nominal`` scales the variables and the constraint rows
+(:mod:`gaitbench.scaling`)."""
 SUITE_SAMPLE_NODES = (10, 20, 30)
 SUITE_SAMPLE_TIME_LIMIT_S = 600
 """The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver, can spend the
@@ -157,14 +162,14 @@ def sectional_solves(problem: WalkProblem, data: StepData, first, source) -> lis
 
 
 def scaling_part(registry) -> list[dict]:
-    """IPOPT with and without objective scaling (:data:`OBJECTIVE_SCALING`) on the same cold steps and sections.
+    """IPOPT with its defaults and with each of :data:`SCALINGS` on the same cold steps and sections.
 
     Both solve the same problems from the same guesses; the sections start from the default solver's First Phase.
     """
     rows = []
     for name in TRANSCRIPTIONS:
         for n_nodes in SCALING_STEP_NODES:
-            for label, options in (("default", {}), ("scaled", OBJECTIVE_SCALING)):
+            for label, options in SCALINGS.items():
                 problem, data = forward_step(registry, n_nodes, name, **options)
                 built = problem.transcription.build(problem.structure("second"))
                 prepare(problem.solver, built.nlp)
@@ -175,7 +180,7 @@ def scaling_part(registry) -> list[dict]:
                 print(rows[-1], flush=True)
         problem, data = forward_step(registry, SCALING_SECTION_NODES, name)
         first = first_phase(problem, data)
-        for label, options in (("default", {}), ("scaled", OBJECTIVE_SCALING)):
+        for label, options in SCALINGS.items():
             solving, _ = forward_step(registry, SCALING_SECTION_NODES, name, **options)
             results = sectional_solves(solving, data, first, first)
             rows.append({"transcription": name, "N": SCALING_SECTION_NODES, "problem": "sections", "ipopt": label,
@@ -311,10 +316,11 @@ def write_summary(results: dict) -> None:
                          f"{r['mean_iterations']:.0f} |")
         lines.append("")
     if "scaling" in results:
-        lines += ["## Objective scaling (IPOPT `nlp_scaling_obj_target_gradient = 1`) against the default", "",
-                  "Same problems, same guesses (forward, step 1). Objective: the cold step's, or the median over the "
-                  "sections; \"lower\" counts the sections whose objective the scaled solve brought below the "
-                  "default's by more than 1e-9 (relative).", "",
+        lines += ["## Scalings against IPOPT's defaults", "",
+                  "Same problems, same guesses (forward, step 1). objective: IPOPT's `nlp_scaling_obj_target_gradient "
+                  "= 1`; nominal: variables and constraint rows (`scaling = \"nominal\"`, gaitbench/scaling.py). "
+                  "Objective: the cold step's, or the median over the sections; \"lower\" counts the sections whose "
+                  "objective the scaled solve brought below the default's by more than 1e-9 (relative).", "",
                   "| transcription | N | problem | IPOPT | converged | mean (ms) | mean iterations | objective | "
                   "lower |", "|" + "---|" * 9]
         rows = results["scaling"]
