@@ -2,7 +2,7 @@
 one-phase, and whole-suite wall time.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
-        [suite-all] [suite-all-large]
+        [suite-all] [suite-all-large] [suite-all-large-scaled]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -22,7 +22,8 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   the whole-suite time is extrapolated per experiment and method with a power law in N fitted to the sample, and
   labelled so. ``suite-all``: the same for ``thesis-all`` (all four experiments). ``suite-all-large``: ``thesis-all``
   without its reference column at N = 50, 100, 150, 200 with 2 jobs and the suite's own case limit, where the
-  sweep costs most.
+  sweep costs most. ``suite-all-large-scaled``: the same with IPOPT's objective scaling (``OBJECTIVE_SCALING``),
+  which changes the results: what the sweep would take if the reproduction adopted it.
 """
 
 from __future__ import annotations
@@ -211,13 +212,18 @@ def walks_part(registry) -> list[dict]:
 
 
 def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPLE_NODES, jobs_runs=(1, 2),
-               methods: tuple[str, ...] = (), time_limit_s: int = SUITE_SAMPLE_TIME_LIMIT_S) -> list[dict]:
+               methods: tuple[str, ...] = (), time_limit_s: int = SUITE_SAMPLE_TIME_LIMIT_S,
+               ipopt_options: dict | None = None) -> list[dict]:
     """``suite`` at ``sample_nodes`` only, run with ``gaitbench run`` once per entry of ``jobs_runs``; with
-    ``methods``, only those methods' cases (``--method``)."""
+    ``methods``, only those methods' cases (``--method``); with ``ipopt_options``, its IPOPT methods solve with them."""
     source = (HERE.parent / "suites" / f"{suite}.toml").read_text()
     sample = source
-    for full, sampled in (("N = { start = 10, stop = 200, step = 10 }", f"N = {list(sample_nodes)}"),
-                          ("time_limit_s = 3600", f"time_limit_s = {time_limit_s}")):
+    replacements = [("N = { start = 10, stop = 200, step = 10 }", f"N = {list(sample_nodes)}"),
+                    ("time_limit_s = 3600", f"time_limit_s = {time_limit_s}")]
+    if ipopt_options:
+        inline = ", ".join(f"{key} = {json.dumps(value)}" for key, value in ipopt_options.items())
+        replacements.append(('solver = "ipopt"', f'solver = {{ name = "ipopt", options = {{ {inline} }} }}'))
+    for full, sampled in replacements:
         if full not in sample:
             raise SystemExit(f"suites/{suite}.toml no longer has the line `{full}` this benchmark replaces")
         sample = sample.replace(full, sampled)
@@ -238,6 +244,7 @@ def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPL
                          "wall_s": float(row["wall_time_s"])}
                         for row in cases.to_dict("records")]
             rows.append({"suite": suite, "sample_N": list(sample_nodes), "jobs": jobs, "methods": list(methods),
+                         "ipopt_options": ipopt_options or {},
                          "time_limit_s": time_limit_s, "cases": len(per_case),
                          "at_time_limit": sum(row["wall_s"] >= time_limit_s for row in per_case),
                          "wall_s": wall, "per_case": per_case,
@@ -254,6 +261,11 @@ def suite_all_large_part(registry) -> list[dict]:
     """``thesis-all`` without its reference column at N = 50 … 200, 2 jobs, the suite's own case limit: the
     part of the sweep that is gaitbench's own, measured where it costs most rather than extrapolated from N ≤ 30."""
     return suite_part(registry, "thesis-all", LARGE_SAMPLE_NODES, (2,), IPOPT_METHODS, 3600)
+
+
+def suite_all_large_scaled_part(registry) -> list[dict]:
+    """``suite-all-large`` with IPOPT's objective scaling: other results, and the sweep's time if adopted."""
+    return suite_part(registry, "thesis-all", LARGE_SAMPLE_NODES, (2,), IPOPT_METHODS, 3600, OBJECTIVE_SCALING)
 
 
 def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
@@ -343,7 +355,8 @@ def write_summary(results: dict) -> None:
             lines.append(f"| {r['transcription']} | {r['N']} | {r['strategy']} | {r['workers']} | {r['complete']} "
                          f"| {acot} | {r['wall_s']:.1f} |")
         lines.append("")
-    suites = [r for part in ("suite", "suite-all", "suite-all-large") for r in results.get(part, [])]
+    suites = [r for part in ("suite", "suite-all", "suite-all-large", "suite-all-large-scaled")
+              for r in results.get(part, [])]
     if suites:
         lines += ["## Suite wall time", ""]
         for r in suites:
@@ -354,6 +367,8 @@ def write_summary(results: dict) -> None:
             limit = (f", case time limit {r['time_limit_s']} s, reached by {r['at_time_limit']}"
                      if "time_limit_s" in r else "")
             only = f", methods {', '.join(r['methods'])} only" if r.get("methods") else ""
+            if r.get("ipopt_options"):
+                only += ", IPOPT with " + ", ".join(f"`{k} = {v}`" for k, v in r["ipopt_options"].items())
             case_time = sum(row["wall_s"] for row in r["per_case"])
             lines += [f"`{r.get('suite', 'thesis-forward')}` sampled at N = {r['sample_N']} ({r['cases']} cases"
                       f"{only}{limit}), `--jobs {r['jobs']}`: "
@@ -369,7 +384,8 @@ def write_summary(results: dict) -> None:
 
 
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
-         "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part}
+         "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part,
+         "suite-all-large-scaled": suite_all_large_scaled_part}
 
 
 def main(argv: list[str]) -> None:
