@@ -211,13 +211,10 @@ def walks_part(registry) -> list[dict]:
     return rows
 
 
-def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPLE_NODES, jobs_runs=(1, 2),
-               methods: tuple[str, ...] = (), time_limit_s: int = SUITE_SAMPLE_TIME_LIMIT_S,
-               ipopt_options: dict | None = None) -> list[dict]:
-    """``suite`` at ``sample_nodes`` only, run with ``gaitbench run`` once per entry of ``jobs_runs``; with
-    ``methods``, only those methods' cases (``--method``); with ``ipopt_options``, its IPOPT methods solve with them."""
-    source = (HERE.parent / "suites" / f"{suite}.toml").read_text()
-    sample = source
+def sampled_suite(suite: str, sample_nodes, time_limit_s: int, ipopt_options: dict | None = None) -> str:
+    """The text of ``suites/<suite>.toml`` at ``sample_nodes`` with ``time_limit_s``, its IPOPT methods solving with
+    ``ipopt_options`` if given."""
+    sample = (HERE.parent / "suites" / f"{suite}.toml").read_text()
     replacements = [("N = { start = 10, stop = 200, step = 10 }", f"N = {list(sample_nodes)}"),
                     ("time_limit_s = 3600", f"time_limit_s = {time_limit_s}")]
     if ipopt_options:
@@ -227,6 +224,15 @@ def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPL
         if full not in sample:
             raise SystemExit(f"suites/{suite}.toml no longer has the line `{full}` this benchmark replaces")
         sample = sample.replace(full, sampled)
+    return sample
+
+
+def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPLE_NODES, jobs_runs=(1, 2),
+               methods: tuple[str, ...] = (), time_limit_s: int = SUITE_SAMPLE_TIME_LIMIT_S,
+               ipopt_options: dict | None = None) -> list[dict]:
+    """``suite`` at ``sample_nodes`` only, run with ``gaitbench run`` once per entry of ``jobs_runs``; with
+    ``methods``, only those methods' cases (``--method``); with ``ipopt_options``, its IPOPT methods solve with them."""
+    sample = sampled_suite(suite, sample_nodes, time_limit_s, ipopt_options)
     selected = [argument for method in methods for argument in ("--method", method)]
     rows = []
     with tempfile.TemporaryDirectory() as scratch:

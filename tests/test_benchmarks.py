@@ -75,3 +75,22 @@ def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own():
     for label, total in expected.items():
         assert abs(fit["methods"][label]["suite_case_time_s"] - total) < 1e-6 * total
     assert abs(fit["wall_s_lower_bound"] - sum(expected.values()) / 2) < 1e-6 * sum(expected.values())
+
+
+def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path):
+    spec = importlib.util.spec_from_file_location("performance", BENCHMARKS / "performance.py")
+    performance = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(performance)
+    text = performance.sampled_suite("thesis-all", (50, 100), 900, performance.OBJECTIVE_SCALING)
+    sample = tmp_path / "sample.toml"
+    sample.write_text(text)
+    suite = load_suite(sample)
+    assert {case.n_nodes for case in suite.cases} == {50, 100}
+    assert {case.time_limit_s for case in suite.cases} == {900}
+    solvers = {case.method: case.solver for case in suite.cases}
+    assert set(solvers) == {"OP-DC", "OP-DM", "D&C-DC", "D&C-DM", "reference"}
+    for method, solver in solvers.items():
+        if method == "reference":
+            assert solver.options == {"executable": "ripopt"}
+        else:
+            assert solver.name == "ipopt" and solver.options == performance.OBJECTIVE_SCALING
