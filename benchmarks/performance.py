@@ -2,7 +2,7 @@
 one-phase, and whole-suite wall time.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
-        [suite-all] [suite-all-large] [suite-all-large-scaled]
+        [suite-all] [suite-all-large] [suite-all-large-scaled] [executors]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -24,6 +24,7 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   without its reference column at N = 50, 100, 150, 200 with 2 jobs and the suite's own case limit, where the
   sweep costs most. ``suite-all-large-scaled``: the same with IPOPT's objective scaling (``OBJECTIVE_SCALING``),
   which changes the results: what the sweep would take if the reproduction adopted it.
+- ``executors``: one sample of ``thesis-forward``'s IPOPT methods with 2 jobs on the local pool and on Dask.
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ SUITE_SAMPLE_TIME_LIMIT_S = 600
 whole limit in one step's solve (stairs, N = 20: over 13 minutes), which would make the sample take hours. A case
 that reaches it makes the extrapolation a lower bound, and the summary says how many did."""
 LARGE_SAMPLE_NODES = (50, 100, 150, 200)
+EXECUTOR_SAMPLE_NODES = (20, 40)
 IPOPT_METHODS = ("OP-DC", "OP-DM", "D&C-DC", "D&C-DM")
 """``thesis-all``'s methods solved by IPOPT through gaitbench's core: all but the reference column."""
 
@@ -239,22 +241,44 @@ def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPL
         suite_file = Path(scratch) / f"{suite}-sample.toml"
         suite_file.write_text(sample)
         for jobs in jobs_runs:
-            store = Path(scratch) / f"store-{jobs}"
-            started = time.perf_counter()
-            subprocess.run([str(Path(sys.executable).parent / "gaitbench"), "run", str(suite_file), "--jobs", str(jobs),
-                            "--store", str(store), "--no-report", *selected], check=False, stdout=subprocess.DEVNULL)
-            wall = time.perf_counter() - started
-            cases = load_results(store)
-            per_case = [{"experiment": row["experiment"], "method": row["method"], "N": int(row["N"]),
-                         "status": row["status"], "steps_solved": int(row["steps_solved"] or 0),
-                         "wall_s": float(row["wall_time_s"])}
-                        for row in cases.to_dict("records")]
+            wall, per_case = run_sample(suite_file, Path(scratch) / f"store-{jobs}", "--jobs", str(jobs), *selected)
             rows.append({"suite": suite, "sample_N": list(sample_nodes), "jobs": jobs, "methods": list(methods),
                          "ipopt_options": ipopt_options or {},
                          "time_limit_s": time_limit_s, "cases": len(per_case),
                          "at_time_limit": sum(row["wall_s"] >= time_limit_s for row in per_case),
                          "wall_s": wall, "per_case": per_case,
                          "extrapolated": extrapolate(per_case, range(10, 201, 10), jobs)})
+            print({key: value for key, value in rows[-1].items() if key != "per_case"}, flush=True)
+    return rows
+
+
+def run_sample(suite_file: Path, store: Path, *arguments: str) -> tuple[float, list[dict]]:
+    """``gaitbench run suite_file`` into ``store``: its wall time and each case's outcome and time."""
+    started = time.perf_counter()
+    subprocess.run([str(Path(sys.executable).parent / "gaitbench"), "run", str(suite_file), "--store", str(store),
+                    "--no-report", *arguments], check=False, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - started
+    per_case = [{"experiment": row["experiment"], "method": row["method"], "N": int(row["N"]),
+                 "status": row["status"], "steps_solved": int(row["steps_solved"] or 0),
+                 "wall_s": float(row["wall_time_s"])}
+                for row in load_results(store).to_dict("records")]
+    return wall, per_case
+
+
+def executors_part(registry) -> list[dict]:
+    """The same sample of ``thesis-forward``'s IPOPT methods with 2 jobs on each executor: the local pool of
+    worker processes, and Dask (a local cluster of 2 workers, each case in its own child process)."""
+    sample = sampled_suite("thesis-forward", EXECUTOR_SAMPLE_NODES, 3600)
+    selected = [argument for method in IPOPT_METHODS for argument in ("--method", method)]
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        suite_file = Path(scratch) / "thesis-forward-sample.toml"
+        suite_file.write_text(sample)
+        for executor in ("local", "dask"):
+            wall, per_case = run_sample(suite_file, Path(scratch) / executor, "--jobs", "2", "--executor", executor,
+                                        *selected)
+            rows.append({"executor": executor, "jobs": 2, "sample_N": list(EXECUTOR_SAMPLE_NODES),
+                         "cases": len(per_case), "wall_s": wall, "per_case": per_case})
             print({key: value for key, value in rows[-1].items() if key != "per_case"}, flush=True)
     return rows
 
@@ -386,12 +410,19 @@ def write_summary(results: dict) -> None:
                       + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
                       + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
                       + ".", ""]
+    if "executors" in results:
+        lines += ["## Executors (the same cases, 2 jobs)", "",
+                  "| executor | sample N | cases | wall (s) | case time (s) |", "|" + "---|" * 5]
+        for r in results["executors"]:
+            case_time = sum(row["wall_s"] for row in r["per_case"])
+            lines.append(f"| {r['executor']} | {r['sample_N']} | {r['cases']} | {r['wall_s']:.0f} | {case_time:.0f} |")
+        lines.append("")
     SUMMARY.write_text("\n".join(lines))
 
 
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
          "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part,
-         "suite-all-large-scaled": suite_all_large_scaled_part}
+         "suite-all-large-scaled": suite_all_large_scaled_part, "executors": executors_part}
 
 
 def main(argv: list[str]) -> None:
