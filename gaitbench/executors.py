@@ -9,6 +9,7 @@ has its process stopped and is recorded as ``timeout``. A worker that dies takes
 
 from __future__ import annotations
 
+import os
 import pickle
 import signal
 import subprocess
@@ -23,6 +24,11 @@ from gaitbench.case import Case
 from gaitbench.runner import CaseOutcome, failed_outcome, run_case
 
 EXECUTORS = ("inprocess", "local", "dask")
+
+DASK_ONLY_ENVIRONMENT = ("MALLOC_TRIM_THRESHOLD_",)
+"""Variables a Dask nanny sets for its worker (``distributed.nanny.pre-spawn-environ``) that a case's child process
+does not inherit. glibc trimming its heap at 64 kB lets Dask report a worker's memory, but it made the walks' many
+small allocations 5–30 % slower (docs/performance.md, "Executors")."""
 
 
 def hard_limit(case: Case) -> float | None:
@@ -126,7 +132,7 @@ def run_case_isolated(case: Case) -> CaseOutcome:
         limit = hard_limit(case)
         try:
             child = subprocess.run([sys.executable, "-m", "gaitbench.executors", str(given), str(returned)],
-                                   capture_output=True, text=True, timeout=limit)
+                                   capture_output=True, text=True, timeout=limit, env=_child_environment())
         except subprocess.TimeoutExpired:
             return failed_outcome(case, "timeout", _timeout_message(case), limit or 0.0)
         if child.returncode != 0 or not returned.exists():
@@ -134,6 +140,10 @@ def run_case_isolated(case: Case) -> CaseOutcome:
             return failed_outcome(case, "crashed", _exit_message(child.returncode) + "".join(f": {line}"
                                                                                           for line in detail))
         return pickle.loads(returned.read_bytes())
+
+
+def _child_environment() -> dict[str, str]:
+    return {name: value for name, value in os.environ.items() if name not in DASK_ONLY_ENVIRONMENT}
 
 
 def _timeout_message(case: Case) -> str:

@@ -286,6 +286,26 @@ def test_dask_cluster_on_loopback_gives_the_local_rows(tmp_path: Path, local_sto
             assert distributed[key][column] == local[key][column], column
 
 
+def test_a_case_on_dask_runs_without_the_nanny_s_malloc_trimming(monkeypatch) -> None:
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ for its workers; the case's child must not inherit it (it slowed the
+    walks by up to 30 %), and must keep everything else, the thread limits included."""
+    import gaitbench.executors as executors
+
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
+    seen = {}
+
+    def fake_run(command, **options):
+        seen.update(options["env"])
+        return subprocess.CompletedProcess(command, 1, "", "stopped by the test")
+
+    monkeypatch.setattr(executors.subprocess, "run", fake_run)
+    outcome = executors.run_case_isolated(walk_case(8))
+    assert outcome.status == "crashed"
+    assert "MALLOC_TRIM_THRESHOLD_" not in seen
+    assert seen["OPENBLAS_NUM_THREADS"] == "1" and seen["PATH"] == os.environ["PATH"]
+
+
 def test_runs_commands_list_show_and_export(local_store: Path, tmp_path: Path) -> None:
     listed = subprocess.run([GAITBENCH, "runs", "list", str(local_store)], capture_output=True, text=True)
     assert listed.returncode == 0 and "test" in listed.stdout
