@@ -9,12 +9,15 @@ has its process stopped and is recorded as ``timeout``. A worker that dies takes
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
+import select
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures import as_completed
@@ -86,7 +89,7 @@ class LocalPoolExecutor:
 class DaskExecutor:
     """Cases as tasks on a Dask cluster: an existing one at ``scheduler``, or a local one of ``jobs`` workers.
 
-    Each task runs its case in a child process of the Dask worker (:func:`run_case_isolated`), so a case that
+    Each task runs its case in a long-lived child process of the Dask worker (:class:`CaseServer`), so a case that
     crashes or hangs costs that case and not the worker; the workers need gaitbench and the suite's plugins
     installed, and plugin directories at the same paths.
     """
@@ -107,7 +110,7 @@ class DaskExecutor:
                                    dashboard_address=None)
         try:
             with Client(self.scheduler or cluster, timeout="30s") as client:
-                futures = {client.submit(run_case_isolated, case, key=f"case-{case.key}", pure=False): case
+                futures = {client.submit(run_case_served, case, key=f"case-{case.key}", pure=False): case
                            for case in cases}
                 for future in dask_completed(futures):
                     case = futures[future]
@@ -120,26 +123,78 @@ class DaskExecutor:
                 cluster.close()
 
 
-def run_case_isolated(case: Case) -> CaseOutcome:
-    """Run a case in a fresh Python process, stopping it at :func:`hard_limit`; a crash becomes ``crashed``.
+class CaseServer:
+    """A long-lived child process that runs one Dask worker's cases one at a time, as a local-pool worker does.
 
-    A subprocess rather than multiprocessing because Dask's worker processes are daemonic and may not fork
-    multiprocessing children.
+    A subprocess rather than multiprocessing because Dask's worker processes are daemonic and may not have
+    multiprocessing children. The child keeps what a walk builds (sectional NLPs, derived interval functions) for
+    the worker's next cases: a fresh process per case cost 17 % more case time (docs/performance.md, "Executors").
+    A case that crashes or outlives :func:`hard_limit` costs only the child, which the next case replaces.
     """
-    with tempfile.TemporaryDirectory(prefix="gaitbench-case-") as directory:
-        given, returned = Path(directory) / "case.pickle", Path(directory) / "outcome.pickle"
-        given.write_bytes(pickle.dumps(case))
-        limit = hard_limit(case)
-        try:
-            child = subprocess.run([sys.executable, "-m", "gaitbench.executors", str(given), str(returned)],
-                                   capture_output=True, text=True, timeout=limit, env=_child_environment())
-        except subprocess.TimeoutExpired:
-            return failed_outcome(case, "timeout", _timeout_message(case), limit or 0.0)
-        if child.returncode != 0 or not returned.exists():
-            detail = child.stderr.strip().splitlines()[-1:] if child.stderr else []
-            return failed_outcome(case, "crashed", _exit_message(child.returncode) + "".join(f": {line}"
-                                                                                          for line in detail))
-        return pickle.loads(returned.read_bytes())
+
+    def __init__(self) -> None:
+        self._child: subprocess.Popen | None = None
+        self._replies = -1  # read end of the pipe on which the child reports each finished case
+        self._errors = tempfile.TemporaryFile()  # the child's stderr during the current case, for a crash's last words
+
+    @property
+    def pid(self) -> int | None:
+        return None if self._child is None else self._child.pid
+
+    def run(self, case: Case) -> CaseOutcome:
+        with tempfile.TemporaryDirectory(prefix="gaitbench-case-") as directory:
+            given, returned = Path(directory) / "case.pickle", Path(directory) / "outcome.pickle"
+            given.write_bytes(pickle.dumps(case))
+            child = self._running()
+            os.ftruncate(self._errors.fileno(), 0)  # the child writes at the shared offset, now 0 again
+            os.lseek(self._errors.fileno(), 0, os.SEEK_SET)
+            try:
+                child.stdin.write(f"{given}\t{returned}\n")
+                child.stdin.flush()
+            except BrokenPipeError:  # it died after its last case: the read below sees the end of its pipe
+                pass
+            limit = hard_limit(case)
+            if not select.select([self._replies], [], [], limit)[0]:
+                self.stop()
+                return failed_outcome(case, "timeout", _timeout_message(case), limit or 0.0)
+            if not os.read(self._replies, 1) or not returned.exists():  # the child died with the case
+                code = child.wait()
+                errors = os.pread(self._errors.fileno(), os.fstat(self._errors.fileno()).st_size, 0)
+                detail = errors.decode(errors="replace").strip().splitlines()[-1:]
+                self.stop()
+                return failed_outcome(case, "crashed", _exit_message(code) + "".join(f": {line}" for line in detail))
+            return pickle.loads(returned.read_bytes())
+
+    def stop(self) -> None:
+        """End the child (killing it if it is still busy); the next case starts a new one."""
+        if self._child is not None:
+            self._child.kill()
+            self._child.wait()
+            with contextlib.suppress(BrokenPipeError):
+                self._child.stdin.close()
+            os.close(self._replies)
+            self._child = None
+
+    def _running(self) -> subprocess.Popen:
+        if self._child is not None and self._child.poll() is not None:
+            self.stop()
+        if self._child is None:
+            self._replies, reply_end = os.pipe()
+            self._child = subprocess.Popen([sys.executable, "-m", "gaitbench.executors", str(reply_end)],
+                                           stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self._errors,
+                                           text=True, env=_child_environment(), pass_fds=(reply_end,))
+            os.close(reply_end)
+        return self._child
+
+
+_SERVERS = threading.local()
+
+
+def run_case_served(case: Case) -> CaseOutcome:
+    """The Dask task: ``case`` run by this worker thread's :class:`CaseServer`."""
+    if not hasattr(_SERVERS, "server"):
+        _SERVERS.server = CaseServer()
+    return _SERVERS.server.run(case)
 
 
 def _child_environment() -> dict[str, str]:
@@ -160,10 +215,15 @@ def _exit_message(code: int | None) -> str:
     return f"worker process exited with status {code}"
 
 
-def _child_main(given: str, returned: str) -> None:
-    case = pickle.loads(Path(given).read_bytes())
-    Path(returned).write_bytes(pickle.dumps(run_case(case)))
+def _serve(reply_fd: int) -> None:
+    """The child's loop: for each line "case path<TAB>outcome path" on stdin, run the case, write its outcome, and
+    report on ``reply_fd``. It ends when its server closes stdin or kills it."""
+    for line in sys.stdin:
+        given, returned = line.rstrip("\n").split("\t")
+        case = pickle.loads(Path(given).read_bytes())
+        Path(returned).write_bytes(pickle.dumps(run_case(case)))
+        os.write(reply_fd, b"\n")
 
 
 if __name__ == "__main__":
-    _child_main(*sys.argv[1:3])
+    _serve(int(sys.argv[1]))

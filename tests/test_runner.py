@@ -19,7 +19,7 @@ from click.testing import CliRunner
 import gaitbench
 from gaitbench.case import Case, PluginChoice
 from gaitbench.cli import main
-from gaitbench.executors import DaskExecutor, InProcessExecutor, LocalPoolExecutor
+from gaitbench.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
 from gaitbench.runner import CaseOutcome, RunRefused, case_row, run_suite
 from gaitbench.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
 
@@ -286,24 +286,37 @@ def test_dask_cluster_on_loopback_gives_the_local_rows(tmp_path: Path, local_sto
             assert distributed[key][column] == local[key][column], column
 
 
-def test_a_case_on_dask_runs_without_the_nanny_s_malloc_trimming(monkeypatch) -> None:
-    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ for its workers; the case's child must not inherit it (it slowed the
-    walks by up to 30 %), and must keep everything else, the thread limits included."""
-    import gaitbench.executors as executors
-
+def test_a_case_server_keeps_its_child_without_the_nanny_s_malloc_trimming(monkeypatch) -> None:
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ for its workers; the cases' child must not inherit it (it slowed the
+    walks by up to 30 %), must keep the thread limits, and must serve the next case too."""
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
-    seen = {}
+    server = CaseServer()
+    try:
+        assert server.run(walk_case(8)).status == "solved"
+        child = server.pid
+        environment = Path(f"/proc/{child}/environ").read_bytes().split(b"\0")
+        assert not any(entry.startswith(b"MALLOC_TRIM_THRESHOLD_=") for entry in environment)
+        assert b"OPENBLAS_NUM_THREADS=1" in environment
+        assert server.run(walk_case(10)).status == "solved"
+        assert server.pid == child
+    finally:
+        server.stop()
 
-    def fake_run(command, **options):
-        seen.update(options["env"])
-        return subprocess.CompletedProcess(command, 1, "", "stopped by the test")
 
-    monkeypatch.setattr(executors.subprocess, "run", fake_run)
-    outcome = executors.run_case_isolated(walk_case(8))
-    assert outcome.status == "crashed"
-    assert "MALLOC_TRIM_THRESHOLD_" not in seen
-    assert seen["OPENBLAS_NUM_THREADS"] == "1" and seen["PATH"] == os.environ["PATH"]
+def test_a_case_server_replaces_a_child_that_crashed_or_hung(faulty_plugins, monkeypatch) -> None:
+    monkeypatch.setattr("gaitbench.executors.hard_limit", lambda case: 15.0)
+    dirs = (str(faulty_plugins),)
+    server = CaseServer()
+    try:
+        crashed = server.run(walk_case(8, "crash", dirs))
+        assert crashed.status == "crashed" and "SIGKILL" in crashed.message
+        hung = server.run(walk_case(8, "hang", dirs))
+        assert hung.status == "timeout" and "worker was stopped" in hung.message
+        assert server.pid is None
+        assert server.run(walk_case(8, plugin_dirs=dirs)).status == "solved"
+    finally:
+        server.stop()
 
 
 def test_runs_commands_list_show_and_export(local_store: Path, tmp_path: Path) -> None:
