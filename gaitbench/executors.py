@@ -128,7 +128,8 @@ class CaseServer:
 
     A subprocess rather than multiprocessing because Dask's worker processes are daemonic and may not have
     multiprocessing children. The child keeps what a walk builds (sectional NLPs, derived interval functions) for
-    the worker's next cases: a fresh process per case cost 17 % more case time (docs/performance.md, "Executors").
+    the worker's next cases, and Python starts once per worker, not once per case (docs/performance.md,
+    "Executors").
     A case that crashes or outlives :func:`hard_limit` costs only the child, which the next case replaces.
     """
 
