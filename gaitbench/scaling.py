@@ -10,6 +10,7 @@ variables at that guess (Betts, *Practical Methods for Optimal Control*, §4.8).
 The factors are parameters of the scaled problem (p̃ = [p; d; c]), so one solver built on it serves every
 scaling: a walk's steps and a D&C step's sections each start from another guess. The objective is not scaled
 here; IPOPT's ``nlp_scaling_obj_target_gradient`` does that (docs/performance.md, "Objective scaling").
+A solver's tolerances then hold in the scaled units: a row scaled down by c is met to c × tol in its own.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from scipy.sparse import diags
 from gaitbench.nlp import NLP
 
 FACTOR_RANGE = (1e-6, 1e6)
-"""Every factor is clipped to this range: a variable guessed at 0 or a row with no gradient keeps factor 1."""
+"""Every factor is clipped to this range; a variable block guessed at 0, or a row without gradient, gets 1."""
 
 
 @dataclass(frozen=True)
