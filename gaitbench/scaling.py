@@ -70,10 +70,7 @@ class ScaledProblem:
         self._p = self._parameters[:n_p]
         self._d = self._parameters[n_p:n_p + n]
         self._c = self._parameters[n_p + n:]
-
-    @property
-    def _unscaled_x(self) -> ca.MX:
-        return self._d * self._x
+        self._unscaled_x = self._d * self._x
 
     @cached_property
     def oracle(self) -> dict[str, ca.MX]:

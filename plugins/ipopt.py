@@ -116,7 +116,8 @@ class Ipopt:
             if self.scaling == "nominal":
                 problem = ScaledProblem(nlp)
             if self.scaling == "nominal" or nlp.interval_blocks:
-                # g and its derivatives from the compiled per-interval functions, not the flat graph's.
+                # The problem's own derivatives: for interval blocks the compiled per-interval ones, not the flat
+                # graph's; scaled, those same derivatives rescaled entry by entry.
                 options |= {"jac_g": problem.constraints_and_jacobian, "hess_lag": problem.hessian_lagrangian_upper}
             nlp.solver_cache[key] = ca.nlpsol("ipopt", "ipopt", problem.oracle, options)
         return nlp.solver_cache[key]
