@@ -2,7 +2,7 @@
 one-phase, and whole-suite wall time.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
-        [suite-all] [suite-all-large] [suite-all-large-scaled] [executors]
+        [suite-all] [suite-all-large] [suite-all-large-scaled] [suite-forward-full] [executors]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -24,11 +24,13 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   without its reference column at N = 50, 100, 150, 200 with 2 jobs and the suite's own case limit, where the
   sweep costs most. ``suite-all-large-scaled``: the same with IPOPT's objective scaling (``OBJECTIVE_SCALING``),
   which changes the results: what the sweep would take if the reproduction adopted it.
+- ``suite-forward-full``: the whole of ``thesis-forward`` without its reference column, 2 jobs.
 - ``executors``: one sample of ``thesis-forward``'s IPOPT methods with 2 jobs on the local pool and on Dask.
 """
 
 from __future__ import annotations
 
+import heapq
 import json
 import os
 import subprocess
@@ -70,6 +72,7 @@ SUITE_SAMPLE_TIME_LIMIT_S = 600
 whole limit in one step's solve (stairs, N = 20: over 13 minutes), which would make the sample take hours. A case
 that reaches it makes the extrapolation a lower bound, and the summary says how many did."""
 LARGE_SAMPLE_NODES = (50, 100, 150, 200)
+FULL_NODES = tuple(range(10, 201, 10))
 EXECUTOR_SAMPLE_NODES = (20, 40)
 IPOPT_METHODS = ("OP-DC", "OP-DM", "D&C-DC", "D&C-DM")
 """``thesis-all``'s methods solved by IPOPT through gaitbench's core: all but the reference column."""
@@ -298,6 +301,29 @@ def suite_all_large_scaled_part(registry) -> list[dict]:
     return suite_part(registry, "thesis-all", LARGE_SAMPLE_NODES, (2,), IPOPT_METHODS, 3600, OBJECTIVE_SCALING)
 
 
+def suite_forward_full_part(registry) -> list[dict]:
+    """The whole of ``thesis-forward`` (N = 10 … 200) without its reference column, 2 jobs: measured, not
+    extrapolated. Its per-case times also give the wall time of the same cases handed out in suite order."""
+    rows = suite_part(registry, "thesis-forward", FULL_NODES, (2,), IPOPT_METHODS, 3600)
+    for row in rows:
+        row["list_schedule_s"] = {order: list_schedule(row["per_case"], row["jobs"], order)
+                                  for order in ("suite order", "largest N first")}
+    return rows
+
+
+def list_schedule(per_case: list[dict], jobs: int, order: str) -> float:
+    """When ``jobs`` workers would finish the measured cases, each taking the next case as it frees up, with the cases
+    in suite order (experiment, N, method) or largest N first (the runner's order): a computed schedule, not a run."""
+    methods = list(dict.fromkeys(row["method"] for row in per_case))
+    rows = sorted(per_case, key=lambda row: (row["experiment"], row["N"], methods.index(row["method"])))
+    if order == "largest N first":
+        rows.sort(key=lambda row: -row["N"])
+    free = [0.0] * jobs
+    for row in rows:
+        heapq.heappush(free, heapq.heappop(free) + row["wall_s"])
+    return max(free)
+
+
 def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
     """Case time ≈ a·N^b per experiment and method, fitted to the sample; the suite's total over ``nodes``,
     divided by ``jobs`` (perfect packing: a lower bound for the wall time with that many jobs)."""
@@ -410,6 +436,19 @@ def write_summary(results: dict) -> None:
                       + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
                       + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
                       + ".", ""]
+    for r in results.get("suite-forward-full", []):
+        case_time = sum(row["wall_s"] for row in r["per_case"])
+        by_method = {}
+        for row in r["per_case"]:
+            by_method[row["method"]] = by_method.get(row["method"], 0.0) + row["wall_s"]
+        schedule = r["list_schedule_s"]
+        lines += [f"Whole `{r['suite']}`, N = 10…200, methods {', '.join(r['methods'])} ({r['cases']} cases, "
+                  f"case time limit {r['time_limit_s']} s, reached by {r['at_time_limit']}), `--jobs {r['jobs']}`: "
+                  f"measured {r['wall_s']:.0f} s ({r['wall_s'] / 3600:.2f} h) of wall time, {case_time:.0f} s of "
+                  "case time (about what `--jobs 1` would take). Case time by method: "
+                  + ", ".join(f"{m} {t:.0f} s" for m, t in by_method.items())
+                  + f". The same case times scheduled on {r['jobs']} workers: "
+                  + ", ".join(f"{order} {t:.0f} s" for order, t in schedule.items()) + ".", ""]
     if "executors" in results:
         lines += ["## Executors (the same cases, 2 jobs)", "",
                   "| executor | sample N | cases | wall (s) | case time (s) |", "|" + "---|" * 5]
@@ -422,7 +461,8 @@ def write_summary(results: dict) -> None:
 
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
          "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part,
-         "suite-all-large-scaled": suite_all_large_scaled_part, "executors": executors_part}
+         "suite-all-large-scaled": suite_all_large_scaled_part, "suite-forward-full": suite_forward_full_part,
+         "executors": executors_part}
 
 
 def main(argv: list[str]) -> None:

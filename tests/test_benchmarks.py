@@ -77,10 +77,15 @@ def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own():
     assert abs(fit["wall_s_lower_bound"] - sum(expected.values()) / 2) < 1e-6 * sum(expected.values())
 
 
-def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path):
+def _performance_module():
     spec = importlib.util.spec_from_file_location("performance", BENCHMARKS / "performance.py")
-    performance = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(performance)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path):
+    performance = _performance_module()
     text = performance.sampled_suite("thesis-all", (50, 100), 900, performance.OBJECTIVE_SCALING)
     sample = tmp_path / "sample.toml"
     sample.write_text(text)
@@ -94,3 +99,13 @@ def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path)
             assert solver.options == {"executable": "ripopt"}
         else:
             assert solver.name == "ipopt" and solver.options == performance.OBJECTIVE_SCALING
+
+
+def test_the_list_schedule_packs_the_measured_case_times_in_either_order():
+    performance = _performance_module()
+    cases = [{"experiment": "forward", "method": "OP", "N": n, "wall_s": t}
+             for n, t in ((10, 1.0), (20, 2.0), (30, 10.0))]
+    # suite order: worker A runs 1 s then 10 s while B runs 2 s; largest first: A runs 10 s, B 2 s then 1 s
+    assert performance.list_schedule(cases, 2, "suite order") == 11.0
+    assert performance.list_schedule(cases, 2, "largest N first") == 10.0
+    assert performance.list_schedule(cases, 1, "largest N first") == 13.0

@@ -20,7 +20,7 @@ import gaitbench
 from gaitbench.case import Case, PluginChoice
 from gaitbench.cli import main
 from gaitbench.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
-from gaitbench.runner import CaseOutcome, RunRefused, case_row, run_suite
+from gaitbench.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_suite
 from gaitbench.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
@@ -152,6 +152,24 @@ def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:
     run_suite(suite_of([case]), tmp_path, InProcessExecutor())
     row = rows_by_key(tmp_path)[case.key]
     assert row["status"] == "error" and "bogus_option" in row["message"]
+
+
+def test_cases_reach_the_executor_largest_n_first(tmp_path: Path) -> None:
+    """The pool gets its longest cases first and fills the end of the run with the short ones."""
+    handed = []
+
+    class Recording:
+        name, jobs = "recording", 2
+
+        def run(self, cases):
+            for case in cases:
+                handed.append(case.key)
+                yield failed_outcome(case, "error", "not run")
+
+    cases = [walk_case(8), walk_case(12), walk_case(8, tolerance=1e-6), walk_case(10)]
+    run_suite(suite_of(cases), tmp_path, Recording())
+    assert handed == [cases[1].key, cases[3].key, cases[0].key, cases[2].key]  # equal N: suite order
+    assert len(rows_by_key(tmp_path)) == 4
 
 
 def test_runs_started_within_one_second_get_distinct_ids(tmp_path: Path, monkeypatch) -> None:
