@@ -39,6 +39,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         methods: tuple[str, ...], resume: bool, retry_failed: bool, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
+    Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle.
+
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
     the rest. Exit status 1 if any case failed, 2 if the suite is invalid.
     """
