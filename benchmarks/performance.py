@@ -2,7 +2,8 @@
 one-phase, and whole-suite wall time.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
-        [suite-all] [suite-all-large] [suite-all-large-scaled] [suite-forward-full] [executors]
+        [suite-all] [suite-all-large] [suite-all-large-scaled] [suite-forward-full]
+        [suite-forward-full-scaled] [executors]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -24,7 +25,8 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   without its reference column at N = 50, 100, 150, 200 with 2 jobs and the suite's own case limit, where the
   sweep costs most. ``suite-all-large-scaled``: the same with IPOPT's objective scaling (``OBJECTIVE_SCALING``),
   which changes the results: what the sweep would take if the reproduction adopted it.
-- ``suite-forward-full``: the whole of ``thesis-forward`` without its reference column, 2 jobs.
+- ``suite-forward-full``: the whole of ``thesis-forward`` without its reference column, 2 jobs;
+  ``suite-forward-full-scaled``: the same with the objective scaled.
 - ``executors``: one sample of ``thesis-forward``'s IPOPT methods with 2 jobs on the local pool and on Dask.
 """
 
@@ -301,14 +303,19 @@ def suite_all_large_scaled_part(registry) -> list[dict]:
     return suite_part(registry, "thesis-all", LARGE_SAMPLE_NODES, (2,), IPOPT_METHODS, 3600, OBJECTIVE_SCALING)
 
 
-def suite_forward_full_part(registry) -> list[dict]:
+def suite_forward_full_part(registry, ipopt_options: dict | None = None) -> list[dict]:
     """The whole of ``thesis-forward`` (N = 10 … 200) without its reference column, 2 jobs: measured, not
     extrapolated. Its per-case times also give the wall time of the same cases handed out in suite order."""
-    rows = suite_part(registry, "thesis-forward", FULL_NODES, (2,), IPOPT_METHODS, 3600)
+    rows = suite_part(registry, "thesis-forward", FULL_NODES, (2,), IPOPT_METHODS, 3600, ipopt_options)
     for row in rows:
         row["list_schedule_s"] = {order: list_schedule(row["per_case"], row["jobs"], order)
                                   for order in ("suite order", "largest N first")}
     return rows
+
+
+def suite_forward_full_scaled_part(registry) -> list[dict]:
+    """``suite-forward-full`` with IPOPT's objective scaling: other results, and the suite's time if adopted."""
+    return suite_forward_full_part(registry, OBJECTIVE_SCALING)
 
 
 def list_schedule(per_case: list[dict], jobs: int, order: str) -> float:
@@ -436,14 +443,16 @@ def write_summary(results: dict) -> None:
                       + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
                       + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
                       + ".", ""]
-    for r in results.get("suite-forward-full", []):
+    for r in [*results.get("suite-forward-full", []), *results.get("suite-forward-full-scaled", [])]:
         case_time = sum(row["wall_s"] for row in r["per_case"])
         by_method = {}
         for row in r["per_case"]:
             by_method[row["method"]] = by_method.get(row["method"], 0.0) + row["wall_s"]
         schedule = r["list_schedule_s"]
         lines += [f"Whole `{r['suite']}`, N = 10…200, methods {', '.join(r['methods'])} ({r['cases']} cases, "
-                  f"case time limit {r['time_limit_s']} s, reached by {r['at_time_limit']}), `--jobs {r['jobs']}`: "
+                  f"case time limit {r['time_limit_s']} s, reached by {r['at_time_limit']})"
+                  + "".join(f", IPOPT with `{k} = {v}`" for k, v in r.get("ipopt_options", {}).items())
+                  + f", `--jobs {r['jobs']}`: "
                   f"measured {r['wall_s']:.0f} s ({r['wall_s'] / 3600:.2f} h) of wall time, {case_time:.0f} s of "
                   "case time (about what `--jobs 1` would take). Case time by method: "
                   + ", ".join(f"{m} {t:.0f} s" for m, t in by_method.items())
@@ -462,7 +471,7 @@ def write_summary(results: dict) -> None:
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
          "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part,
          "suite-all-large-scaled": suite_all_large_scaled_part, "suite-forward-full": suite_forward_full_part,
-         "executors": executors_part}
+         "suite-forward-full-scaled": suite_forward_full_scaled_part, "executors": executors_part}
 
 
 def main(argv: list[str]) -> None:
