@@ -43,11 +43,14 @@ from pathlib import Path
 
 import numpy as np
 
+from gaitbench.case import Case
 from gaitbench.gait_problem import StepData, sectional_structure
 from gaitbench.plugins import load_registry
 from gaitbench.provenance import provenance
+from gaitbench.runner import largest_first
 from gaitbench.solver import prepare
 from gaitbench.store import load_results
+from gaitbench.suite import load_suite
 from gaitbench.walk import WalkProblem, solve_and_verify
 from plugins.decrease_and_conquer import release_sections
 
@@ -307,9 +310,10 @@ def suite_forward_full_part(registry, ipopt_options: dict | None = None) -> list
     """The whole of ``thesis-forward`` (N = 10 … 200) without its reference column, 2 jobs: measured, not
     extrapolated. Its per-case times also give the wall time of the same cases handed out in suite order."""
     rows = suite_part(registry, "thesis-forward", FULL_NODES, (2,), IPOPT_METHODS, 3600, ipopt_options)
+    cases = suite_cases("thesis-forward", FULL_NODES, IPOPT_METHODS, ipopt_options)
     for row in rows:
-        row["list_schedule_s"] = {order: list_schedule(row["per_case"], row["jobs"], order)
-                                  for order in ("suite order", "largest N first")}
+        row["list_schedule_s"] = {"suite order": list_schedule(row["per_case"], row["jobs"], cases),
+                                  "largest N first": list_schedule(row["per_case"], row["jobs"], largest_first(cases))}
     return rows
 
 
@@ -318,16 +322,21 @@ def suite_forward_full_scaled_part(registry) -> list[dict]:
     return suite_forward_full_part(registry, OBJECTIVE_SCALING)
 
 
-def list_schedule(per_case: list[dict], jobs: int, order: str) -> float:
-    """When ``jobs`` workers would finish the measured cases, each taking the next case as it frees up, with the cases
-    in suite order (experiment, N, method) or largest N first (the runner's order): a computed schedule, not a run."""
-    methods = list(dict.fromkeys(row["method"] for row in per_case))
-    rows = sorted(per_case, key=lambda row: (row["experiment"], row["N"], methods.index(row["method"])))
-    if order == "largest N first":
-        rows.sort(key=lambda row: -row["N"])
+def suite_cases(suite: str, nodes, methods: tuple[str, ...], ipopt_options: dict | None) -> list[Case]:
+    """The cases of ``sampled_suite(suite, nodes, ...)`` with only ``methods``, in suite order."""
+    with tempfile.TemporaryDirectory() as scratch:
+        suite_file = Path(scratch) / f"{suite}.toml"
+        suite_file.write_text(sampled_suite(suite, nodes, 3600, ipopt_options))
+        return load_suite(suite_file).with_methods(methods).cases
+
+
+def list_schedule(per_case: list[dict], jobs: int, order: list[Case]) -> float:
+    """When ``jobs`` workers would finish the measured cases, each taking the next case of ``order`` as it frees
+    up: a computed schedule, not a run."""
+    times = {(row["experiment"], row["N"], row["method"]): row["wall_s"] for row in per_case}
     free = [0.0] * jobs
-    for row in rows:
-        heapq.heappush(free, heapq.heappop(free) + row["wall_s"])
+    for case in order:
+        heapq.heappush(free, heapq.heappop(free) + times[case.experiment.name, case.n_nodes, case.method])
     return max(free)
 
 

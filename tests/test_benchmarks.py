@@ -4,6 +4,8 @@ import importlib.util
 import json
 from pathlib import Path
 
+from gaitbench.case import Case, PluginChoice
+from gaitbench.runner import largest_first
 from gaitbench.suite import load_suite
 
 BENCHMARKS = Path(__file__).parents[1] / "benchmarks"
@@ -103,9 +105,11 @@ def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path)
 
 def test_the_list_schedule_packs_the_measured_case_times_in_either_order():
     performance = _performance_module()
-    cases = [{"experiment": "forward", "method": "OP", "N": n, "wall_s": t}
-             for n, t in ((10, 1.0), (20, 2.0), (30, 10.0))]
+    cases = [Case(PluginChoice("forward"), n, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
+                  PluginChoice("one-phase"), method="OP") for n in (10, 20, 30)]
+    measured = [{"experiment": "forward", "method": "OP", "N": n, "wall_s": t}
+                for n, t in ((10, 1.0), (20, 2.0), (30, 10.0))]
     # suite order: worker A runs 1 s then 10 s while B runs 2 s; largest first: A runs 10 s, B 2 s then 1 s
-    assert performance.list_schedule(cases, 2, "suite order") == 11.0
-    assert performance.list_schedule(cases, 2, "largest N first") == 10.0
-    assert performance.list_schedule(cases, 1, "largest N first") == 13.0
+    assert performance.list_schedule(measured, 2, cases) == 11.0
+    assert performance.list_schedule(measured, 2, largest_first(cases)) == 10.0
+    assert performance.list_schedule(measured, 1, largest_first(cases)) == 13.0
