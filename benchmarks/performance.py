@@ -3,7 +3,7 @@ one-phase, and whole-suite wall time.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
         [suite-all] [suite-all-large] [suite-all-large-scaled] [suite-forward-full]
-        [suite-forward-full-scaled] [executors]
+        [suite-forward-full-scaled] [suite-all-rest] [executors]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
 rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-clock time of this process.
@@ -26,7 +26,9 @@ rewrites ``performance.md``. Run it on a quiet machine: every figure is a wall-c
   sweep costs most. ``suite-all-large-scaled``: the same with IPOPT's objective scaling (``OBJECTIVE_SCALING``),
   which changes the results: what the sweep would take if the reproduction adopted it.
 - ``suite-forward-full``: the whole of ``thesis-forward`` without its reference column, 2 jobs;
-  ``suite-forward-full-scaled``: the same with the objective scaled.
+  ``suite-forward-full-scaled``: the same with the objective scaled. ``suite-all-rest``: the rest of
+  ``thesis-all`` the same way (its other three experiments), which with ``suite-forward-full`` measures the whole
+  of ``thesis-all``'s IPOPT part; its row also holds that sum and the computed 2-worker schedule of all 320 cases.
 - ``executors``: one sample of ``thesis-forward``'s IPOPT methods with 2 jobs on the local pool and on Dask.
 """
 
@@ -79,6 +81,8 @@ that reaches it makes the extrapolation a lower bound, and the summary says how 
 LARGE_SAMPLE_NODES = (50, 100, 150, 200)
 FULL_NODES = tuple(range(10, 201, 10))
 EXECUTOR_SAMPLE_NODES = (20, 40)
+ALL_EXPERIMENTS = ("forward", "downward-slope", "upward-slope", "stairs")
+"""``thesis-all``'s experiments, in its order."""
 IPOPT_METHODS = ("OP-DC", "OP-DM", "D&C-DC", "D&C-DM")
 """``thesis-all``'s methods solved by IPOPT through gaitbench's core: all but the reference column."""
 
@@ -221,12 +225,16 @@ def walks_part(registry) -> list[dict]:
     return rows
 
 
-def sampled_suite(suite: str, sample_nodes, time_limit_s: int, ipopt_options: dict | None = None) -> str:
+def sampled_suite(suite: str, sample_nodes, time_limit_s: int, ipopt_options: dict | None = None,
+                  experiments: tuple[str, ...] = ()) -> str:
     """The text of ``suites/<suite>.toml`` at ``sample_nodes`` with ``time_limit_s``, its IPOPT methods solving with
-    ``ipopt_options`` if given."""
+    ``ipopt_options`` if given, and only ``experiments`` if given."""
     sample = (HERE.parent / "suites" / f"{suite}.toml").read_text()
     replacements = [("N = { start = 10, stop = 200, step = 10 }", f"N = {list(sample_nodes)}"),
                     ("time_limit_s = 3600", f"time_limit_s = {time_limit_s}")]
+    if experiments:
+        replacements.append((f"experiments = {json.dumps(list(ALL_EXPERIMENTS))}",
+                             f"experiments = {json.dumps(list(experiments))}"))
     if ipopt_options:
         inline = ", ".join(f"{key} = {json.dumps(value)}" for key, value in ipopt_options.items())
         replacements.append(('solver = "ipopt"', f'solver = {{ name = "ipopt", options = {{ {inline} }} }}'))
@@ -239,10 +247,11 @@ def sampled_suite(suite: str, sample_nodes, time_limit_s: int, ipopt_options: di
 
 def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPLE_NODES, jobs_runs=(1, 2),
                methods: tuple[str, ...] = (), time_limit_s: int = SUITE_SAMPLE_TIME_LIMIT_S,
-               ipopt_options: dict | None = None) -> list[dict]:
+               ipopt_options: dict | None = None, experiments: tuple[str, ...] = ()) -> list[dict]:
     """``suite`` at ``sample_nodes`` only, run with ``gaitbench run`` once per entry of ``jobs_runs``; with
-    ``methods``, only those methods' cases (``--method``); with ``ipopt_options``, its IPOPT methods solve with them."""
-    sample = sampled_suite(suite, sample_nodes, time_limit_s, ipopt_options)
+    ``methods``, only those methods' cases (``--method``); with ``ipopt_options``, its IPOPT methods solve with them;
+    with ``experiments``, only those experiments."""
+    sample = sampled_suite(suite, sample_nodes, time_limit_s, ipopt_options, experiments)
     selected = [argument for method in methods for argument in ("--method", method)]
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
@@ -251,7 +260,8 @@ def suite_part(registry, suite: str = "thesis-forward", sample_nodes=SUITE_SAMPL
         for jobs in jobs_runs:
             wall, per_case = run_sample(suite_file, Path(scratch) / f"store-{jobs}", "--jobs", str(jobs), *selected)
             rows.append({"suite": suite, "sample_N": list(sample_nodes), "jobs": jobs, "methods": list(methods),
-                         "ipopt_options": ipopt_options or {},
+                         "ipopt_options": ipopt_options or {}, "experiments": list(experiments),
+                         "git_commit": provenance()["git_commit"],
                          "time_limit_s": time_limit_s, "cases": len(per_case),
                          "at_time_limit": sum(row["wall_s"] >= time_limit_s for row in per_case),
                          "wall_s": wall, "per_case": per_case,
@@ -320,6 +330,25 @@ def suite_forward_full_part(registry, ipopt_options: dict | None = None) -> list
 def suite_forward_full_scaled_part(registry) -> list[dict]:
     """``suite-forward-full`` with IPOPT's objective scaling: other results, and the suite's time if adopted."""
     return suite_forward_full_part(registry, OBJECTIVE_SCALING)
+
+
+def suite_all_rest_part(registry) -> list[dict]:
+    """``thesis-all``'s experiments other than forward, whole, without the reference column, 2 jobs. Forward's cases
+    are the same as ``thesis-forward``'s, so with ``suite-forward-full``'s rows this measures all of
+    ``thesis-all``'s IPOPT part, in two runs; the row records that sum and, from the measured case times, when 2
+    workers would finish all of it in the runner's order."""
+    rest = tuple(experiment for experiment in ALL_EXPERIMENTS if experiment != "forward")
+    rows = suite_part(registry, "thesis-all", FULL_NODES, (2,), IPOPT_METHODS, 3600, experiments=rest)
+    forward = json.loads(RESULTS.read_text()).get("suite-forward-full", []) if RESULTS.exists() else []
+    if forward:
+        row, forward_row = rows[0], forward[0]
+        per_case = forward_row["per_case"] + row["per_case"]
+        cases = suite_cases("thesis-all", FULL_NODES, IPOPT_METHODS, None)
+        row["with_forward"] = {"forward_git_commit": forward_row.get("git_commit"), "cases": len(per_case),
+                               "case_time_s": sum(case["wall_s"] for case in per_case),
+                               "wall_s_measured_sum": forward_row["wall_s"] + row["wall_s"],
+                               "list_schedule_s": list_schedule(per_case, row["jobs"], largest_first(cases))}
+    return rows
 
 
 def suite_cases(suite: str, nodes, methods: tuple[str, ...], ipopt_options: dict | None) -> list[Case]:
@@ -480,7 +509,8 @@ def write_summary(results: dict) -> None:
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
          "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part,
          "suite-all-large-scaled": suite_all_large_scaled_part, "suite-forward-full": suite_forward_full_part,
-         "suite-forward-full-scaled": suite_forward_full_scaled_part, "executors": executors_part}
+         "suite-forward-full-scaled": suite_forward_full_scaled_part, "suite-all-rest": suite_all_rest_part,
+         "executors": executors_part}
 
 
 def main(argv: list[str]) -> None:
