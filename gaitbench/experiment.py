@@ -201,7 +201,7 @@ def render_experiment(experiment: Experiment, console: Console) -> None:
     checks = experiment.feasibility()
     console.print(_step_table(experiment, checks))
     for check in checks:
-        for problem in check.problems:
+        for problem in check.described:
             console.print(f"✗ {escape(problem)}", style="red", highlight=False)
     console.print(feasibility_summary(checks))
 

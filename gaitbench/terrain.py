@@ -147,6 +147,12 @@ class StepCheck:
     q_st: float | None
     q_sw: float | None
     problems: list[str]
+    """What makes the step infeasible, each without the step's number: a walk's failure adds it once."""
+
+    @property
+    def described(self) -> list[str]:
+        """The problems each led by "step i:", for lists that span steps."""
+        return [f"step {self.step}: {problem}" for problem in self.problems]
 
     @property
     def ok(self) -> bool:
@@ -159,14 +165,15 @@ def check_feasibility(
     """Check every step's heel-strike configuration against reach (D ≤ 2l) and the leg-angle bounds.
 
     The heel-strike angles of step i are also the initial angles of step i+1, so both legs are checked once
-    per step. Each problem names the step, the violated bound and the numbers behind it.
+    per step. Each problem names the violated bound and the numbers behind it (``StepCheck.described`` adds the
+    step).
     """
     lower, upper = angle_bounds
     checks = []
     for i, step in enumerate(terrain.steps, start=1):
         context = f"(D = {step.D:g} m, θ = {step.theta:.3f} rad, l = {l:g} m)"
         if step.D > 2 * l:
-            problem = f"step {i}: chord {step.D:g} m exceeds twice the leg length {2 * l:g} m"
+            problem = f"chord {step.D:g} m exceeds twice the leg length {2 * l:g} m"
             checks.append(StepCheck(i, step.D, step.theta, None, None, [problem]))
             continue
         q_st, q_sw = heel_strike_configuration(step.D, step.theta, l)
@@ -174,12 +181,12 @@ def check_feasibility(
         for role, angle in (("stance", q_st), ("swing", q_sw)):
             if angle < lower:
                 problems.append(
-                    f"step {i}: {role} angle at heel strike {angle:.3f} rad is below the lower angle bound "
+                    f"{role} angle at heel strike {angle:.3f} rad is below the lower angle bound "
                     f"{lower:.3f} rad {context}"
                 )
             if angle > upper:
                 problems.append(
-                    f"step {i}: {role} angle at heel strike {angle:.3f} rad is above the upper angle bound "
+                    f"{role} angle at heel strike {angle:.3f} rad is above the upper angle bound "
                     f"{upper:.3f} rad {context}"
                 )
         checks.append(StepCheck(i, step.D, step.theta, q_st, q_sw, problems))

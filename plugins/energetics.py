@@ -95,7 +95,7 @@ def energetics(mass_ratio: float = 0.5, length_ratio: float = 0.5, speed: float 
         source="thesis §5.6 Energetics (L13296–13545): Rm, Rl (5.1) L13316–13329; normalization, mass scale and "
                "initial state are gaitbench choices (plugins/energetics.py)",
     )
-    problems = [problem for check in experiment.feasibility() for problem in check.problems]
+    problems = [problem for check in experiment.feasibility() for problem in check.described]
     if problems:
         raise ValueError(f"energetics ({parameters}): infeasible geometry: {problems[0]}")
     return experiment

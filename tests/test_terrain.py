@@ -95,7 +95,7 @@ def test_printed_downward_slope_step_1_is_flagged_below_the_angle_bound():
     assert first.q_st == pytest.approx(-1.8806, abs=1e-3)
     assert len(first.problems) == 1
     message = first.problems[0]
-    assert message.startswith("step 1: stance angle at heel strike -1.881 rad")
+    assert message.startswith("stance angle at heel strike -1.881 rad")
     assert "below the lower angle bound -1.571 rad" in message
     assert "D = 2.8 m" in message and "l = 1.5 m" in message
     assert [c.step for c in checks if not c.ok] == [1, 2]
@@ -105,7 +105,7 @@ def test_feasibility_reports_a_chord_beyond_reach():
     checks = check_feasibility(Terrain.flat([1.0, 3.2]), 1.5)
     assert checks[0].ok
     assert checks[1].q_st is None and checks[1].q_sw is None
-    assert checks[1].problems == ["step 2: chord 3.2 m exceeds twice the leg length 3 m"]
+    assert checks[1].described == ["step 2: chord 3.2 m exceeds twice the leg length 3 m"]
 
 
 def test_feasibility_checks_the_swing_leg_against_the_upper_bound():

@@ -113,6 +113,7 @@ def test_infeasible_geometry_is_reported_before_solving():
     walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 21, steps=2))
     assert walk.steps[0].status == "infeasible_geometry"
     assert "below the lower angle bound" in walk.failure and walk.steps[0].solver_result is None
+    assert walk.failure.startswith("step 1: stance angle at heel strike") and walk.failure.count("step 1:") == 1
 
 
 def test_solve_command_writes_the_documented_json(tmp_path):
