@@ -481,21 +481,34 @@ def write_summary(results: dict) -> None:
                       + ", ".join(f"{m} {sum(t) / 3600:.1f} h" for m, t in sorted(methods.items()))
                       + "; exponents: " + ", ".join(f"{m} {v['exponent']:.2f}" for m, v in fit["methods"].items())
                       + ".", ""]
-    for r in [*results.get("suite-forward-full", []), *results.get("suite-forward-full-scaled", [])]:
+    for r in [*results.get("suite-forward-full", []), *results.get("suite-forward-full-scaled", []),
+              *results.get("suite-all-rest", [])]:
         case_time = sum(row["wall_s"] for row in r["per_case"])
         by_method = {}
         for row in r["per_case"]:
             by_method[row["method"]] = by_method.get(row["method"], 0.0) + row["wall_s"]
-        schedule = r["list_schedule_s"]
-        lines += [f"Whole `{r['suite']}`, N = 10…200, methods {', '.join(r['methods'])} ({r['cases']} cases, "
+        schedule = r.get("list_schedule_s", {})
+        experiments = f" (experiments {', '.join(r['experiments'])})" if r.get("experiments") else ""
+        lines += [f"Whole `{r['suite']}`{experiments}, N = 10…200, methods {', '.join(r['methods'])} "
+                  f"({r['cases']} cases, "
                   f"case time limit {r['time_limit_s']} s, reached by {r['at_time_limit']})"
                   + "".join(f", IPOPT with `{k} = {v}`" for k, v in r.get("ipopt_options", {}).items())
                   + f", `--jobs {r['jobs']}`: "
                   f"measured {r['wall_s']:.0f} s ({r['wall_s'] / 3600:.2f} h) of wall time, {case_time:.0f} s of "
                   "case time (about what `--jobs 1` would take). Case time by method: "
                   + ", ".join(f"{m} {t:.0f} s" for m, t in by_method.items())
-                  + f". The same case times scheduled on {r['jobs']} workers: "
-                  + ", ".join(f"{order} {t:.0f} s" for order, t in schedule.items()) + ".", ""]
+                  + (f". The same case times scheduled on {r['jobs']} workers: "
+                     + ", ".join(f"{order} {t:.0f} s" for order, t in schedule.items()) if schedule else "")
+                  + ".", ""]
+        if "with_forward" in r:
+            whole = r["with_forward"]
+            commit = whole["forward_git_commit"] or "not recorded"
+            lines += [f"With `suite-forward-full`'s forward cases (commit {commit}), all of `{r['suite']}`'s IPOPT "
+                      f"part, {whole['cases']} cases: {whole['case_time_s']:.0f} s "
+                      f"({whole['case_time_s'] / 3600:.2f} h) of case time; the two runs took "
+                      f"{whole['wall_s_measured_sum']:.0f} s of wall time together; the measured case times "
+                      f"scheduled on {r['jobs']} workers in the runner's order, largest N first, finish at "
+                      f"{whole['list_schedule_s']:.0f} s ({whole['list_schedule_s'] / 3600:.2f} h).", ""]
     if "executors" in results:
         lines += ["## Executors (the same cases, 2 jobs)", "",
                   "| executor | sample N | cases | wall (s) | case time (s) |", "|" + "---|" * 5]
