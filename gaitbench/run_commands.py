@@ -27,8 +27,8 @@ from gaitbench.plugins import PLUGINS_DIR_ENV
 @click.option("--store", "store_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Results directory [default: the suite's `output`].")
 @click.option("--method", "methods", multiple=True, metavar="LABEL",
-              help="Run only this method's cases (repeatable), e.g. --method OP-DC --method D&C-DC; a later run "
-                   "with --resume does the rest.")
+              help="Run only this method's cases (repeatable), e.g. --method OP-DC --method 'D&C-DC' (quote a "
+                   "label with & in a shell); a later run with --resume does the rest.")
 @click.option("--resume", is_flag=True, help="Skip the cases the store already holds.")
 @click.option("--retry-failed", is_flag=True,
               help="With --resume, run again the cases that errored, timed out or crashed.")
