@@ -103,6 +103,17 @@ def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path)
             assert solver.name == "ipopt" and solver.options == performance.OBJECTIVE_SCALING
 
 
+def test_the_rest_of_thesis_all_and_thesis_forward_are_its_cases_split_without_overlap(tmp_path):
+    performance = _performance_module()
+    rest = tmp_path / "rest.toml"
+    rest.write_text(performance.sampled_suite("thesis-all", (50,), 3600,
+                                              experiments=("downward-slope", "upward-slope", "stairs")))
+    forward = performance.suite_cases("thesis-forward", (50,), performance.IPOPT_METHODS, None)
+    whole = performance.suite_cases("thesis-all", (50,), performance.IPOPT_METHODS, None)
+    keys = [case.key for case in load_suite(rest).with_methods(performance.IPOPT_METHODS).cases]
+    assert len(keys) == 12 and sorted(keys + [case.key for case in forward]) == sorted(case.key for case in whole)
+
+
 def test_the_list_schedule_packs_the_measured_case_times_in_either_order():
     performance = _performance_module()
     cases = [Case(PluginChoice("forward"), n, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
