@@ -74,18 +74,18 @@ class Limits:
     """Actuator and joint limits of the gait problems (thesis constraints (9)–(12), L9514–9537).
 
     The thesis's torque, velocity and push-off limits were in the lost Fig. 5.1 (DECISIONS §8). The defaults
-    are gaitbench choices, generous enough for every thesis step to be feasible:
+    are gaitbench choices for the forward robot (80 kg, 1 m legs), generous enough for every thesis step to be
+    feasible; :meth:`sized_for` scales them to another robot:
 
     - ``tau_max`` = 3000 Nm (|τ| ≤ tau_max). The thesis's long steps must swing the legs by up to 2.5 rad in the
       fixed 0.7343 s: with 300 Nm the forward walk is infeasible from step 4, with 1000 Nm from step 5 (measured
-      with Hermite–Simpson at N = 51). The bound is nevertheless active at the optimum, because the thesis's cost
+      with Hermite–Simpson at N = 51). The bound can be active at the optimum, because the thesis's cost
       (net hip power, i.e. the total variation of mechanical energy) does not penalize torque at all.
     - ``dq_max`` = 50 rad/s: the forward walk's optima reach 16 rad/s at N = 51.
-    - ``push_off_max`` = 500 N·s: more than the heaviest thesis robot's (140 kg) momentum at 3 m/s, far above
-      the impulse that restores a heel-strike loss at walking speed.
+    - ``push_off_max`` = 500 N·s: far above the impulse that restores a heel-strike loss at walking speed.
 
     Whether a bound is active is reported with every result. ``angle_bounds`` are the thesis's −π/2 ≤ q ≤ π,
-    kept as printed.
+    used only with the problem option ``angle_bounds = "thesis"``; the default limits are physical (DECISIONS §4).
     """
 
     tau_max: float = 3000.0
@@ -107,6 +107,23 @@ class Limits:
         if not bounds[0] < bounds[1]:
             raise InvalidParameterError(f"limit angle_bounds = {bounds}: lower must be below upper")
         object.__setattr__(self, "angle_bounds", (float(bounds[0]), float(bounds[1])))
+
+    @classmethod
+    def sized_for(cls, robot: RobotParameters) -> Limits:
+        """The default limits scaled from the forward robot's (80 kg, 1 m legs) to ``robot`` (DECISIONS §8).
+
+        Each limit keeps its dimensionless size: torque in units of m g l, angular rate in √(g/l), impulse in
+        m √(g l), with m the total mass. The downward slope's robot (120 kg, 1.5 m legs) gets 6750 Nm, where
+        3000 Nm did not walk.
+        """
+        mass, leg = robot.total_mass / REFERENCE_MASS, robot.l / REFERENCE_LEG
+        base = cls()
+        return cls(tau_max=base.tau_max * mass * leg, dq_max=base.dq_max / math.sqrt(leg),
+                   push_off_max=base.push_off_max * mass * math.sqrt(leg))
+
+
+REFERENCE_MASS, REFERENCE_LEG = 80.0, 1.0
+"""The forward robot's total mass (kg) and leg length (m): the robot the default :class:`Limits` are chosen for."""
 
 
 GAITBENCH_LIMIT_CHOICES = {"tau_max": "Nm", "dq_max": "rad/s", "push_off_max": "N·s"}
@@ -183,8 +200,29 @@ class Experiment:
         q_st, q_sw = heel_strike_configuration(geometry.D, geometry.theta, self.robot.l)
         return (q_st, q_sw) if self.stance_leg(step) == 1 else (q_sw, q_st)
 
-    def feasibility(self) -> list[StepCheck]:
-        return check_feasibility(self.terrain, self.robot.l, self.limits.angle_bounds)
+    def feasibility(self, angle_bounds: str = "physical") -> list[StepCheck]:
+        """Per-step geometry checks under the physical leg-angle limits, or the thesis's printed box."""
+        box = self.limits.angle_bounds if angle_bounds == "thesis" else None
+        return check_feasibility(self.terrain, self.robot.l, box)
+
+    def start_state(self, pose: str = "on-ground") -> np.ndarray:
+        """(q1, q2, q̇1, q̇2) at the start of step 1 (DECISIONS §4).
+
+        ``on-ground``: the printed pose rotated about the stance foot until the trailing foot touches the ground
+        behind it, which keeps the inter-leg angle and the rates. The thesis prints flat-ground poses (q2 = −q1)
+        for its slopes, which puts the downward slope's trailing foot 0.79 m inside the ground. ``printed``: the
+        state as printed.
+        """
+        state = np.array(self.initial_state)[[0, 1, 4, 5]]
+        if pose == "printed":
+            return state
+        if pose != "on-ground":
+            raise ValueError(f"start pose {pose!r}: expected 'on-ground' or 'printed'")
+        stance, swing = self.stance_leg(1) - 1, 2 - self.stance_leg(1)
+        half_angle = (state[stance] - state[swing]) / 2
+        ground = self.terrain.ground_behind(1)
+        state[stance], state[swing] = ground + half_angle, ground - half_angle
+        return state
 
     def _require_step(self, step: int) -> int:
         if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or not 1 <= step <= self.n_steps:
@@ -204,6 +242,13 @@ def render_experiment(experiment: Experiment, console: Console) -> None:
         for problem in check.described:
             console.print(f"✗ {escape(problem)}", style="red", highlight=False)
     console.print(feasibility_summary(checks))
+    thesis = experiment.feasibility("thesis")
+    refused = [problem for check in thesis if not check.ok for problem in check.described]
+    if refused:
+        console.print(f"Under the thesis's printed angle bounds (problem option angle_bounds = \"thesis\"): "
+                      f"{feasibility_summary(thesis)}", highlight=False)
+        for problem in refused:
+            console.print(f"  {escape(problem)}", highlight=False)
 
 
 def feasibility_summary(checks: list[StepCheck]) -> str:
@@ -246,14 +291,15 @@ def _parameter_table(experiment: Experiment) -> Table:
         table.add_row("vs3 = vs4", f"{friction.vs_lin:g} m/s", "")
         table.add_row("Stribeck exponent n", f"{friction.n:g}", GAITBENCH_CHOICE)
     limits = experiment.limits
-    defaults = Limits()
+    defaults = Limits.sized_for(robot)
     for name, unit in GAITBENCH_LIMIT_CHOICES.items():
         value = getattr(limits, name)
-        note = GAITBENCH_CHOICE if value == getattr(defaults, name) else ""
-        table.add_row(name, f"{value:g} {unit}", note)
+        note = f"{GAITBENCH_CHOICE}, sized to the robot" if value == getattr(defaults, name) else ""
+        table.add_row(name, f"{value:.4g} {unit}", note)
+    table.add_row("leg-angle limits", "physical", "no leg points into the ground (DECISIONS §4)")
     lower, upper = limits.angle_bounds
     note = "thesis (10), as printed" if limits.angle_bounds == THESIS_ANGLE_BOUNDS else ""
-    table.add_row("angle bounds", f"[{lower:.4f}, {upper:.4f}] rad", note)
+    table.add_row("thesis angle bounds", f"[{lower:.4f}, {upper:.4f}] rad", f"{note}; angle_bounds = \"thesis\"")
     return table
 
 

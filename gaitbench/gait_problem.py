@@ -21,6 +21,17 @@ from gaitbench.robot import RobotParameters
 
 PHASES = ("first", "second")
 ABSOLUTE_VALUE_FORMS = ("slack", "smooth")
+CLEARANCE_FORMS = ("terrain", "chord", "off")
+ANGLE_LIMIT_FORMS = ("physical", "thesis")
+START_POSES = ("on-ground", "printed")
+
+OPTION_CHOICES: dict[str, tuple[str, ...]] = {
+    "absolute_value": ABSOLUTE_VALUE_FORMS,
+    "clearance": CLEARANCE_FORMS,
+    "angle_bounds": ANGLE_LIMIT_FORMS,
+    "start_pose": START_POSES,
+}
+"""The allowed values of every string-valued :class:`ProblemOptions` field (suites and ``solve -p`` check them)."""
 
 
 @dataclass(frozen=True)
@@ -30,9 +41,23 @@ class ProblemOptions:
     limits: Limits = field(default_factory=Limits)
     absolute_value: str = "slack"  # |hip power| in the objective: "slack" (exact split) or "smooth" (thesis)
     smoothing_eps: float = 0.1  # ε of the thesis's √(x² + ε²), used with absolute_value = "smooth" (DECISIONS §5)
-    # Swing-foot height over l above the chord line at interior nodes. The legs must cross, and at the crossing the
+    # Interior nodes keep the swing foot above: "terrain" (DECISIONS §4), the ground profile through the footholds
+    # it passes; "chord", the line of the current step's chord (the thesis's form); "off", nowhere (scuffing allowed,
+    # as the passive-walking literature allows it).
+    clearance: str = "terrain"
+    # Swing-foot height over l above that ground at interior nodes. The legs must cross, and at the crossing the
     # height is exactly 0 (digest ch2 C1), so any positive margin makes fine grids infeasible.
     clearance_margin: float = 0.0
+    # The old stance foot leaves the ground at push-off: its velocity after heel strike along the normal of the
+    # step's chord is at least this (l/s; DECISIONS §3). ``lift_off = False`` is the thesis's literal problem.
+    lift_off: bool = True
+    lift_off_rate: float = 0.0
+    # Leg-angle limits (DECISIONS §4): "physical", no leg points into the ground of its step (|q − θ| ≤ π/2);
+    # "thesis", the printed −π/2 ≤ q ≤ π from the vertical (``limits.angle_bounds``).
+    angle_bounds: str = "physical"
+    # The state step 1 starts from (DECISIONS §4): "on-ground", the printed pose rotated so that both feet touch the
+    # ground, keeping its inter-leg angle and rates; "printed", the experiment's initial state as printed.
+    start_pose: str = "on-ground"
     approach_rate: float = 1e-3  # the swing foot nears the chord line at the last node at least this fast (l/s)
     # ρ in ρ·∫|τ|² dt added to the energy. The thesis's cost ∫|τ·q̇| dt is the total variation of the robot's
     # mechanical energy (τ·q̇ = dE/dt with torques on absolute angles), blind to torque: without a tie-break the
@@ -51,10 +76,10 @@ class StepStructure:
     options: ProblemOptions = field(default_factory=ProblemOptions)
 
     def __post_init__(self) -> None:
-        if self.options.absolute_value not in ABSOLUTE_VALUE_FORMS:
-            raise ValueError(
-                f"absolute_value must be one of {ABSOLUTE_VALUE_FORMS}, got {self.options.absolute_value!r}"
-            )
+        for name, choices in OPTION_CHOICES.items():
+            value = getattr(self.options, name)
+            if value not in choices:
+                raise ValueError(f"{name} must be one of {choices}, got {value!r}")
         if self.phase not in PHASES:
             raise ValueError(f"phase must be one of {PHASES}, got {self.phase!r}")
         if self.n_nodes < 3:
@@ -63,7 +88,12 @@ class StepStructure:
 
 @dataclass(frozen=True)
 class StepData:
-    """The numbers of one solve: robot, stance leg, initial state (leg order q1, q2, q̇1, q̇2), chord, slope, h."""
+    """The numbers of one solve: robot, stance leg, initial state (leg order q1, q2, q̇1, q̇2), chord, slope, h.
+
+    ``previous_slope`` is the inclination of the ground behind the stance foot (the previous step's chord, or the
+    ground the walk starts on): with ``slope`` it gives the terrain profile the swing foot passes over. It defaults
+    to ``slope``, a uniform slope.
+    """
 
     robot: RobotParameters
     stance: int
@@ -71,6 +101,7 @@ class StepData:
     chord: float
     slope: float
     time_step: float
+    previous_slope: float | None = None
 
     def parameter_vector(self) -> np.ndarray:
         """Parameters in the order of :data:`PARAMETER_LAYOUT`, in role coordinates."""
@@ -78,11 +109,13 @@ class StepData:
             role_robot_vector(self.robot, self.stance),
             legs_to_roles(self.initial_state, self.stance),
             [self.chord, self.slope, self.time_step],
+            [self.slope if self.previous_slope is None else self.previous_slope],
         ])
 
 
-PARAMETER_LAYOUT = {"robot": slice(0, 8), "initial_state": slice(8, 12), "chord": 12, "slope": 13, "time_step": 14}
-N_STEP_PARAMETERS = 15
+PARAMETER_LAYOUT = {"robot": slice(0, 8), "initial_state": slice(8, 12), "chord": 12, "slope": 13, "time_step": 14,
+                    "previous_slope": 15}
+N_STEP_PARAMETERS = 16
 
 
 def role_robot_vector(robot: RobotParameters, stance: int) -> np.ndarray:

@@ -51,9 +51,15 @@ class StepGeometry:
 
 @dataclass(frozen=True)
 class Terrain:
-    """The footholds of a walk, one :class:`StepGeometry` per step, starting from the origin."""
+    """The footholds of a walk, one :class:`StepGeometry` per step, starting from the origin.
+
+    Between footholds the ground is the straight chord; behind the first foothold it rises at
+    ``start_inclination`` (rad, > 0 uphill; ``None``: the first step's inclination, a walk that starts on its
+    slope). Stairs start on a level floor.
+    """
 
     steps: tuple[StepGeometry, ...]
+    start_inclination: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "steps", tuple(self.steps))
@@ -62,6 +68,14 @@ class Terrain:
         for step in self.steps:
             if not isinstance(step, StepGeometry):
                 raise InvalidParameterError(f"terrain steps: expected StepGeometry, got {step!r}")
+        if self.start_inclination is not None:
+            StepGeometry(1.0, self.start_inclination)  # the same range check as a step's
+
+    def ground_behind(self, step: int) -> float:
+        """Inclination of the ground behind the stance foot of ``step`` (1-based): the previous chord's."""
+        if step == 1:
+            return self.steps[0].theta if self.start_inclination is None else float(self.start_inclination)
+        return self.steps[step - 2].theta
 
     @classmethod
     def flat(cls, chords: Iterable[float]) -> Terrain:
@@ -82,7 +96,7 @@ class Terrain:
                     f"stair {i} (run, rise) = ({run!r}, {rise!r}): run must be positive and both finite"
                 )
             steps.append(StepGeometry(math.hypot(run, rise), math.atan2(rise, run)))
-        return cls(tuple(steps))
+        return cls(tuple(steps), start_inclination=0.0)
 
     def __len__(self) -> int:
         return len(self.steps)
@@ -114,6 +128,29 @@ def clearance(q_st: Any, q_sw: Any, theta: Any) -> Any:
     """
     ns = _namespace(q_st, q_sw, theta)
     return ns.cos(q_st - theta) - ns.cos(q_sw - theta)
+
+
+TERRAIN_KINK_SMOOTHING = 1e-2
+"""ε (in leg lengths) over which the ground profile's bend under the stance foot is rounded."""
+
+
+def terrain_clearance(q_st: Any, q_sw: Any, theta: Any, theta_behind: Any,
+                      eps: float = TERRAIN_KINK_SMOOTHING) -> Any:
+    """Swing-foot height over l above the ground profile through the footholds it passes (DECISIONS §4).
+
+    The stance foot stands where the ground bends from ``theta_behind`` (the chord the swing foot comes from) to
+    ``theta`` (the chord it lands on). With the foot at (x, y) from the stance foot, in leg lengths, the profile is
+    s̄ x + δ |x| with s̄, δ the mean and half-difference of the two chords' slopes: exact on either side. |x| is
+    rounded as x tanh(x / ε), exact at the crossing (x = y = 0, where the legs pass each other) and at the
+    footholds, and off by at most 0.28 |δ| ε in between (2 mm for a 1 m leg on the stairs): conservative where
+    the ground peaks, lenient where it dips. On a uniform slope (δ = 0) this is the chord clearance / cos θ.
+    """
+    ns = _namespace(q_st, q_sw, theta, theta_behind)
+    x = ns.sin(q_sw) - ns.sin(q_st)
+    y = ns.cos(q_st) - ns.cos(q_sw)
+    ahead, behind = ns.tan(theta), ns.tan(theta_behind)
+    mean, half_bend = (ahead + behind) / 2, (ahead - behind) / 2
+    return y - mean * x - half_bend * x * ns.tanh(x / eps)
 
 
 def swing_foot_advance(q_st: Any, q_sw: Any, theta: Any) -> Any:
@@ -160,14 +197,17 @@ class StepCheck:
 
 
 def check_feasibility(
-    terrain: Terrain, l: float, angle_bounds: tuple[float, float] = THESIS_ANGLE_BOUNDS  # noqa: E741
+    terrain: Terrain, l: float, angle_bounds: tuple[float, float] | None = None  # noqa: E741
 ) -> list[StepCheck]:
-    """Check every step's heel-strike configuration against reach (D ≤ 2l) and the leg-angle bounds.
+    """Check every step's heel-strike configuration against reach (D ≤ 2l) and the leg-angle limits.
 
-    The heel-strike angles of step i are also the initial angles of step i+1, so both legs are checked once
-    per step. Each problem names the violated bound and the numbers behind it (``StepCheck.described`` adds the
-    step).
+    ``angle_bounds`` ``None`` (the default) checks the physical limits (DECISIONS §4): at heel strike neither leg
+    points into the ground of the step it ends, nor of the step it starts (the same angles begin step i+1). A
+    (low, high) pair checks that box instead, e.g. the thesis's printed :data:`THESIS_ANGLE_BOUNDS`. Each
+    problem names the violated limit and the numbers behind it (``StepCheck.described`` adds the step).
     """
+    if angle_bounds is None:
+        return _check_physical(terrain, l)
     lower, upper = angle_bounds
     checks = []
     for i, step in enumerate(terrain.steps, start=1):
@@ -191,3 +231,39 @@ def check_feasibility(
                 )
         checks.append(StepCheck(i, step.D, step.theta, q_st, q_sw, problems))
     return checks
+
+
+def _check_physical(terrain: Terrain, l: float) -> list[StepCheck]:  # noqa: E741
+    """Step i's heel-strike angles against the limits of the gait problem (see ``leg_angle_window``): in step i
+    as its final angles, and in step i + 1, where the landing leg stands and the other swings."""
+    checks = []
+    for i, step in enumerate(terrain.steps, start=1):
+        if step.D > 2 * l:
+            problem = f"chord {step.D:g} m exceeds twice the leg length {2 * l:g} m"
+            checks.append(StepCheck(i, step.D, step.theta, None, None, [problem]))
+            continue
+        q_st, q_sw = heel_strike_configuration(step.D, step.theta, l)
+        legs = [("stance", q_st, *leg_angle_window(step.theta, terrain.ground_behind(i))),
+                ("swing", q_sw, *leg_angle_window(step.theta))]
+        if i < len(terrain.steps):
+            ahead = terrain.steps[i].theta
+            legs += [(f"landing (step {i + 1}'s stance)", q_sw, *leg_angle_window(ahead, step.theta)),
+                     (f"lifting (step {i + 1}'s swing)", q_st, *leg_angle_window(ahead))]
+        problems = [
+            f"{role} leg at heel strike ({angle:.3f} rad) points into the ground: outside [{low:.3f}, {high:.3f}] rad"
+            for role, angle, low, high in legs
+            if not low <= angle <= high
+        ]
+        checks.append(StepCheck(i, step.D, step.theta, q_st, q_sw, problems))
+    return checks
+
+
+def leg_angle_window(theta: float, theta_behind: float | None = None) -> tuple[float, float]:
+    """Physical leg-angle limits (DECISIONS §4) in a step of inclination θ.
+
+    With ``theta_behind`` (the stance leg, whose foot stands where the ground bends from θ_behind to θ): the hip
+    above the ground, θ − π/2 ≤ q ≤ θ_behind + π/2, which is above both lines in a valley and above either on a
+    crest. Without it (the swing leg): pointing down from the hip relative to the chord, |q − θ| ≤ π/2.
+    """
+    behind = theta if theta_behind is None else theta_behind
+    return theta - math.pi / 2, behind + math.pi / 2

@@ -20,7 +20,7 @@ from gaitbench.energetics import smooth_abs
 from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, StepStructure, roles_to_legs
 from gaitbench.mechanics import BipedFunctions, biped_functions
 from gaitbench.nlp import NLP, NLPBuilder
-from gaitbench.terrain import clearance, heel_strike_configuration
+from gaitbench.terrain import clearance, heel_strike_configuration, terrain_clearance
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,7 @@ class StepSymbols:
     chord: ca.SX
     slope: ca.SX
     time_step: ca.SX
+    previous_slope: ca.SX
 
     @classmethod
     def create(cls) -> StepSymbols:
@@ -45,6 +46,7 @@ class StepSymbols:
             chord=p[layout["chord"]],
             slope=p[layout["slope"]],
             time_step=p[layout["time_step"]],
+            previous_slope=p[layout["previous_slope"]],
         )
 
     @property
@@ -246,7 +248,22 @@ def _add_step_constraints(
     q_st_end, q_sw_end = heel_strike_angles(symbols)
     builder.constrain("heel_strike_configuration", q[:, -1] - ca.vertcat(q_st_end, q_sw_end))
     interior = q[:, 1:-1]
-    builder.constrain("clearance", clearance(interior[0, :], interior[1, :], theta), options.clearance_margin, np.inf)
+    if options.clearance == "terrain":
+        height = terrain_clearance(interior[0, :], interior[1, :], theta, symbols.previous_slope)
+        builder.constrain("clearance", height, options.clearance_margin, np.inf)
+    elif options.clearance == "chord":
+        builder.constrain("clearance", clearance(interior[0, :], interior[1, :], theta), options.clearance_margin,
+                          np.inf)
+    if options.angle_bounds == "physical":
+        # No leg points into the ground (DECISIONS §4), linear in q: the stance leg's hip stays above the ground
+        # where its foot stands, which bends from the previous chord to this one (above both lines in a valley,
+        # above either on a crest: θ − π/2 ≤ q_st ≤ θ_behind + π/2); the swing leg points down from the hip
+        # relative to the chord it swings over (|q_sw − θ| ≤ π/2).
+        half_turn = np.pi / 2
+        builder.constrain("leg_angles", ca.vertcat(q[0, :] - theta + half_turn,
+                                                   symbols.previous_slope + half_turn - q[0, :],
+                                                   q[1, :] - theta + half_turn, theta + half_turn - q[1, :]),
+                          0.0, np.inf)
     # Replaces the thesis's infeasible "monotonically descending swing foot" (DECISIONS §4): d/dt of the
     # clearance at the last node is negative, i.e. the swing foot comes down onto the ground.
     approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]
@@ -262,6 +279,13 @@ def _add_step_constraints(
     push_off_energy = model4.kinetic_energy(q_end4, dq_plus, symbols.robot) - model4.kinetic_energy(
         q_end4, dq_end4, symbols.robot
     )
+
+    if options.lift_off:
+        # DECISIONS §3: the old stance foot leaves the ground. After heel strike it is the 4-DOF model's free foot
+        # (q3, q4); its velocity along the normal of the step's chord must not point into the ground.
+        dq_after, _ = model4.heel_strike(q_end4, dq_plus, symbols.robot)
+        normal_rate = -ca.sin(theta) * dq_after[2] + ca.cos(theta) * dq_after[3]
+        builder.constrain("lift_off", normal_rate / symbols.leg_length, options.lift_off_rate, np.inf)
 
     reactions = []
     for k, ddq in enumerate(discretization.accelerations):
@@ -355,11 +379,23 @@ def cubic_hermite(y0: np.ndarray, y1: np.ndarray, m0: np.ndarray, m1: np.ndarray
     return y0 + m0 * s + c2 * s**2 + c3 * s**3, m0 + 2 * c2 * s + 3 * c3 * s**2
 
 
+PHYSICAL_ANGLE_BOX = (-np.pi, np.pi)
+"""Variable bounds on leg angles under physical limits, which are constraints relative to the slope; the box only
+keeps angles on one branch."""
+
+
+def angle_box(structure: StepStructure) -> tuple[float, float]:
+    """Bounds of the leg-angle variables: the thesis's printed box, or a wide one under physical limits."""
+    options = structure.options
+    return options.limits.angle_bounds if options.angle_bounds == "thesis" else PHYSICAL_ANGLE_BOX
+
+
 def collocation_variables(structure: StepStructure, builder: NLPBuilder) -> tuple[ca.SX, ca.SX]:
     """Node states (q_st, q_sw, q̇_st, q̇_sw; 4 × N) and node torques (2 × N) with the limits as bounds."""
     n, limits = structure.n_nodes, structure.options.limits
-    lower = [limits.angle_bounds[0]] * 2 + [-limits.dq_max] * 2
-    upper = [limits.angle_bounds[1]] * 2 + [limits.dq_max] * 2
+    low, high = angle_box(structure)
+    lower = [low] * 2 + [-limits.dq_max] * 2
+    upper = [high] * 2 + [limits.dq_max] * 2
     states = builder.variable("states", (4, n), lower, upper)
     torques = builder.variable("torques", (2, n), -limits.tau_max, limits.tau_max)
     return states, torques

@@ -20,7 +20,8 @@ from gaitbench.energetics import average_cot
 from gaitbench.experiment import Experiment
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.mechanics import BipedModel
-from gaitbench.solver import Solver, SolverResult
+from gaitbench.solver import Solver, SolverResult, SolverStatus
+from gaitbench.terrain import StepCheck
 from gaitbench.transcription import Seed, StepTrajectory, TranscribedStep, Transcription
 from gaitbench.verify import StepVerification, verify_step
 
@@ -172,9 +173,19 @@ class WalkProblem:
 
     def step_data(self, index: int, state: np.ndarray) -> StepData:
         """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""
-        geometry = self.experiment.terrain.steps[index - 1]
+        terrain = self.experiment.terrain
+        geometry = terrain.steps[index - 1]
         return StepData(self.experiment.robot, self.experiment.stance_leg(index), np.asarray(state, dtype=float),
-                        geometry.D, geometry.theta, self.experiment.time_step(self.n_nodes))
+                        geometry.D, geometry.theta, self.experiment.time_step(self.n_nodes),
+                        previous_slope=terrain.ground_behind(index))
+
+    def start_state(self) -> np.ndarray:
+        """(q1, q2, q̇1, q̇2) at the start of step 1, in the start pose the options ask for."""
+        return self.experiment.start_state(self.options.start_pose)
+
+    def feasibility(self) -> list[StepCheck]:
+        """The experiment's per-step geometry checks under the options' leg-angle limits."""
+        return self.experiment.feasibility(self.options.angle_bounds)
 
     def model(self, phase: str) -> BipedModel:
         """The model a step of ``phase`` is verified with: 4-DOF (push-off acts) or the 2-DOF First Phase."""
@@ -208,8 +219,8 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
     """
     walk = problem.result(strategy, phase)
     started = time.perf_counter()
-    checks = problem.experiment.feasibility()
-    state = np.asarray(problem.experiment.initial_state)[[0, 1, 4, 5]]
+    checks = problem.feasibility()
+    state = problem.start_state()
     for index in range(1, problem.n_steps + 1):
         check = checks[index - 1]
         if check.ok:
@@ -228,9 +239,12 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
 
 
 def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
-                     seed: Seed | None = None, phase: str = "second") -> StepOutcome:
-    """Step ``index``'s NLP solved from ``seed`` (the blended guess by default), decoded, verified and chained."""
-    result = problem.solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data, seed))
+                     seed: Seed | None = None, phase: str = "second", solver: Solver | None = None) -> StepOutcome:
+    """Step ``index``'s NLP solved from ``seed`` (the blended guess by default), decoded, verified and chained.
+
+    ``solver`` replaces the problem's solver for this solve (a retry's variant of it)."""
+    solver = solver or problem.solver
+    result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data, seed))
     if not result.converged:
         return StepOutcome(index, data.stance, result.status.value, f"{result.status.value}: {result.message}",
                            result)
@@ -239,6 +253,71 @@ def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, d
     verification = verify_step(built, result.x, data, trajectory, model)
     return StepOutcome(index, data.stance, result.status.value, result.message, result, trajectory, verification,
                        next_state=next_step_state(model, trajectory))
+
+
+RETRIED_STATUSES = (SolverStatus.INFEASIBLE.value, SolverStatus.ITERATION_LIMIT.value, SolverStatus.ERROR.value)
+"""Failures worth another try: a local solver that calls a feasible step infeasible, runs out of iterations or
+fails in its restoration phase has often only started badly. A time limit is final."""
+
+
+def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
+                       seed: Seed | None = None, phase: str = "second") -> StepOutcome:
+    """:func:`solve_and_verify`, and when the solve fails with a :data:`RETRIED_STATUSES` status, the retry
+    ladder (docs/strategies.md) until a rung solves the step:
+
+    1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess;
+    2. ``first-phase-seed`` (4-DOF steps only): the step's 2-DOF First-Phase problem solved, and the 4-DOF problem
+       started from its trajectory, with the solver and then each of its remedies.
+
+    Every rung tried is recorded in the outcome's ``details["retries"]`` (remedy, status, iterations, time), and
+    the first attempt's status in ``details["first_attempt"]``; a step that still fails keeps the first failure's
+    message, with the rungs that were tried.
+    """
+    outcome = solve_and_verify(problem, index, built, data, seed, phase)
+    if outcome.solved or outcome.status not in RETRIED_STATUSES:
+        return outcome
+    first_attempt, retries = outcome, []
+    for remedy, attempt in _ladder(problem, index, built, data, seed, phase):
+        retry = attempt()
+        retries.append({"remedy": remedy, **retry.summary()})
+        if retry.solved:
+            outcome = retry
+            break
+    outcome.details = {**outcome.details, "first_attempt": first_attempt.summary(), "retries": retries}
+    if not outcome.solved:
+        tried = ", ".join(entry["remedy"] for entry in retries) or "none applies"
+        outcome.message = f"{first_attempt.message} (retried: {tried})"
+    return outcome
+
+
+def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
+            phase: str):
+    """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
+    remedies = solver_remedies(problem.solver)
+    for name, variant in remedies:
+        yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
+    if phase != "second":
+        return
+    first_phase: list[StepOutcome] = []
+
+    def seeded(variant: Solver | None) -> StepOutcome:
+        if not first_phase:
+            first = problem.transcription.build(problem.structure("first"))
+            first_phase.append(solve_and_verify(problem, index, first, data, phase="first"))
+        coarse = first_phase[0]
+        if not coarse.solved:
+            return coarse
+        return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), phase, variant)
+
+    yield "first-phase-seed", lambda: seeded(None)
+    for name, variant in remedies:
+        yield f"first-phase-seed+{name}", lambda variant=variant: seeded(variant)
+
+
+def solver_remedies(solver: Solver) -> list[tuple[str, Solver]]:
+    """The solver's variants worth a retry after a failed solve (its optional ``remedies()``), named."""
+    method = getattr(solver, "remedies", None)
+    return list(method()) if method is not None else []
 
 
 def next_step_state(model: BipedModel, trajectory: StepTrajectory) -> np.ndarray:

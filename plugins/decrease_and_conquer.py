@@ -42,7 +42,15 @@ from gaitbench.transcription import (
     locate_interval,
 )
 from gaitbench.verify import verify_step
-from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, next_step_state, solve_and_verify, walk_step_by_step
+from gaitbench.walk import (
+    StepOutcome,
+    WalkProblem,
+    WalkResult,
+    next_step_state,
+    solve_and_verify,
+    solve_with_retries,
+    walk_step_by_step,
+)
 from plugins.synthesis import complete_sections, synthesize
 
 DYNAMICS_TOLERANCE = 1e-6
@@ -81,14 +89,15 @@ class DecreaseAndConquer:
                     sections: SectionalSolves) -> StepOutcome:
         transcription, n = problem.transcription, problem.n_nodes
         data = problem.step_data(index, state)
-        first = solve_and_verify(problem, index, transcription.build(problem.structure("first")), data,
-                                 phase="first")
+        first = solve_with_retries(problem, index, transcription.build(problem.structure("first")), data,
+                                   phase="first")
         if not first.solved:
             first.message = f"First Phase: {first.message}"
             return first
         complete_built = transcription.build(problem.structure("second"))
-        complete = solve_and_verify(problem, index, complete_built, data, seed=first.trajectory.seed())
-        details = {"first_phase": first.summary(), "complete": complete.summary()}
+        complete = solve_with_retries(problem, index, complete_built, data, seed=first.trajectory.seed())
+        details = {"first_phase": first.summary(), "complete": complete.summary(),
+                   "retries": first.details.get("retries", []) + complete.details.get("retries", [])}
         if not complete.solved:
             complete.message = f"complete Second Phase: {complete.message}"
             complete.details = details
@@ -98,7 +107,7 @@ class DecreaseAndConquer:
         candidates, starts, failed = [complete.trajectory], [0], []
         section_data = {k0: StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
                                                                     first.trajectory.dq[k0 - 1]],
-                                     data.chord, data.slope, h) for k0 in sections.starts}
+                                     data.chord, data.slope, h, data.previous_slope) for k0 in sections.starts}
         seed_from = first if self.sectional_guess == "first-phase" else complete
         tasks = [(k0, section_data[k0].parameter_vector(),
                   sections.built[k0].initial_guess(section_data[k0], seed_from.trajectory.seed((k0 - 1) * h)))

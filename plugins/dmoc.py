@@ -26,6 +26,7 @@ from gaitbench.transcription import (
     StepSymbols,
     Transcription,
     absolute_power,
+    angle_box,
     cubic_hermite,
     locate_interval,
     sample_seed,
@@ -41,7 +42,7 @@ class DiscreteMechanics(Transcription):
                    model: BipedFunctions) -> Discretization:
         n = structure.n_nodes
         limits = structure.options.limits
-        q = builder.variable("positions", (2, n), *limits.angle_bounds)
+        q = builder.variable("positions", (2, n), *angle_box(structure))
         dq_start = builder.variable("start_velocity", (2, 1), -limits.dq_max, limits.dq_max)
         dq_end = builder.variable("end_velocity", (2, 1), -limits.dq_max, limits.dq_max)
         tau = builder.variable("torques", (2, n - 1), -limits.tau_max, limits.tau_max)

@@ -56,6 +56,8 @@ class Ipopt:
         if scaling not in SCALINGS:
             raise ValueError(f"scaling = {scaling!r}: expected one of {', '.join(SCALINGS)}")
         self.scaling = scaling
+        self._arguments = dict(max_iterations=max_iterations, time_limit_s=time_limit_s, tolerance=tolerance,
+                               print_level=print_level, scaling=scaling, **ipopt_options)
         ipopt = {"max_iter": max_iterations, "tol": tolerance, "print_level": print_level}
         if time_limit_s is not None:
             ipopt["max_wall_time"] = time_limit_s
@@ -104,6 +106,13 @@ class Ipopt:
                          if f"n_call_nlp_{name}" in stats},
             multipliers=np.asarray(solution["lam_g"], dtype=float).ravel() / c,
         )
+
+    def remedies(self) -> list[tuple[str, Ipopt]]:
+        """Variants for the walk's retry ladder: adaptive μ (Mehrotra's probing), which converges on steps the
+        monotone strategy declares infeasible (upward slope, HS N = 60 step 6; DMOC N = 30 step 2)."""
+        if self._arguments.get("mu_strategy") == "adaptive":
+            return []
+        return [("adaptive-mu", Ipopt(**{**self._arguments, "mu_strategy": "adaptive"}))]
 
     def prepare(self, nlp: NLP) -> None:
         """Build the ``nlpsol`` for ``nlp`` now (see :meth:`gaitbench.solver.Solver.prepare`)."""

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, solve_and_verify, walk_step_by_step
+from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, solve_with_retries, walk_step_by_step
 
 
 class OnePhase:
@@ -27,7 +27,7 @@ class OnePhase:
         built = problem.transcription.build(problem.structure(self.phase))
 
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
-            return solve_and_verify(problem, index, built, problem.step_data(index, state), phase=self.phase)
+            return solve_with_retries(problem, index, built, problem.step_data(index, state), phase=self.phase)
 
         return walk_step_by_step(problem, self.name, solve_step, on_step, phase=self.phase)
 

@@ -2,8 +2,9 @@
 
 Line numbers (Lnnnn) refer to ``seed/thesis.txt``. Common to all four (§5.2–5.5): H = 11 steps, a = b = l/2,
 step duration 0.7343 s, stance foot starting at rest at the origin (q3 = q4 = dq3 = dq4 = 0), inertias m l²/12
-(not given; DECISIONS §1), Leg 2 swings first. Limits are the gaitbench defaults (the thesis's were lost,
-DECISIONS §8).
+(not given; DECISIONS §1), Leg 2 swings first. Limits are the gaitbench defaults sized to each robot (the
+thesis's were lost, DECISIONS §8). The printed initial poses are flat-ground poses; walks start from them rotated
+onto the ground (``Experiment.start_state``, DECISIONS §4).
 Importing this module is cheap: the experiments are built only when a factory is called.
 """
 
@@ -30,13 +31,15 @@ STAIRS_DESCRIPTION = "5 stairs up then 6 down, from (run, rise) pairs, 140 kg bi
 
 def _experiment(name, description, *, M, m, l, terrain, q0, dq0, friction, source):  # noqa: E741
     """Assemble one thesis experiment; ``q0``/``dq0`` are the printed (q1, q2) and (dq1, dq2)."""
-    from gaitbench.experiment import Experiment, FrictionParameters
+    from gaitbench.experiment import Experiment, FrictionParameters, Limits
     from gaitbench.robot import RobotParameters
 
+    robot = RobotParameters(m1=m, m2=m, M=M, l=l, a=l / 2)
     return Experiment(
         name=name,
         description=description,
-        robot=RobotParameters(m1=m, m2=m, M=M, l=l, a=l / 2),
+        robot=robot,
+        limits=Limits.sized_for(robot),
         terrain=terrain,
         initial_state=[q0[0], q0[1], 0.0, 0.0, dq0[0], dq0[1], 0.0, 0.0],
         step_duration=STEP_DURATION,
@@ -70,7 +73,8 @@ def downward_slope():
         friction=dict(Fc=7.0, Fs=11.0, fv=9.0, vs=0.21, Fc_lin=6.0, Fs_lin=6.0, fv_lin=7.0, vs_lin=0.07),
         source=(
             "thesis §5.3 Downward Slope, parameters L12433–12459 (θ L12443, initial state L12449, "
-            "friction L12455–12459); steps 1-2 violate the printed angle bound -π/2 at heel strike"
+            "friction L12455–12459); steps 1-2 violate the printed angle bound -π/2 at heel strike, and the "
+            "printed pose q2 = -q1 puts the trailing foot 0.79 m below the slope"
         ),
     )
 

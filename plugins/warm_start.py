@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, solve_and_verify, walk_step_by_step
+from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, solve_with_retries, walk_step_by_step
 
 
 class WarmStart:
@@ -24,12 +24,13 @@ class WarmStart:
 
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
             data = problem.step_data(index, state)
-            coarse = solve_and_verify(problem, index, first, data, phase="first")
+            coarse = solve_with_retries(problem, index, first, data, phase="first")
             if not coarse.solved:
                 coarse.message = f"First Phase: {coarse.message}"
                 return coarse
-            outcome = solve_and_verify(problem, index, second, data, seed=coarse.trajectory.seed(), phase="second")
-            outcome.details = {"first_phase": coarse.summary()}
+            outcome = solve_with_retries(problem, index, second, data, seed=coarse.trajectory.seed(), phase="second")
+            retries = coarse.details.get("retries", []) + outcome.details.get("retries", [])
+            outcome.details = {**outcome.details, "first_phase": coarse.summary(), "retries": retries}
             return outcome
 
         return walk_step_by_step(problem, self.name, solve_step, on_step)

@@ -41,7 +41,7 @@ class WholeWalk:
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
         started = time.perf_counter()
         walk = problem.result(self.name)
-        for check in problem.experiment.feasibility()[: problem.n_steps]:
+        for check in problem.feasibility()[: problem.n_steps]:
             if not check.ok:
                 walk.steps.append(StepOutcome(check.step, problem.experiment.stance_leg(check.step),
                                               "infeasible_geometry", "; ".join(check.problems)))
@@ -100,18 +100,19 @@ class WalkChain:
         variables = ca.SX.sym("walk", n * problem.n_steps)
         self.slices = [slice(i * n, (i + 1) * n) for i in range(problem.n_steps)]
         robot = experiment.robot
-        state = ca.DM(legs_to_roles(np.asarray(experiment.initial_state)[[0, 1, 4, 5]], 1))
+        state = ca.DM(legs_to_roles(problem.start_state(), experiment.stance_leg(1)))
         objectives, constraints, self.parameters = [], [], []
         for i, part in enumerate(self.slices, start=1):
             geometry = experiment.terrain.steps[i - 1]
             stance = experiment.stance_leg(i)
-            parameters = ca.vertcat(role_robot_vector(robot, stance), state, geometry.D, geometry.theta, h)
+            parameters = ca.vertcat(role_robot_vector(robot, stance), state, geometry.D, geometry.theta, h,
+                                    experiment.terrain.ground_behind(i))
             self.parameters.append(parameters)
             f, g = step_function(variables[part], parameters)
             objectives.append(f)
             constraints.append(g)
-            state = _next_role_state(end_state(variables[part], parameters), robot, stance,
-                                     experiment.stance_leg(i + 1))
+            # Roles alternate; after the last step the next state is unused but the map is the same.
+            state = _next_role_state(end_state(variables[part], parameters), robot, stance, 3 - stance)
         self.nlp = NLP(x=variables, p=ca.SX.sym("p", 0), f=sum(objectives) / problem.n_steps,
                        g=ca.vertcat(*constraints), lbx=np.tile(step_nlp.lbx, problem.n_steps),
                        ubx=np.tile(step_nlp.ubx, problem.n_steps), lbg=np.tile(step_nlp.lbg, problem.n_steps),
@@ -129,14 +130,12 @@ class WalkChain:
             p = np.asarray(p, dtype=float).ravel()
             stance = experiment.stance_leg(i)
             state = legs_to_roles(p[INITIAL_STATE], stance)
-            geometry = experiment.terrain.steps[i - 1]
-            out.append((np.asarray(x)[part], StepData(experiment.robot, stance, state, geometry.D, geometry.theta,
-                                                      p[PARAMETER_LAYOUT["time_step"]])))
+            out.append((np.asarray(x)[part], self.problem.step_data(i, state)))
         return out
 
     def nominal_data(self, walk: WalkResult) -> list[StepData]:
         """The step data of a solved step-by-step walk (its initial states), for seeding this NLP from it."""
-        state = np.asarray(self.problem.experiment.initial_state)[[0, 1, 4, 5]]
+        state = self.problem.start_state()
         data = []
         for step in walk.steps:
             data.append(self.problem.step_data(step.index, state))
@@ -145,7 +144,7 @@ class WalkChain:
 
     def blended_guess(self, built) -> np.ndarray:
         experiment = self.problem.experiment
-        nominal = np.asarray(experiment.initial_state)[[0, 1, 4, 5]]
+        nominal = self.problem.start_state()
         guesses = []
         for i in range(1, self.problem.n_steps + 1):
             stance = experiment.stance_leg(i)

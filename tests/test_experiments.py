@@ -43,7 +43,7 @@ def test_every_thesis_experiment_builds_with_the_common_parameters(name):
     assert experiment.robot.inertia1 == pytest.approx(experiment.robot.m1 * experiment.robot.l**2 / 12)
     np.testing.assert_array_equal(experiment.initial_state[[2, 3, 6, 7]], 0.0)
     assert experiment.friction is not None and experiment.friction.n == 2
-    assert experiment.limits == Limits()
+    assert experiment.limits == Limits.sized_for(experiment.robot)
     assert "L1" in experiment.source  # thesis line references
 
 
@@ -167,17 +167,18 @@ def render(name: str) -> str:
     return console.export_text()
 
 
-def test_render_shows_parameters_step_rows_and_the_infeasible_steps():
+def test_render_shows_parameters_step_rows_and_the_thesis_bounds_refusals():
     text = render("downward-slope")
     assert "0.7343 s" in text and "60 kg" in text
     assert text.count("gaitbench choice, not thesis") == 4  # tau_max, dq_max, push_off_max, Stribeck n
+    assert "6750 Nm" in text  # 3000 Nm scaled by m g l to the 120 kg, 1.5 m robot
     rows = [line.split() for line in text.splitlines() if "Leg 1" in line or "Leg 2" in line]
     assert [row[0] for row in rows] == [str(i) for i in range(1, 12)]
-    step_1 = ["Leg", "1", "2.8000", "-0.6770", "-38.79", "2.182", "-1.754", "-1.8806", "0.5266", "✗"]
+    step_1 = ["Leg", "1", "2.8000", "-0.6770", "-38.79", "2.182", "-1.754", "-1.8806", "0.5266", "✓"]
     assert rows[0][1:] == step_1
-    assert [row[-1] for row in rows[2:]] == ["✓"] * 9
-    assert "✗ step 1: stance angle at heel strike -1.881 rad is below the lower angle bound -1.571" in text
-    assert "11 steps, 9 feasible, 2 infeasible: steps 1, 2" in text
+    assert "11 steps, 11 feasible, 0 infeasible" in text
+    assert 'angle_bounds = "thesis"): 11 steps, 9 feasible, 2 infeasible: steps 1, 2' in text
+    assert "step 1: stance angle at heel strike -1.881 rad is below the lower angle bound -1.571" in text
 
 
 def test_render_of_a_feasible_experiment():
@@ -186,5 +187,39 @@ def test_render_of_a_feasible_experiment():
     assert "✗" not in text
 
 
-def test_feasibility_summary_for_stairs_names_step_7():
-    assert feasibility_summary(build("stairs").feasibility()) == "11 steps, 10 feasible, 1 infeasible: step 7"
+def test_feasibility_summary_for_stairs_names_step_7_under_the_thesis_bounds_only():
+    stairs = build("stairs")
+    assert feasibility_summary(stairs.feasibility("thesis")) == "11 steps, 10 feasible, 1 infeasible: step 7"
+    assert feasibility_summary(stairs.feasibility()) == "11 steps, 11 feasible, 0 infeasible"
+
+
+@pytest.mark.parametrize("name", ["forward", "downward-slope", "upward-slope", "stairs"])
+def test_the_walk_starts_with_both_feet_on_the_ground_and_the_printed_inter_leg_angle(name):
+    experiment = build(name)
+    state = experiment.start_state()
+    printed = experiment.initial_state[[0, 1, 4, 5]]
+    q1, q2 = state[:2]
+    ground = experiment.terrain.ground_behind(1)
+    trailing = np.array([math.sin(q2) - math.sin(q1), math.cos(q1) - math.cos(q2)])  # from the stance foot, in l
+    assert trailing[1] == pytest.approx(math.tan(ground) * trailing[0], abs=1e-12)
+    assert trailing[0] < 0
+    assert q1 - q2 == pytest.approx(printed[0] - printed[1])
+    np.testing.assert_array_equal(state[2:], printed[2:])
+    np.testing.assert_array_equal(experiment.start_state("printed"), printed)
+
+
+def test_the_printed_downward_pose_puts_the_trailing_foot_inside_the_slope():
+    experiment = build("downward-slope")
+    q1, q2 = experiment.initial_state[:2]
+    l, theta = experiment.robot.l, experiment.terrain.steps[0].theta  # noqa: E741
+    x, y = l * (math.sin(q2) - math.sin(q1)), l * (math.cos(q1) - math.cos(q2))
+    depth = (math.tan(theta) * x - y) * math.cos(theta)  # distance below the slope line
+    assert depth == pytest.approx(0.79, abs=0.01)
+
+
+def test_limits_are_sized_to_the_robot():
+    forward, downward = build("forward"), build("downward-slope")
+    assert forward.limits == Limits()
+    assert downward.limits.tau_max == pytest.approx(3000 * 120 * 1.5 / 80)
+    assert downward.limits.dq_max == pytest.approx(50 / math.sqrt(1.5))
+    assert downward.limits.push_off_max == pytest.approx(500 * 120 / 80 * math.sqrt(1.5))

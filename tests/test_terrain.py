@@ -6,12 +6,15 @@ import pytest
 
 from gaitbench.robot import InvalidParameterError
 from gaitbench.terrain import (
+    THESIS_ANGLE_BOUNDS,
     StepGeometry,
     Terrain,
     check_feasibility,
     clearance,
     heel_strike_configuration,
+    leg_angle_window,
     swing_foot_advance,
+    terrain_clearance,
 )
 
 
@@ -85,9 +88,14 @@ def test_clearance_and_advance_work_on_numpy_and_casadi():
     assert isinstance(clearance(x, 0.3, 0.1), casadi.MX)
 
 
-def test_printed_downward_slope_step_1_is_flagged_below_the_angle_bound():
-    terrain = Terrain.slope([2.8, 2.6, 2.3, 2.15, 1.95, 1.8, 1.75, 1.35, 1.15, 1.05, 0.6], -0.677)
-    checks = check_feasibility(terrain, 1.5)
+DOWNWARD = Terrain.slope([2.8, 2.6, 2.3, 2.15, 1.95, 1.8, 1.75, 1.35, 1.15, 1.05, 0.6], -0.677)
+STAIRS = Terrain.stairs([(1.0, 0.6), (1.4, 0.6), (1.5, 0.8), (1.2, 0.4), (1.1, 0.5), (0.9, -0.8), (0.8, -1.0),
+                         (0.75, -0.7), (0.6, -0.6), (0.5, -0.6), (0.2, -0.4)])
+
+
+def test_printed_downward_slope_step_1_is_flagged_below_the_thesis_angle_bound():
+    terrain = DOWNWARD
+    checks = check_feasibility(terrain, 1.5, THESIS_ANGLE_BOUNDS)
     assert len(checks) == 11
     first = checks[0]
     assert not first.ok
@@ -112,6 +120,61 @@ def test_feasibility_checks_the_swing_leg_against_the_upper_bound():
     checks = check_feasibility(Terrain.slope([1.0], 1.2), 1.0, angle_bounds=(-1.0, 1.5))
     assert checks[0].problems and "swing angle" in checks[0].problems[0]
     assert "above the upper angle bound 1.500 rad" in checks[0].problems[0]
+
+
+def test_physical_angle_limits_accept_the_downward_slope_and_the_stairs():
+    """DECISIONS §4: −1.88 rad on a −0.677 rad slope is 18° below horizontal where the ground falls at 39°."""
+    assert all(check.ok for check in check_feasibility(DOWNWARD, 1.5))
+    assert all(check.ok for check in check_feasibility(STAIRS, 1.0))
+    assert [c.step for c in check_feasibility(STAIRS, 1.0, THESIS_ANGLE_BOUNDS) if not c.ok] == [7]
+
+
+def test_physical_angle_limits_refuse_a_leg_that_points_into_the_ground():
+    # A steep climb after a steep drop: the landing leg of step 1 leans back into the rising ground of step 2.
+    checks = check_feasibility(Terrain((StepGeometry(0.4, -1.2), StepGeometry(1.0, 1.0))), 1.0)
+    assert not checks[0].ok and "landing (step 2's stance) leg" in checks[0].problems[0]
+    assert check_feasibility(Terrain((StepGeometry(0.4, -1.2), StepGeometry(1.0, -1.0))), 1.0)[0].ok
+
+
+def test_leg_angle_window_is_the_hip_above_the_ground_where_the_foot_stands():
+    for theta, behind in ((0.0, 0.0), (0.4, -0.3), (-0.7, 0.5)):
+        low, high = leg_angle_window(theta, behind)
+        for q in np.linspace(-3.1, 3.1, 241):
+            hip = np.array([-math.sin(q), math.cos(q)])
+            ahead_line = hip[1] - math.tan(theta) * hip[0]
+            behind_line = hip[1] - math.tan(behind) * hip[0]
+            above = ahead_line > 0 if hip[0] > 0 else behind_line > 0
+            if abs(q - low) > 1e-9 and abs(q - high) > 1e-9:
+                assert above == (low <= q <= high), (theta, behind, q)
+
+
+@pytest.mark.parametrize(("behind", "ahead"), [(0.0, 0.0), (0.5, -0.7), (-0.6, 0.4), (0.54, 0.54)])
+def test_terrain_clearance_is_the_height_above_the_ground_profile(behind, ahead):
+    """Height above the two chords meeting at the stance foot, in leg lengths, up to the rounding of the bend."""
+    rng = np.random.default_rng(3)
+    for q_st, q_sw in rng.uniform(-1.2, 1.2, size=(200, 2)):
+        foot = convention_a_swing_foot([0.0, 0.0], q_st, q_sw, 1.0)
+        ground = foot[0] * math.tan(ahead if foot[0] > 0 else behind)
+        bound = 0.28 * abs(math.tan(ahead) - math.tan(behind)) / 2 * 1e-2
+        assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(foot[1] - ground, abs=bound + 1e-12)
+    assert terrain_clearance(0.3, 0.3, ahead, behind) == pytest.approx(0.0, abs=1e-15)  # legs crossing
+    q_st, q_sw = heel_strike_configuration(1.2, ahead, 1.0)
+    assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=1e-12)  # landing
+
+
+def test_terrain_clearance_sees_the_stairs_the_chord_does_not():
+    """At the start of stairs step 6 (the first step down) the lifting foot stands on the ground of step 5, below
+    the line of step 6's descending chord: the chord form calls it buried, the terrain form on the ground."""
+    behind, ahead = STAIRS.ground_behind(6), STAIRS.steps[5].theta
+    q_sw, q_st = heel_strike_configuration(STAIRS.steps[4].D, behind, 1.0)  # step 5's landing pose, roles swapped
+    assert clearance(q_st, q_sw, ahead) < -0.1
+    assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_stairs_start_on_a_level_floor_and_slopes_on_their_slope():
+    assert STAIRS.ground_behind(1) == 0.0
+    assert DOWNWARD.ground_behind(1) == -0.677
+    assert STAIRS.ground_behind(7) == STAIRS.steps[5].theta
 
 
 def test_all_forward_walking_steps_are_feasible():

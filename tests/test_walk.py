@@ -110,7 +110,8 @@ def test_a_failed_step_ends_the_walk_keeping_the_solved_steps():
 
 def test_infeasible_geometry_is_reported_before_solving():
     experiment = REGISTRY.create("experiment", "downward-slope")
-    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 21, steps=2))
+    options = ProblemOptions(limits=experiment.limits, angle_bounds="thesis")
+    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 21, steps=2, options=options))
     assert walk.steps[0].status == "infeasible_geometry"
     assert "below the lower angle bound" in walk.failure and walk.steps[0].solver_result is None
     assert walk.failure.startswith("step 1: stance angle at heel strike") and walk.failure.count("step 1:") == 1
