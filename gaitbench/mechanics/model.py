@@ -22,6 +22,7 @@ class HeelStrike:
     lift_off_velocity: (
         float  # vertical velocity of the old stance foot after impact (4-DOF); > 0 means it lifts off
     )
+    lifting_foot_velocity: np.ndarray | None = None  # (x, y) velocity of the old stance foot after impact (4-DOF)
 
 
 def other_leg(stance: int) -> int:
@@ -114,7 +115,8 @@ class BipedModel:
         foot = self.swing_foot_position(q, stance)
         q_next = np.concatenate([q[:2], foot])
         dq_next = np.concatenate([dq_plus[:2], np.zeros(2)])
-        return HeelStrike(q=q_next, dq=dq_next, impulse=impulse, lift_off_velocity=float(dq_plus[3]))
+        return HeelStrike(q=q_next, dq=dq_next, impulse=impulse, lift_off_velocity=float(dq_plus[3]),
+                          lifting_foot_velocity=np.asarray(dq_plus[2:4], dtype=float))
 
 
 def _scalar(value):

@@ -1,0 +1,130 @@
+"""The step constraints DECISIONS §3–§4 ask for: lift-off at push-off, clearance above the terrain, physical leg
+angles; and the retry ladder that a failed step solve climbs before a walk stops."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gaitbench.gait_problem import ProblemOptions, StepStructure
+from gaitbench.mechanics import BipedModel
+from gaitbench.plugins import load_registry
+from gaitbench.solver import SolverResult, SolverStatus
+from gaitbench.terrain import terrain_clearance
+from gaitbench.walk import WalkProblem, solve_with_retries
+from plugins.dmoc import DiscreteMechanics
+from plugins.hermite_simpson import HermiteSimpson
+from plugins.ipopt import Ipopt
+from plugins.one_phase import OnePhase
+
+REGISTRY = load_registry()
+
+
+def stairs_problem(n_nodes=12, **options):
+    experiment = REGISTRY.create("experiment", "stairs")
+    problem_options = ProblemOptions(limits=experiment.limits, **options)
+    return WalkProblem(experiment, HermiteSimpson(), Ipopt(), n_nodes, options=problem_options)
+
+
+def lift_off_rate(problem, data, x, built):
+    """The old stance foot's post-impact normal velocity, from the numeric model (not the NLP's expression)."""
+    trajectory = built.trajectory(x, data)
+    model = BipedModel(problem.experiment.robot, 4)
+    q, dq = np.r_[trajectory.q[-1], 0.0, 0.0], np.r_[trajectory.dq[-1], 0.0, 0.0]
+    dq_push, _ = model.push_off(q, dq, trajectory.push_off, data.stance)
+    strike = model.heel_strike(q, dq_push, data.stance)
+    velocity = strike.lifting_foot_velocity
+    return -np.sin(data.slope) * velocity[0] + np.cos(data.slope) * velocity[1]
+
+
+@pytest.mark.parametrize("transcription", [HermiteSimpson(), DiscreteMechanics()], ids=["hs", "dmoc"])
+def test_lift_off_row_is_the_old_stance_feet_normal_velocity_after_heel_strike(transcription):
+    problem = stairs_problem()
+    problem = replace(problem, transcription=transcription)
+    built = transcription.build(problem.structure("second"))
+    data = problem.step_data(6, problem.start_state())
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        x = built.initial_guess(data) + 0.05 * rng.standard_normal(built.nlp.n_variables)
+        x[built.nlp.variable_blocks["push_off"]] = rng.uniform(0, 50)
+        g = np.asarray(built.nlp.functions.constraints(x, data.parameter_vector())).ravel()
+        row = g[built.nlp.constraint_blocks["lift_off"]]
+        assert row == pytest.approx(lift_off_rate(problem, data, x, built) / problem.experiment.robot.l, rel=1e-9)
+
+
+def test_a_solved_step_lifts_the_old_stance_foot_and_without_the_constraint_the_row_is_gone():
+    problem = stairs_problem()
+    built = problem.transcription.build(problem.structure("second"))
+    data = problem.step_data(1, problem.start_state())
+    result = problem.solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+    assert result.converged
+    assert lift_off_rate(problem, data, result.x, built) >= -1e-7
+    literal = problem.transcription.build(StepStructure("second", 12, replace(problem.options, lift_off=False)))
+    assert "lift_off" not in literal.nlp.constraint_blocks
+
+
+def test_clearance_rows_follow_the_terrain_the_chord_or_nothing():
+    problem = stairs_problem()
+    data = problem.step_data(6, problem.start_state())
+    built = problem.transcription.build(problem.structure("second"))
+    x = built.initial_guess(data)
+    q = np.reshape(x[built.nlp.variable_blocks["states"]], (4, -1), order="F")[:2, 1:-1]
+    g = np.asarray(built.nlp.functions.constraints(x, data.parameter_vector())).ravel()
+    expected = terrain_clearance(q[0], q[1], data.slope, data.previous_slope)
+    np.testing.assert_allclose(g[built.nlp.constraint_blocks["clearance"]], expected, atol=1e-12)
+    assert data.previous_slope == problem.experiment.terrain.steps[4].theta != data.slope
+    off = problem.transcription.build(StepStructure("second", 12, replace(problem.options, clearance="off")))
+    assert "clearance" not in off.nlp.constraint_blocks
+
+
+@pytest.mark.parametrize("name", ["forward", "downward-slope", "upward-slope", "stairs"])
+def test_physical_leg_angle_rows_hold_at_the_first_steps_heel_strike_and_start(name):
+    experiment = REGISTRY.create("experiment", name)
+    problem = WalkProblem(experiment, HermiteSimpson(), Ipopt(), 10)
+    built = problem.transcription.build(problem.structure("second"))
+    for index in range(1, experiment.n_steps + 1):
+        # The blended guess runs from the heel-strike pose of the step before to this step's: both ends checked.
+        start = problem.start_state() if index == 1 else np.r_[experiment.heel_strike_configuration(index - 1), 0, 0]
+        data = problem.step_data(index, start)
+        x = built.initial_guess(data)
+        g = np.asarray(built.nlp.functions.constraints(x, data.parameter_vector())).ravel()
+        assert g[built.nlp.constraint_blocks["leg_angles"]].min() >= -1e-12, (name, index)
+
+
+class FailingFirst:
+    """A solver that calls every step infeasible, with IPOPT as its remedy (as a solver's ``remedies`` offers)."""
+
+    name = "failing-first"
+
+    def __init__(self, remedies=True):
+        self.has_remedies = remedies
+        self.calls = 0
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.calls += 1
+        return SolverResult(SolverStatus.INFEASIBLE, "infeasible (scripted)", np.asarray(initial_guess), np.nan,
+                            np.nan, 3, 0.0, 0.0)
+
+    def remedies(self):
+        return [("use-ipopt", Ipopt())] if self.has_remedies else []
+
+
+def test_a_failed_solve_climbs_the_ladder_and_records_every_rung():
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailingFirst()
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert outcome.solved and solver.calls == 1
+    assert [entry["remedy"] for entry in outcome.details["retries"]] == ["use-ipopt"]
+    assert outcome.details["first_attempt"]["status"] == "infeasible"
+
+
+def test_a_step_that_fails_every_rung_names_them_and_the_walk_stops_there():
+    experiment = REGISTRY.create("experiment", "forward")
+    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), FailingFirst(remedies=False), 10, steps=2))
+    assert len(walk.steps) == 1 and not walk.complete
+    step = walk.steps[0]
+    # The First Phase fails with the same solver, so the first-phase seed cannot be tried further.
+    assert [entry["remedy"] for entry in step.details["retries"]] == ["first-phase-seed"]
+    assert step.message == "infeasible: infeasible (scripted) (retried: first-phase-seed)"
