@@ -263,7 +263,7 @@ fails in its restoration phase has often only started badly. A time limit is fin
 def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
                        seed: Seed | None = None, phase: str = "second") -> StepOutcome:
     """:func:`solve_and_verify`, and when the solve fails with a :data:`RETRIED_STATUSES` status, the retry
-    ladder (docs/strategies.md) until a rung solves the step:
+    ladder (docs/solvers.md, "Retries") until a rung solves the step:
 
     1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess;
     2. ``first-phase-seed`` (4-DOF steps only): the step's 2-DOF First-Phase problem solved, and the 4-DOF problem
