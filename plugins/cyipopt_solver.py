@@ -138,6 +138,14 @@ class CyIpopt:
         options.update(ipopt_options)
         self.options = options
         """The IPOPT options every solve is built with."""
+        self._arguments = dict(max_iterations=max_iterations, time_limit_s=time_limit_s, tolerance=tolerance,
+                               print_level=print_level, **ipopt_options)
+
+    def remedies(self) -> list:
+        """Adaptive μ for the retry ladder, as the ``ipopt`` plugin offers it (docs/solvers.md, "Retries")."""
+        if self.options.get("mu_strategy") == "adaptive":
+            return []
+        return [("adaptive-mu", type(self)(**{**self._arguments, "mu_strategy": "adaptive"}))]
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Solve from ``initial_guess``; exceptions (in cyipopt or in a callback) become an ERROR status."""
