@@ -132,14 +132,53 @@ def case_row(outcome: CaseOutcome, suite: str, run_id: str) -> dict[str, Any]:
         "provenance": outcome.provenance or None, "finished_at": _now(),
     }
     row |= outcome.metrics
+    if outcome.status in RUN_FAILURE_CAUSES:  # the run failed, not the method: the walk's own record is moot
+        row["stop_cause"] = RUN_FAILURE_CAUSES[outcome.status]
     for column, name in (("walk_path", WALK_FILE), ("tracking_path", TRACK_FILE)):
         if name in outcome.files:
             row[column] = case_file(case.key, name)
     return row
 
 
+RUN_FAILURE_CAUSES = {"error": "error", "timeout": "time_limit", "crashed": "crashed"}
+"""The ``stop_cause`` of a case the run lost (it raised, ran past its limit, or its worker died)."""
+
+
+def stop_cause(status: str) -> str:
+    """The ``stop_cause`` (gaitbench.store.STOP_CAUSES) of a walk stopped by a step with this status.
+
+    ``infeasible_geometry`` is checked before any solve; a solver's ``time_limit`` is the case's time limit passed
+    to it; a step whose solve converged but that is not solved failed the verification after it; every other status
+    (``infeasible``, ``iteration_limit``, ``error``, a plugin's own) is the solver's.
+    """
+    if status == "infeasible_geometry":
+        return "geometry"
+    if status == "time_limit":
+        return "time_limit"
+    if status == "converged" or "verif" in status:
+        return "verification"
+    return "solver"
+
+
+def walk_stop(walk) -> dict[str, Any]:
+    """Why and where a walk stopped (store columns ``stop_cause``, ``stop_step``, ``stop_status``) and how many
+    solve retries it took (``retries``: each step's ``details["retries"]``, a list; missing means none)."""
+    retries = 0
+    for step in walk.steps:
+        recorded = step.details.get("retries") if isinstance(step.details, dict) else None
+        retries += len(recorded) if isinstance(recorded, list) else int(recorded or 0)
+    failed = next((step for step in walk.steps if not step.solved), None)
+    if failed is not None:
+        return {"stop_cause": stop_cause(failed.status), "stop_step": failed.index, "stop_status": failed.status,
+                "retries": retries}
+    if walk.complete:
+        return {"stop_cause": "complete", "stop_step": None, "stop_status": None, "retries": retries}
+    # Fewer steps than requested, each solved: the strategy ended the walk without a failing step to blame.
+    return {"stop_cause": "solver", "stop_step": len(walk.steps) + 1, "stop_status": None, "retries": retries}
+
+
 def walk_metrics(walk) -> dict[str, Any]:
-    """ACOT, per-step COT and its bounds, effort and verification of a walk, as store columns."""
+    """ACOT, per-step COT and its bounds, effort, verification and why the walk stopped, as store columns."""
     cots = [step.verification.cot if step.verification else None for step in walk.steps]
     solved = [cot for cot in cots if cot is not None]
     results = [step.solver_result for step in walk.steps if step.solver_result is not None]
@@ -160,6 +199,7 @@ def walk_metrics(walk) -> dict[str, Any]:
         "max_defect": max((check.max_defect for check in checks), default=None),
         "max_resim_error": max((check.resim_error for check in checks), default=None),
         "strategy_details": details or None,
+        **walk_stop(walk),
     }
 
 

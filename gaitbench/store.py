@@ -58,6 +58,10 @@ CASE_COLUMNS: dict[str, str] = {
     "cot_min": "REAL",
     "cot_max": "REAL",
     "steps_solved": "INTEGER",
+    "stop_cause": "TEXT",
+    "stop_step": "INTEGER",
+    "stop_status": "TEXT",
+    "retries": "INTEGER",
     "wall_time_s": "REAL",
     "solve_time_s": "REAL",
     "function_time_s": "REAL",
@@ -77,7 +81,12 @@ CASE_COLUMNS: dict[str, str] = {
     "finished_at": "TEXT",
 }
 """Every column of the ``cases`` table, in order (documented in docs/results.md). Columns holding lists or
-dicts are JSON text; paths are relative to the store directory."""
+dicts are JSON text; paths are relative to the store directory. A store written before a column existed gains it
+(null in its old rows) when opened: see :func:`_add_missing_columns`."""
+
+STOP_CAUSES = ("complete", "geometry", "solver", "verification", "time_limit", "error", "crashed")
+"""Values of the ``stop_cause`` column: why a walk ended (``complete``: it did not stop; null: not recorded, a row
+written before the column existed)."""
 
 JSON_COLUMNS = ("experiment_options", "transcription_options", "solver_options", "strategy_options",
                 "problem_options", "tracking_stage", "cot_steps", "strategy_details", "tracking", "provenance")
@@ -117,6 +126,7 @@ class ResultStore:
         with store._db:
             store._db.execute(_create_table("runs", RUN_COLUMNS))
             store._db.execute(_create_table("cases", CASE_COLUMNS))
+            _add_missing_columns(store._db)
         return store
 
     @classmethod
@@ -132,6 +142,11 @@ class ResultStore:
             connection.execute("SELECT case_key FROM cases LIMIT 1")
         except sqlite3.DatabaseError as error:
             raise StoreError(f"{database}: not a gaitbench results store ({error})") from error
+        try:
+            with connection:
+                _add_missing_columns(connection)
+        except sqlite3.OperationalError:  # a read-only store is still read: its rows lack the new columns
+            pass
         return cls(database.parent, connection)
 
     def close(self) -> None:
@@ -194,12 +209,13 @@ class ResultStore:
             self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
 
     def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
-        """Stored case rows (JSON columns decoded), optionally only those a given run computed."""
+        """Stored case rows (JSON columns decoded, every column of :data:`CASE_COLUMNS` present, null where a
+        store predates it), optionally only those a given run computed."""
         if run_id is None:
             rows = self._db.execute("SELECT * FROM cases ORDER BY rowid")
         else:
             rows = self._db.execute("SELECT * FROM cases WHERE run_id = ? ORDER BY rowid", (run_id,))
-        return [_decode(dict(row)) for row in rows]
+        return [_decode(dict.fromkeys(CASE_COLUMNS) | dict(row)) for row in rows]
 
     def resolve_run(self, run: str) -> str:
         """A run id from a full id or a unique prefix of one; :class:`StoreError` otherwise."""
@@ -239,6 +255,18 @@ def _connect(database: Path) -> sqlite3.Connection:
 
 def _create_table(name: str, columns: dict[str, str]) -> str:
     return f"CREATE TABLE IF NOT EXISTS {name} ({', '.join(f'{c} {t}' for c, t in columns.items())})"
+
+
+def _add_missing_columns(connection: sqlite3.Connection) -> None:
+    """Add the columns a store written by an older gaitbench lacks, so it can be read and resumed (old rows: null).
+
+    Only additions are migrated; SQLite's ``ALTER TABLE ADD COLUMN`` keeps the existing rows and is cheap.
+    """
+    for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
+        present = {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
+        for column, kind in columns.items():
+            if present and column not in present:
+                connection.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
 
 
 def _insert(table: str, columns: dict[str, str], replace: bool) -> str:

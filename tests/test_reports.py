@@ -127,7 +127,8 @@ DOCUMENTED_CSV = {
     "savings": tables.SAVINGS_COLUMNS, "published_acot": tables.PUBLISHED_COLUMNS,
     "published_savings": tables.PUBLISHED_SAVINGS_COLUMNS, "dc_claims": tables.DC_CLAIMS_COLUMNS,
     "energetics": tables.ENERGETICS_COLUMNS, "tracking": tables.TRACKING_COLUMNS,
-    "failed_cases": tables.FAILED_COLUMNS, "provenance": tables.PROVENANCE_COLUMNS, "cases": tables.CASES_COLUMNS,
+    "stop_causes": tables.STOP_CAUSE_COLUMNS, "failed_cases": tables.FAILED_COLUMNS,
+    "provenance": tables.PROVENANCE_COLUMNS, "cases": tables.CASES_COLUMNS,
 }
 
 
@@ -150,12 +151,19 @@ def test_csv_files_have_their_documented_columns(report_dir):
     failed = pd.read_csv(report_dir / "failed_cases.csv")
     assert list(failed["method"]) == ["reference"] and list(failed["status"]) != ["solved"]
     assert isinstance(failed["message"].iloc[0], str) and failed["message"].iloc[0].strip()
+    causes = pd.read_csv(report_dir / "stop_causes.csv").set_index("method")
+    # The unknown IPOPT option: the solver's own status `error` at step 1, a solver stop (the case did not raise).
+    reference = causes.loc["reference"]
+    assert (reference["stop_cause"], int(reference["stop_steps"]), reference["stop_statuses"]) == ("solver", 1, "error")
+    assert (causes.drop("reference")["stop_cause"] == "complete").all()
+    assert causes.drop("reference")["cases"].tolist() == [2, 2, 2]
 
 
 def test_html_contains_every_figure_and_table(report_dir, store):
     html = (report_dir / "index.html").read_text()
-    for element in ("fig-acot-forward", "fig-cot-bounds-forward", "fig-savings-forward", "tbl-minima-forward",
-                    "tbl-acot-forward", "tbl-savings-forward", "tbl-published-acot", "tbl-published-savings",
+    for element in ("fig-acot-forward", "fig-completion-forward", "fig-cot-bounds-forward", "fig-savings-forward",
+                    "tbl-minima-forward", "tbl-acot-forward", "tbl-savings-forward", "tbl-stop-causes-forward",
+                    "tbl-stop-causes", "tbl-published-acot", "tbl-published-savings",
                     "tbl-dc-claims", "tbl-failed", "tbl-provenance", 'id="gaits"', "fig-gait-angles-",
                     "fig-gait-velocities-", "fig-gait-torques-", "fig-gait-grf-", "fig-gait-push-off-",
                     "fig-animation-", "svg.stick-figure", "# tiny test suite"):
@@ -359,3 +367,102 @@ def test_report_opens_in_headless_chromium(report_dir, tmp_path):
     assert pixels.shape == (2000, 1280)
     assert pixels.std() > 10  # not blank: text, figures and tables on white
     assert (pixels < 128).mean() > 0.01
+
+
+# --- complete walks only: a synthetic store with partial walks ----------------------------------------------------
+
+def _synthetic_store(directory: Path) -> Path:
+    """Forward, OP-DC at N = 8 (a complete walk, ACOT 0.30, and a partial one whose solved step costs 0.01) and N = 10
+    (only a partial walk), OP-DM complete at both; one row stored before stop causes were recorded."""
+    from gaitbench.store import ResultStore
+
+    base = {"suite": "synthetic", "run_id": "r1", "experiment": "forward", "experiment_options": {}, "steps": 2,
+            "transcription": "hermite-simpson", "solver": "ipopt", "strategy": "one-phase", "repetition": 0,
+            "wall_time_s": 1.0, "iterations": 10, "message": ""}
+    complete = {"status": "solved", "stop_cause": "complete", "retries": 0, "steps_solved": 2,
+                "max_defect": 1e-10, "max_resim_error": 1e-6}
+    partial = {"status": "incomplete", "acot": None, "steps_solved": 1, "max_defect": 0.5, "max_resim_error": 0.5}
+    rows = [
+        {"method": "OP-DC", "N": 8, "acot": 0.30, "cot_steps": [0.20, 0.40], "cot_min": 0.20, "cot_max": 0.40,
+         "retries": 1, **{k: v for k, v in complete.items() if k != "retries"}},
+        {"method": "OP-DC", "N": 8, "repetition": 1, **partial, "cot_steps": [0.01, None], "cot_min": 0.01,
+         "cot_max": 0.01, "stop_cause": "solver", "stop_step": 2, "stop_status": "iteration_limit", "retries": 3,
+         "message": "step 2: iteration_limit: too many iterations"},
+        {"method": "OP-DC", "N": 10, **partial, "cot_steps": [0.02, None], "cot_min": 0.02, "cot_max": 0.02,
+         "stop_cause": "geometry", "stop_step": 2, "stop_status": "infeasible_geometry", "retries": 0,
+         "message": "step 2: stance angle at heel strike below the lower angle bound"},
+        {"method": "OP-DM", "transcription": "dmoc", "N": 8, "acot": 0.50, "cot_steps": [0.5, 0.5], "cot_min": 0.5,
+         "cot_max": 0.5, **complete},
+        {"method": "OP-DM", "transcription": "dmoc", "N": 10, "acot": 0.45, "cot_steps": [0.45, 0.45],
+         "cot_min": 0.45, "cot_max": 0.45, **complete},
+        {"method": "OP-DM", "transcription": "dmoc", "N": 10, "repetition": 1, **partial, "cot_steps": [0.03, None],
+         "cot_min": 0.03, "cot_max": 0.03, "message": "step 2: infeasible: locally infeasible"},  # no stop columns
+    ]
+    with ResultStore.create(directory) as store:
+        store.start_run({"run_id": "r1", "suite": "synthetic", "started_at": "2026-01-01T00:00:00+00:00"})
+        for i, row in enumerate(rows):
+            store.record_case(base | row | {"case_key": f"{i:016x}"})
+    return directory
+
+
+def test_acot_is_over_complete_walks_and_partial_walks_are_labelled(tmp_path):
+    store = _synthetic_store(tmp_path / "synthetic")
+    report = build_report(store)
+    acot = report.tables["acot"].set_index(["method", "N"])
+    # The partial walks' cheap steps (0.01, 0.02, 0.03) are in no ACOT, bound or minimum.
+    assert acot.loc[("OP-DC", 8), "acot"] == pytest.approx(0.30)
+    assert acot.loc[("OP-DC", 8), "cot_min"] == pytest.approx(0.20)
+    assert acot.loc[("OP-DC", 8), "max_defect"] == pytest.approx(1e-10)
+    assert math.isnan(acot.loc[("OP-DC", 10), "acot"]) and math.isnan(acot.loc[("OP-DC", 10), "cot_min"])
+    assert acot.loc[("OP-DM", 10), "acot"] == pytest.approx(0.45)
+    assert acot["completion_rate"].to_dict() == {("OP-DC", 8): 0.5, ("OP-DC", 10): 0.0, ("OP-DM", 8): 1.0,
+                                                 ("OP-DM", 10): 0.5}
+    assert acot.loc[("OP-DC", 8), "retries"] == 4
+    minima = report.tables["acot_minima"].set_index("method")
+    assert minima.loc["OP-DC", "min_acot"] == pytest.approx(0.30) and minima.loc["OP-DC", "N_at_min"] == 8
+    assert report.tables["cot_bounds"]["cot_min"].min() == pytest.approx(0.20)
+    # Stop causes, counted per experiment, method and cause; the row stored without one is "unrecorded".
+    causes = report.tables["stop_causes"]
+    counted = {(r.method, r.stop_cause): (r.cases, r.N, r.stop_steps, r.stop_statuses, r.retries)
+               for r in causes.itertuples()}
+    assert counted == {("OP-DC", "complete"): (1, "8", "", "", 1),
+                       ("OP-DC", "solver"): (1, "8", "2", "iteration_limit", 3),
+                       ("OP-DC", "geometry"): (1, "10", "2", "infeasible_geometry", 0),
+                       ("OP-DM", "complete"): (2, "8, 10", "", "", 0),
+                       ("OP-DM", "unrecorded"): (1, "10", "", "", 0)}
+    # A partial walk's own figure is shown only as partial_acot, in the per-case tables.
+    failed = report.tables["failed_cases"].set_index("N")
+    assert failed.loc[8, "partial_acot"] == pytest.approx(0.01) and failed.loc[8, "stop_cause"] == "solver"
+    cases = report.tables["cases"]
+    assert cases["partial_acot"].notna().sum() == 3 and cases.loc[cases["partial_acot"].notna(), "acot"].isna().all()
+    assert cases.loc[cases["status"] != "solved", "cot_min"].isna().all()
+
+    out = write_report(store, tmp_path / "out")
+    html = out.read_text()
+    for element in ("fig-acot-forward", "fig-completion-forward", "tbl-stop-causes-forward", 'id="stop-causes"',
+                    "partial_acot", "4 solve retries in all"):
+        assert element in html, element
+    row = html.index('class="figure-row"')
+    assert row < html.index('id="fig-acot-forward"') < html.index('id="fig-completion-forward"') < html.index(
+        "</div>", row)  # the completion figure beside the ACOT figure
+    assert "0.01" not in pd.read_csv(tmp_path / "out" / "acot.csv").to_csv()
+    written = pd.read_csv(tmp_path / "out" / "stop_causes.csv")
+    assert list(written.columns) == tables.STOP_CAUSE_COLUMNS and len(written) == 5
+
+
+def test_a_partial_gait_chosen_by_hand_is_labelled_partial(store, tmp_path):
+    """The real store's failed reference case has no walk; a copy with one N = 8 OP-DC case marked as stopped shows
+    its gait labelled partial and without an ACOT."""
+    copy = tmp_path / "partial"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        (key,) = db.execute("SELECT case_key FROM cases WHERE method = 'OP-DC' AND N = 8").fetchone()
+        db.execute("UPDATE cases SET status = 'incomplete', stop_cause = 'solver', stop_step = 2, "
+                   "stop_status = 'infeasible', message = 'step 2: infeasible' WHERE case_key = ?", (key,))
+    report = build_report(copy, gait=key)
+    (section,) = report.gaits
+    assert section.gait.partial and "partial walk" in section.gait.label and section.gait.acot is None
+    assert section.gait.notes[0].startswith("Partial walk: it stopped at step 2 (solver;")
+    assert all("partial walk" in figure.title for figure in section.figures)
+    assert key not in set(report.tables["acot"].get("case_key", []))
+    assert tables.chosen_gaits(report.cases)["forward"] != key

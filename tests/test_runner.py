@@ -20,7 +20,7 @@ import gaitbench
 from gaitbench.case import Case, PluginChoice
 from gaitbench.cli import main
 from gaitbench.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
-from gaitbench.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_suite
+from gaitbench.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_case, run_suite
 from gaitbench.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
@@ -373,3 +373,79 @@ def test_tracking_stage_fills_the_tracking_columns(tmp_path: Path) -> None:
     assert 0 < row["max_position_error"] < 1e-2 and row["fell"] == 0
     assert row["acot_increase_percent"] > 5  # friction costs energy on top of the reference (measured: +65 %)
     assert (tmp_path / row["tracking_path"]).exists() and (tmp_path / row["tracking_path"]).with_suffix(".npz").exists()
+
+
+# --- why a walk stopped ------------------------------------------------------------------------------------------
+
+def test_stop_columns_record_geometry_solver_and_complete_walks(tmp_path: Path) -> None:
+    """Real walks: one stopped by its geometry before any solve, one by the solver's iteration limit, one complete;
+    and a timeout the run recorded without a walk."""
+    geometry = Case(PluginChoice("downward-slope"), 8, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
+                    PluginChoice("one-phase"), steps=2, method="geometry")
+    solver = walk_case(8, max_iterations=5)
+    complete = walk_case(8)
+    lost = walk_case(10)
+
+    class WithTimeout(InProcessExecutor):
+        def run(self, cases):
+            for case in cases:
+                yield failed_outcome(case, "timeout", "stopped") if case.key == lost.key else run_case(case)
+
+    run_suite(suite_of([geometry, solver, complete, lost]), tmp_path, WithTimeout())
+    rows = rows_by_key(tmp_path)
+    columns = ("status", "stop_cause", "stop_step", "stop_status", "retries")
+    assert tuple(rows[geometry.key][c] for c in columns) == ("incomplete", "geometry", 1, "infeasible_geometry", 0)
+    assert tuple(rows[solver.key][c] for c in columns) == ("incomplete", "solver", 1, "iteration_limit", 0)
+    got = rows[complete.key]
+    assert (got["status"], got["stop_cause"], got["retries"]) == ("solved", "complete", 0)
+    assert got["stop_step"] is None or np.isnan(got["stop_step"])
+    assert (rows[lost.key]["status"], rows[lost.key]["stop_cause"]) == ("timeout", "time_limit")
+
+
+def _step(index: int, status: str, solved: bool, retries: list | None = None):
+    from gaitbench.verify import StepVerification
+    from gaitbench.walk import StepOutcome
+
+    check = StepVerification(1e-12, 1e-6, 1e-6, 1.0, 0.1, 0.02) if solved else None
+    return StepOutcome(index, 1, status, status, verification=check,
+                       next_state=np.zeros(4) if solved else None,
+                       details={"retries": retries} if retries is not None else {})
+
+
+@pytest.mark.parametrize(("status", "cause"), [("infeasible", "solver"), ("iteration_limit", "solver"),
+                                               ("error", "solver"), ("time_limit", "time_limit"),
+                                               ("converged", "verification"), ("infeasible_geometry", "geometry")])
+def test_stop_cause_of_the_failing_step_and_retries_summed_over_the_walk(status: str, cause: str) -> None:
+    from gaitbench.runner import walk_metrics
+    from gaitbench.walk import WalkResult
+
+    retry = {"remedy": "adaptive-mu", "status": "infeasible"}
+    walk = WalkResult("forward", "hermite-simpson", "ipopt", "one-phase", 8, "second", requested_steps=3,
+                      steps=[_step(1, "converged", True, [retry]), _step(2, status, False, [retry, retry])])
+    metrics = walk_metrics(walk)
+    assert (metrics["stop_cause"], metrics["stop_step"], metrics["stop_status"]) == (cause, 2, status)
+    assert metrics["retries"] == 3
+    whole = WalkResult("forward", "hermite-simpson", "ipopt", "one-phase", 8, "second", requested_steps=1,
+                       steps=[_step(1, "converged", True)])
+    assert {k: walk_metrics(whole)[k] for k in ("stop_cause", "stop_step", "stop_status", "retries")} == {
+        "stop_cause": "complete", "stop_step": None, "stop_status": None, "retries": 0}
+
+
+def test_a_store_written_before_the_stop_columns_opens_and_gains_them(tmp_path: Path) -> None:
+    new = ("stop_cause", "stop_step", "stop_status", "retries")
+    old_columns = {c: t for c, t in CASE_COLUMNS.items() if c not in new}
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        db.execute(f"CREATE TABLE cases ({', '.join(f'{c} {t}' for c, t in old_columns.items())})")
+        db.execute("CREATE TABLE runs (run_id TEXT PRIMARY KEY, suite TEXT, started_at TEXT)")
+        db.execute("INSERT INTO cases (case_key, status, acot) VALUES ('old', 'solved', 0.03)")
+    frame = gaitbench.load_results(tmp_path)  # reading opens it
+    assert list(frame.columns) == list(CASE_COLUMNS)
+    assert frame.iloc[0]["acot"] == 0.03 and frame.iloc[0]["stop_cause"] is None
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        present = {row[1] for row in db.execute("PRAGMA table_info(cases)")}
+        runs = {row[1] for row in db.execute("PRAGMA table_info(runs)")}
+    assert set(new) <= present and "provenance" in runs
+    with ResultStore.create(tmp_path) as store:  # and a resumed run writes the new columns into it
+        store.record_case(case_row(CaseOutcome(walk_case(8), "crashed", "SIGKILL", 1.0), "s", "r"))
+        rows = {row["case_key"]: row for row in store.cases()}
+    assert rows[walk_case(8).key]["stop_cause"] == "crashed" and rows["old"]["stop_cause"] is None

@@ -48,6 +48,7 @@ class ReportData:
     tables: dict[str, Any]
     experiments: list[str]
     experiment_figures: dict[str, list] = field(default_factory=dict)
+    """Per sweep experiment: the ACOT and completion-rate figures first (shown side by side), then the others."""
     gaits: list[GaitSection] = field(default_factory=list)
     gait_problems: list[str] = field(default_factory=list)
     energetics_figures: list = field(default_factory=list)
@@ -86,14 +87,15 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
         "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "savings": savings,
         "published_acot": tb.published_comparison(minima), "published_savings": tb.published_savings(savings, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
-        "failed_cases": tb.failed_cases(df), "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
+        "stop_causes": tb.stop_causes(df), "failed_cases": tb.failed_cases(df),
+        "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
     }
     suites = sorted({run.get("suite") or "?" for run in runs})
     report = ReportData(store_dir=store_dir, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",
                         cases=df, runs=runs, tables=tables, experiments=tb.experiments(df))
     for experiment in report.experiments:
-        made = [fig.acot_figure(acot, experiment), fig.cot_bounds_figure(acot, experiment),
-                fig.savings_figure(savings, experiment)]
+        made = [fig.acot_figure(acot, experiment), fig.completion_figure(acot, experiment),
+                fig.cot_bounds_figure(acot, experiment), fig.savings_figure(savings, experiment)]
         report.experiment_figures[experiment] = [figure for figure in made if figure is not None]
     report.energetics_figures = fig.energetics_figures(energetics)
 
@@ -119,6 +121,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
         except Exception as error:  # a report shows what it can and says what it could not
             report.gait_problems.append(f"case {key}: gait not shown ({type(error).__name__}: {error})")
             continue
+        if loaded.partial:
+            loaded.notes.insert(0, _partial_note(case))
         claim = None
         if case["is_dc"]:
             claims = tables["dc_claims"]
@@ -138,6 +142,24 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
                 series = {k: npz[k] for k in npz.files}
         report.tracking.append(TrackingSection(key, label, summary, fig.tracking_figures(key, label, series, summary)))
     return report
+
+
+def _partial_note(case) -> str:
+    """What a chosen gait that is not a complete walk shows, said before anything else about it."""
+    import math
+
+    where = f" at step {int(case['stop_step'])}" if not _missing(case["stop_step"]) else ""
+    solved = 0 if _missing(case["steps_solved"]) else int(case["steps_solved"])
+    figure = case["partial_acot"]
+    mean = "" if _missing(figure) or math.isnan(figure) else f"; partial ACOT of those steps {figure:.4g}"
+    return (f"Partial walk: it stopped{where} ({case['stop_cause']}; {case['status']}: {case['message']}) after "
+            f"{solved} solved steps{mean}. It has no ACOT, and no partial figure enters any ACOT of this report.")
+
+
+def _missing(value) -> bool:
+    import pandas as pd
+
+    return value is None or bool(pd.isna(value))
 
 
 def _track_summaries(store_dir: Path, df) -> dict[str, dict]:

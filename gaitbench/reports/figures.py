@@ -100,9 +100,31 @@ def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     ax.set_title(f"{experiment}: ACOT against N")
     ax.legend(fontsize=7, loc="best")
     return Figure(f"fig-acot-{slug(experiment)}", f"ACOT against N: {experiment}",
-                  "Average cost of transport of each method at each N (verified; dashed: the claimed ACOT of "
-                  "Decrease & Conquer's synthesized trajectory). Red circles: each method's minimum."
+                  "Average cost of transport of each method at each N, over its complete walks only (verified; "
+                  "dashed: the claimed ACOT of Decrease & Conquer's synthesized trajectory). A gap: no complete walk "
+                  "at that N. Red circles: each method's minimum."
                   + _thesis(experiment, "acot"), render(fig))
+
+
+def completion_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
+    """The fraction of each method's walks that were complete, against N: what the ACOT figure beside it rests on."""
+    data = acot[acot["experiment"] == experiment]
+    if data.empty:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method, rows, color in _by_method(data):
+        ax.plot(rows["N"], 100 * rows["completion_rate"], "o-", color=color, ms=4,
+                label=f"{method} ({int(rows['solved'].sum())} of {int(rows['cases'].sum())})")
+    ax.set_ylim(-5, 105)
+    ax.set_xlabel("N (nodes per step)")
+    _integer_n(ax)
+    ax.set_ylabel("complete walks (%)")
+    ax.set_title(f"{experiment}: completion rate against N")
+    ax.legend(fontsize=7, loc="best")
+    return Figure(f"fig-completion-{slug(experiment)}", f"Completion rate against N: {experiment}",
+                  "Share of each method's walks at each N that walked every requested step, solved and verified "
+                  "(the legend counts them over all N). Only these complete walks enter the ACOT beside it; why the "
+                  "others stopped is in the stop-cause table.", render(fig))
 
 
 def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
@@ -120,9 +142,9 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     ax.set_title(f"{experiment}: minimum and maximum per-step COT")
     ax.legend(fontsize=7, ncol=2)
     return Figure(f"fig-cot-bounds-{slug(experiment)}", f"Per-step COT bounds: {experiment}",
-                  "Lowest and highest COT of a single step of the walk, per method and N (store columns cot_min, "
-                  "cot_max; for D&C the chosen, synthesized trajectory)." + _thesis(experiment, "cot_bounds"),
-                  render(fig))
+                  "Lowest and highest COT of a single step of the walk, per method and N, over complete walks "
+                  "(store columns cot_min, cot_max; for D&C the chosen, synthesized trajectory)."
+                  + _thesis(experiment, "cot_bounds"), render(fig))
 
 
 def savings_figure(savings: pd.DataFrame, experiment: str) -> Figure | None:

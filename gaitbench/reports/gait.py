@@ -53,10 +53,13 @@ class Gait:
     footholds: np.ndarray
     leg_length: float
     notes: list[str] = field(default_factory=list)
+    partial: bool = False
+    """The walk stopped early (a ``--gait`` choice can be one): its label, and so every figure's title, says so."""
 
     @property
     def label(self) -> str:
-        return f"{self.experiment}, {self.method}, N = {self.N} (case {self.case_key})"
+        partial = ", partial walk" if self.partial else ""
+        return f"{self.experiment}, {self.method}, N = {self.N} (case {self.case_key}{partial})"
 
 
 def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
@@ -112,7 +115,8 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
     return Gait(case_key=case["case_key"], experiment=case["experiment"], method=case["method"],
                 strategy=case["strategy"], transcription=case["transcription"], N=int(case["N"]), phase=phase,
                 acot=_float(case["acot"]), claimed_acot=_float(case["claimed_acot"]), steps=steps,
-                footholds=footholds, leg_length=experiment.robot.l, notes=notes)
+                footholds=footholds, leg_length=experiment.robot.l, notes=notes,
+                partial=not bool(case.get("complete", case["status"] == "solved")))
 
 
 def _float(value: Any) -> float | None:

@@ -93,9 +93,10 @@ class HtmlReporter:
 
         df = report.cases
         counts = df["status"].value_counts().to_dict() if not df.empty else {}
+        retries = int(df["retries"].sum()) if not df.empty else 0
         csv_files = sorted(path.name for path in out_dir.glob("*.csv"))
         html = environment.get_template("report.html.j2").render(
-            report=report, table=table, rows=rows, counts=counts, total=len(df), csv_files=csv_files,
+            report=report, table=table, rows=rows, counts=counts, total=len(df), retries=retries, csv_files=csv_files,
             generated=datetime.now(timezone.utc).isoformat(timespec="seconds"), thesis=thesis_values,
             figures_dir=FIGURES_DIR, has_dc=bool(len(tables["dc_claims"])),
         )

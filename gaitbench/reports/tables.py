@@ -8,6 +8,11 @@ recomputed from its trajectory). For Decrease & Conquer the store's ``acot`` is 
 patchwork, i.e. the thesis's claim (``claimed_acot``); the figure of trajectories that satisfy the dynamics is the
 polished one in ``strategy_details.verified_acot`` (plugins/decrease_and_conquer.py). The tables use that as the
 verified ACOT of D&C and keep the claim beside it; with ``polish = false`` there is no verified D&C figure (NaN).
+
+Complete walks only: a case is complete when its status is ``solved`` (every requested step solved and verified).
+Every ACOT, claim and per-step COT bound in the tables and figures is of complete walks; a walk that stopped early
+contributes to the completion rate and the stop-cause table, and its own figure appears only as ``partial_acot``
+in the per-case tables, under that name, never inside an ACOT average.
 """
 
 from __future__ import annotations
@@ -29,8 +34,8 @@ ENERGETICS = "energetics"
 ENERGETICS_OPTIONS = ("mass_ratio", "length_ratio", "speed", "step_length", "slope")
 THESIS_TRANSCRIPTION = {"hermite-simpson": "DC", "dmoc": "DM"}
 
-ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "acot", "claimed_acot", "cot_min", "cot_max",
-                "wall_time_s", "iterations", "max_defect", "max_resim_error", "is_minimum"]
+ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "completion_rate", "acot", "claimed_acot", "cot_min",
+                "cot_max", "wall_time_s", "iterations", "retries", "max_defect", "max_resim_error", "is_minimum"]
 MINIMA_COLUMNS = ["experiment", "method", "thesis_method", "min_acot", "N_at_min", "claimed_acot_at_min",
                   "N_values", "N_solved"]
 COT_BOUNDS_COLUMNS = ["experiment", "method", "N", "cot_min", "cot_max", "acot"]
@@ -49,12 +54,18 @@ ENERGETICS_COLUMNS = ["method", "N", *ENERGETICS_OPTIONS, "status", "acot", "cla
 TRACKING_COLUMNS = ["experiment", "method", "N", "case_key", "max_position_error", "max_velocity_error",
                     "acot_reference", "acot_tracked", "acot_increase_percent", "fell", "published_increase_percent",
                     "published_position_error", "published_velocity_error"]
-FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "message", "wall_time_s"]
+STOP_CAUSE_COLUMNS = ["experiment", "method", "stop_cause", "cases", "N", "stop_steps", "stop_statuses", "retries"]
+FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "stop_cause", "stop_step", "stop_status",
+                  "message", "steps_solved", "partial_acot", "retries", "wall_time_s"]
 PROVENANCE_COLUMNS = ["run_id", "item", "value"]
 CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "transcription", "solver", "strategy",
                  "repetition", "status", "message", "acot", "claimed_acot", "cot_min", "cot_max", "steps_solved",
-                 "wall_time_s", "solve_time_s", "iterations", "max_defect", "max_resim_error", "walk_path",
-                 "tracking_path"]
+                 "stop_cause", "stop_step", "stop_status", "retries", "partial_acot", "wall_time_s", "solve_time_s",
+                 "iterations", "max_defect", "max_resim_error", "walk_path", "tracking_path"]
+STOP_CAUSE_ORDER = ("complete", "geometry", "solver", "verification", "time_limit", "error", "crashed", "unrecorded")
+"""The store's stop causes (gaitbench.store.STOP_CAUSES) in report order; ``unrecorded``: an incomplete walk stored
+before the store had a ``stop_cause`` column."""
+STATUS_CAUSES = {"solved": "complete", "timeout": "time_limit", "crashed": "crashed", "error": "error"}
 
 
 # --- shared columns --------------------------------------------------------------------------------------------
@@ -65,10 +76,16 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     ``experiment`` becomes a label (the plugin name, with its options for parametrized experiments other than
     ``energetics``), ``method`` falls back to strategy/transcription/solver when a case has no label,
     ``store_acot`` keeps the store's ``acot`` and ``acot`` becomes the verified ACOT (see the module docstring).
+    ``complete`` marks complete walks; ``acot``, ``claimed_acot``, ``cot_min`` and ``cot_max`` are kept only for them,
+    and ``partial_acot`` holds the mean COT of the steps an incomplete walk solved. ``stop_cause`` is filled from the
+    status where a store predates the column.
     """
     df = cases.copy()
+    for column in ("stop_cause", "stop_step", "stop_status", "retries", "cot_steps", "steps_solved"):
+        if column not in df.columns:
+            df[column] = None
     if df.empty:
-        for column in ("store_acot", "verified_acot", "is_dc", "experiment_name"):
+        for column in ("store_acot", "verified_acot", "is_dc", "experiment_name", "complete", "partial_acot"):
             df[column] = pd.Series(dtype=object)
         return df
     df["experiment_name"] = df["experiment"]
@@ -83,12 +100,35 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     verified = [_details(details).get("verified_acot") if is_dc else acot
                 for details, is_dc, acot in zip(df["strategy_details"], df["is_dc"], df["store_acot"], strict=True)]
     df["verified_acot"] = pd.to_numeric(pd.Series(verified, index=df.index, dtype=object), errors="coerce")
-    solved = df["status"] == "solved"
-    df["acot"] = df["verified_acot"].where(solved)
-    df["claimed_acot"] = df["claimed_acot"].where(solved & df["is_dc"])
-    for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N"):
+    complete = df["status"] == "solved"
+    df["complete"] = complete
+    df["acot"] = df["verified_acot"].where(complete)
+    df["claimed_acot"] = df["claimed_acot"].where(complete & df["is_dc"])
+    for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N",
+                   "retries", "steps_solved"):
         df[column] = pd.to_numeric(df[column], errors="coerce")
+    for column in ("cot_min", "cot_max"):  # a partial walk's bounds would pass for the walk's
+        df[column] = df[column].where(complete)
+    df["stop_step"] = pd.to_numeric(df["stop_step"], errors="coerce").astype("Int64")
+    df["stop_cause"] = [cause if isinstance(cause, str) and cause else STATUS_CAUSES.get(status, "unrecorded")
+                        for cause, status in zip(df["stop_cause"], df["status"], strict=True)]
+    df["partial_acot"] = [math.nan if done or is_dc else _partial_acot(cots)
+                          for done, is_dc, cots in zip(complete, df["is_dc"], df["cot_steps"], strict=True)]
     return df
+
+
+def _partial_acot(cot_steps: Any) -> float:
+    """Mean COT of the steps a walk solved before it stopped (NaN if none): the partial walk's own figure."""
+    if isinstance(cot_steps, str):
+        try:
+            cot_steps = json.loads(cot_steps)
+        except json.JSONDecodeError:
+            return math.nan
+    if not isinstance(cot_steps, list):
+        return math.nan
+    solved = [_number(cot) for cot in cot_steps]
+    solved = [cot for cot in solved if math.isfinite(cot)]
+    return float(np.mean(solved)) if solved else math.nan
 
 
 def _experiment_label(name: str, options: Any) -> str:
@@ -157,18 +197,23 @@ def _thesis_method(label: str, strategy: str, transcription: str) -> str | None:
 # --- ACOT, minima, COT bounds ------------------------------------------------------------------------------------
 
 def acot_table(df: pd.DataFrame) -> pd.DataFrame:
-    """ACOT per experiment × method × N (mean over solved repetitions), per-step COT bounds, effort, and whether
-    this N gives the method's minimum ACOT (the first N reaching it, as the thesis quotes)."""
+    """ACOT per experiment × method × N (mean over the complete walks among the repetitions), the completion rate,
+    per-step COT bounds and verification of the complete walks, effort over every case, and whether this N gives
+    the method's minimum ACOT (the first N reaching it, as the thesis quotes)."""
     sweep = sweep_cases(df)
     if sweep.empty:
         return pd.DataFrame(columns=ACOT_COLUMNS)
-    solved = sweep.assign(is_solved=sweep["status"] == "solved")
+    complete = sweep["complete"].astype(bool)
+    solved = sweep.assign(is_solved=complete, complete_defect=sweep["max_defect"].where(complete),
+                          complete_resim=sweep["max_resim_error"].where(complete))
     grouped = solved.groupby(["experiment", "method", "N"], sort=False)
     table = grouped.agg(cases=("case_key", "size"), solved=("is_solved", "sum"), acot=("acot", "mean"),
                         claimed_acot=("claimed_acot", "mean"), cot_min=("cot_min", "min"),
                         cot_max=("cot_max", "max"), wall_time_s=("wall_time_s", "mean"),
-                        iterations=("iterations", "mean"), max_defect=("max_defect", "max"),
-                        max_resim_error=("max_resim_error", "max")).reset_index()
+                        iterations=("iterations", "mean"), retries=("retries", "sum"),
+                        max_defect=("complete_defect", "max"), max_resim_error=("complete_resim", "max")).reset_index()
+    table["completion_rate"] = table["solved"] / table["cases"]
+    table["retries"] = table["retries"].astype(int)
     table = table.sort_values(["experiment", "method", "N"], kind="stable",
                               key=lambda column: column.map(_order(sweep, column.name)))
     table["N"] = table["N"].astype(int)
@@ -389,12 +434,38 @@ def tracking_table(df: pd.DataFrame, summaries: dict[str, dict]) -> pd.DataFrame
     return pd.DataFrame(rows, columns=TRACKING_COLUMNS)
 
 
+def stop_causes(df: pd.DataFrame) -> pd.DataFrame:
+    """How many walks of each experiment and method ended for each cause (``complete`` included), at which N and
+    steps, with which raw statuses, and the solve retries they took."""
+    if df.empty:
+        return pd.DataFrame(columns=STOP_CAUSE_COLUMNS)
+    rows = []
+    for (experiment, method, cause), group in df.groupby(["experiment", "method", "stop_cause"], sort=False):
+        rows.append({"experiment": experiment, "method": method, "stop_cause": cause, "cases": len(group),
+                     "N": _listed(group["N"].dropna().astype(int)),
+                     "stop_steps": _listed(group["stop_step"].dropna().astype(int)),
+                     "stop_statuses": _listed(group["stop_status"].dropna()),
+                     "retries": int(group["retries"].sum())})
+    table = pd.DataFrame(rows, columns=STOP_CAUSE_COLUMNS)
+    causes = {cause: i for i, cause in enumerate(STOP_CAUSE_ORDER)}
+    table["_cause"] = table["stop_cause"].map(lambda cause: causes.get(cause, len(causes)))
+    table = table.sort_values(["experiment", "method", "_cause"], kind="stable",
+                              key=lambda column: column if column.name == "_cause" else
+                              column.map(_order(df, column.name)))
+    return table.drop(columns="_cause").reset_index(drop=True)
+
+
+def _listed(values: pd.Series) -> str:
+    """Distinct values, sorted, as text (``"8, 10"``); empty when there are none."""
+    return ", ".join(str(value) for value in sorted(set(values)))
+
+
 def failed_cases(df: pd.DataFrame) -> pd.DataFrame:
-    """Every case that did not solve, with its status and reason."""
+    """Every case that did not solve, with its status, why and where its walk stopped, and its partial figure."""
     if df.empty:
         return pd.DataFrame(columns=FAILED_COLUMNS)
     failed = df[df["status"] != "solved"]
-    return failed[FAILED_COLUMNS].reset_index(drop=True)
+    return _integers(failed[FAILED_COLUMNS].reset_index(drop=True), "steps_solved", "retries")
 
 
 def provenance_table(runs: Iterable[dict]) -> pd.DataFrame:
@@ -419,7 +490,7 @@ def cases_table(df: pd.DataFrame) -> pd.DataFrame:
     """Every stored case, its parameters and scalar results (verified ``acot``; see the module docstring)."""
     if df.empty:
         return pd.DataFrame(columns=CASES_COLUMNS)
-    return df[CASES_COLUMNS].reset_index(drop=True)
+    return _integers(df[CASES_COLUMNS].reset_index(drop=True), "steps_solved", "retries")
 
 
 def chosen_gaits(df: pd.DataFrame) -> dict[str, str]:
