@@ -206,3 +206,16 @@ def test_problem_options_reach_the_walk_and_its_json(invoke, tmp_path):
         "absolute_value": "slack", "torque_regularization": 0.001, "start_pose": "on-ground"}
     assert options["limits"]["tau_max"] > 0  # the experiment's limits, recorded with the options
 
+
+@pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
+def test_compass_gait_optimum_with_scuffing_allowed_is_the_passive_gait(invoke, tmp_path, transcription):
+    """The passive walker needs no energy, so the optimizer must find (close to) zero (docs/deviations.md, Compass
+    gait). The tie-break is needed: the net-power cost is blind to torque, and without it the solvers stop at
+    torques whose power vanishes only at the quadrature points (verified ACOT 0.0045 HS, 0.29 DMOC)."""
+    out = tmp_path / "compass.json"
+    result = invoke("solve", "-e", "compass-gait", "-t", transcription, "--N", "40", "--steps", "2",
+                    "-p", "clearance=off", "-p", "torque_regularization=1e-4", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["complete"] and data["acot"] < 1e-3
+    assert all(step["push_off_impulse"] < 0.01 for step in data["steps"])
