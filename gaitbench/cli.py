@@ -181,7 +181,54 @@ def _create(ctx: click.Context, kind: str, name: str, **options):
         ctx.exit(2)
 
 
-@main.command("solve")
+PROBLEM_OPTION_HINT = "'-p' / '--problem-option'"
+
+
+class _SolveCommand(click.Command):
+    """``solve``, whose help ends with the problem options and their values. They are read from the suite schema
+    (the same checker a suite's ``problem_options`` uses) only when the help is shown, so the CLI stays quick to
+    import."""
+
+    def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        from gaitbench.gait_problem import ProblemOptions
+        from gaitbench.suite_schema import problem_option_kinds
+
+        defaults = ProblemOptions()
+        rows = []
+        for name, kind in problem_option_kinds().items():
+            default = getattr(defaults, name)
+            if default is None:
+                shown = "unset: no constraint"
+            else:
+                shown = str(default).lower() if isinstance(default, bool) else default
+            rows.append((name, f"{kind} (default {shown})"))
+        with formatter.section("Problem options (-p KEY=VALUE, the keys of a suite's problem_options)"):
+            formatter.write_dl(rows)
+        super().format_epilog(ctx, formatter)
+
+
+def _problem_options(pairs: tuple[str, ...], **flags: object) -> dict[str, object]:
+    """The ``-p KEY=VALUE`` overrides of :class:`~gaitbench.gait_problem.ProblemOptions`, checked as a suite's
+    ``problem_options`` are; ``flags`` are the older single-option flags (None when not given)."""
+    from gaitbench.suite_schema import problem_option_error
+
+    options = _parse_options(pairs, PROBLEM_OPTION_HINT)
+    for name, value in flags.items():
+        if value is None:
+            continue
+        if name in options and options[name] != value:
+            raise click.BadParameter(f"{name} is given twice, as {options[name]!r} and {value!r} (its own flag)",
+                                     param_hint=PROBLEM_OPTION_HINT)
+        options[name] = value
+    for name, value in options.items():
+        problem = problem_option_error(name, value)
+        if problem is not None:
+            raise click.BadParameter(f"{name}: {problem}" if not problem.startswith("unknown") else problem,
+                                     param_hint=PROBLEM_OPTION_HINT)
+    return options
+
+
+@main.command("solve", cls=_SolveCommand)
 @click.option("--experiment", "-e", "experiment_name", required=True, help="Experiment plugin, e.g. forward.")
 @click.option("--transcription", "-t", default="hermite-simpson", show_default=True, help="Transcription plugin.")
 @click.option("--solver", "-s", "solver_name", default="ipopt", show_default=True, help="Solver plugin.")
@@ -219,19 +266,29 @@ def _create(ctx: click.Context, kind: str, name: str, **options):
     help="Passed to the solver, e.g. -o max_iterations=500 -o linear_solver=mumps (repeatable).",
 )
 @click.option(
+    "--problem-option",
+    "-p",
+    "problem_options",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Overrides a gait-problem option, as a suite's problem_options does (repeatable; the keys and values are "
+         "listed below), e.g. -p clearance=off (scuffing allowed) -p lift_off=false.",
+)
+@click.option(
     "--abs",
+    "--absolute-value",
     "absolute_value",
     type=click.Choice(["slack", "smooth"]),
-    default="slack",
-    show_default=True,
-    help="|hip power| in the NLP: exact slack split, or the thesis's sqrt(x^2 + eps^2).",
+    default=None,
+    help="|hip power| in the NLP: exact slack split (default), or the thesis's sqrt(x^2 + eps^2). "
+         "Same as -p absolute_value=...",
 )
 @click.option(
     "--torque-regularization",
-    type=float,
-    default=0.0,
-    show_default=True,
-    help="Tie-break rho * integral of |tau|^2 added to the energy (never to the reported COT).",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Tie-break rho * integral of |tau|^2 added to the energy, never to the reported COT (default 0). "
+         "Same as -p torque_regularization=...",
 )
 @click.option(
     "--out",
@@ -250,8 +307,9 @@ def solve(
     strategy_name: str,
     strategy_options: tuple[str, ...],
     solver_options: tuple[str, ...],
-    absolute_value: str,
-    torque_regularization: float,
+    problem_options: tuple[str, ...],
+    absolute_value: str | None,
+    torque_regularization: float | None,
     out: Path | None,
 ) -> None:
     """Solve an experiment's walk with a strategy, and verify every step.
@@ -266,17 +324,15 @@ def solve(
     from gaitbench.gait_problem import ProblemOptions
     from gaitbench.walk import WalkProblem
 
+    overrides = _problem_options(problem_options, absolute_value=absolute_value,
+                                 torque_regularization=torque_regularization)
     experiment = _create(ctx, "experiment", experiment_name)
     transcriber = _create(ctx, "transcription", transcription)
     solver = _create(ctx, "solver", solver_name, **_parse_options(solver_options, "--solver-option"))
     strategy = _create(ctx, "strategy", strategy_name, **_parse_options(strategy_options, "--strategy-option"))
     if steps is not None and steps > experiment.n_steps:
         raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
-    options = replace(
-        ProblemOptions(limits=experiment.limits),
-        absolute_value=absolute_value,
-        torque_regularization=torque_regularization,
-    )
+    options = replace(ProblemOptions(limits=experiment.limits), **overrides)
     console = Console()
     total = steps or experiment.n_steps
     with console.status(f"solving step 1 of {total}") as status:

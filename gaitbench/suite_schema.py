@@ -269,23 +269,11 @@ class _Parser:
             return {}
         if not isinstance(value, dict):
             raise self.error(key, f"expected a table of ProblemOptions overrides, found {_found(value)}")
-        from gaitbench.gait_problem import ABSOLUTE_VALUE_FORMS, ProblemOptions
-
-        defaults = ProblemOptions()
-        allowed = tuple(f.name for f in fields(ProblemOptions) if f.name != "limits")
-        self.keys(value, key, allowed)
+        self.keys(value, key, tuple(problem_option_kinds()))
         for name, option in value.items():
-            default = getattr(defaults, name)
-            where = f"{key}.{name}"
-            if isinstance(default, bool):
-                if not isinstance(option, bool):
-                    raise self.error(where, f"expected true or false, found {_found(option)}")
-            elif isinstance(default, str):
-                if option not in ABSOLUTE_VALUE_FORMS:
-                    forms = " or ".join(f"'{form}'" for form in ABSOLUTE_VALUE_FORMS)
-                    raise self.error(where, f"expected {forms}, found {_found(option)}")
-            elif not _is_number(option) or not math.isfinite(option) or option < 0:
-                raise self.error(where, f"expected a non-negative number, found {_found(option)}")
+            problem = problem_option_error(name, option)
+            if problem is not None:
+                raise self.error(f"{key}.{name}", problem)
         return dict(value)
 
     # Plugin entries
@@ -434,6 +422,60 @@ class _Parser:
         if not _is_number(value) or not math.isfinite(value) or value <= 0:
             raise self.error(f"{where}.{name}", f"expected a positive number, found {_found(value)}")
         return float(value)
+
+
+def problem_option_kinds() -> dict[str, str]:
+    """Every :class:`~gaitbench.gait_problem.ProblemOptions` field a suite's ``problem_options`` (or ``gaitbench
+    solve -p``) may set, in declaration order, with what it takes: its allowed values (``OPTION_CHOICES``), true or
+    false, or a non-negative number. ``limits`` is not among them: it comes from the experiment."""
+    from gaitbench.gait_problem import OPTION_CHOICES, ProblemOptions
+
+    defaults = ProblemOptions()
+    kinds = {}
+    for item in fields(ProblemOptions):
+        if item.name == "limits":
+            continue
+        default = getattr(defaults, item.name)
+        if item.name in OPTION_CHOICES:
+            kinds[item.name] = _alternatives(OPTION_CHOICES[item.name])
+        elif isinstance(default, bool):
+            kinds[item.name] = "true or false"
+        elif isinstance(default, str):
+            kinds[item.name] = "a string"
+        else:  # floats, and friction_coefficient whose default None means "no friction cone"
+            kinds[item.name] = "a non-negative number"
+    return kinds
+
+
+def problem_option_error(name: str, value: Any) -> str | None:
+    """What is wrong with ``name = value`` as a ProblemOptions override, or None if nothing is.
+
+    The message names the allowed keys (for an unknown one) or values: ``expected 'terrain', 'chord' or 'off',
+    found a string 'of'``. Suites and ``gaitbench solve -p`` share it.
+    """
+    from gaitbench.gait_problem import OPTION_CHOICES
+
+    kinds = problem_option_kinds()
+    if name not in kinds:
+        close = difflib.get_close_matches(name, kinds, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        return f"unknown key '{name}'{hint}; allowed: {', '.join(kinds)}"
+    expected = kinds[name]
+    if name in OPTION_CHOICES:
+        ok = isinstance(value, str) and value in OPTION_CHOICES[name]
+    elif expected == "true or false":
+        ok = isinstance(value, bool)
+    elif expected == "a string":
+        ok = isinstance(value, str)
+    else:
+        ok = _is_number(value) and math.isfinite(value) and value >= 0
+    return None if ok else f"expected {expected}, found {_found(value)}"
+
+
+def _alternatives(choices: tuple[str, ...]) -> str:
+    """``'a'``, ``'a' or 'b'``, ``'a', 'b' or 'c'``."""
+    quoted = [f"'{choice}'" for choice in choices]
+    return quoted[0] if len(quoted) == 1 else f"{', '.join(quoted[:-1])} or {quoted[-1]}"
 
 
 def _is_int(value: Any) -> bool:

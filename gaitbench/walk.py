@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Protocol
 
@@ -88,6 +88,8 @@ class WalkResult:
     wall_time_s: float = 0.0
     strategy_details: dict = field(default_factory=dict)
     """Walk-level figures of the strategy (for decrease-and-conquer: claimed and verified ACOT, candidates)."""
+    problem_options: dict = field(default_factory=dict)
+    """The :class:`ProblemOptions` the walk was solved under, every field (limits included)."""
 
     @property
     def failure(self) -> str | None:
@@ -117,6 +119,7 @@ class WalkResult:
             "failure": self.failure,
             "wall_time_s": self.wall_time_s,
             "strategy_details": self.strategy_details,
+            "problem_options": self.problem_options,
             "steps": [step.as_dict() for step in self.steps],
         }
 
@@ -194,7 +197,7 @@ class WalkProblem:
     def result(self, strategy: str, phase: str = "second") -> WalkResult:
         return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
                           solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
-                          requested_steps=self.n_steps)
+                          requested_steps=self.n_steps, problem_options=asdict(self.options))
 
 
 class Strategy(Protocol):

@@ -140,10 +140,82 @@ def test_invalid_experiment_exits_1_with_the_message(invoke, fake_entry_points, 
 def test_help_and_version_do_not_load_plugins(invoke, fake_entry_points):
     fake_entry_points("ep_broken", BROKEN_PLUGIN)
 
-    for args in (["--help"], ["plugins", "-h"], ["experiments", "--help"], ["experiments", "show", "--help"]):
+    for args in (["--help"], ["plugins", "-h"], ["experiments", "--help"], ["experiments", "show", "--help"],
+                 ["solve", "--help"]):
         result = invoke(*args)
         assert result.exit_code == 0, args
         assert "Usage:" in result.stdout
         assert "warning" not in result.stderr
     version = invoke("--version")
     assert version.exit_code == 0 and __version__ in version.stdout
+
+
+# solve -p: the gait-problem options
+
+
+def test_solve_help_lists_every_problem_option_and_its_values(invoke):
+    from gaitbench.gait_problem import OPTION_CHOICES
+    from gaitbench.suite_schema import problem_option_kinds
+
+    result = invoke("solve", "--help")
+    assert result.exit_code == 0
+    listed = result.stdout.split("Problem options (-p KEY=VALUE")[1]
+    for name in problem_option_kinds():
+        assert f"\n  {name} " in listed, name
+    for name, choices in OPTION_CHOICES.items():
+        line = next(line for line in listed.splitlines() if line.startswith(f"  {name} "))
+        assert all(f"'{choice}'" in line for choice in choices), line
+    assert "true or false (default true)" in listed  # lift_off
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["-p", "clearance=of"], "clearance: expected 'terrain', 'chord' or 'off', found a string 'of'"),
+        (["-p", "angle_bounds=box"], "angle_bounds: expected 'physical' or 'thesis', found a string 'box'"),
+        (["-p", "start_pose=standing"], "start_pose: expected 'on-ground' or 'printed'"),
+        (["-p", "absolute_value=abs"], "absolute_value: expected 'slack' or 'smooth'"),
+        (["-p", "lift_off=1"], "lift_off: expected true or false, found an integer (1)"),
+        (["-p", "lift-off=yes"], "lift_off: expected true or false, found a string 'yes'"),
+        (["-p", "friction_coefficient=-0.5"], "friction_coefficient: expected a non-negative number, found a float"),
+        (["-p", "torque_regularization=much"], "torque_regularization: expected a non-negative number"),
+        (["-p", "clearnce=off"], "unknown key 'clearnce' (did you mean 'clearance'?); allowed: absolute_value"),
+        (["-p", "limits=1"], "unknown key 'limits'"),
+        (["-p", "clearance"], "'clearance' is not KEY=VALUE"),
+        (["-p", "absolute_value=smooth", "--abs", "slack"], "absolute_value is given twice"),
+    ],
+)
+def test_bad_problem_options_are_usage_errors_naming_the_key_and_the_allowed_values(invoke, args, expected):
+    result = invoke("solve", "-e", "forward", *args)
+    assert result.exit_code == 2
+    assert "--problem-option" in result.stderr
+    assert expected in " ".join(result.stderr.split()), result.stderr
+    assert "Traceback" not in result.output
+
+
+def test_problem_options_reach_the_walk_and_its_json(invoke, tmp_path):
+    out = tmp_path / "walk.json"
+    result = invoke("solve", "-e", "forward", "-t", "dmoc", "--N", "8", "--steps", "1", "-p", "clearance=chord",
+                    "-p", "lift-off=false", "-p", "friction_coefficient=2", "--problem-option", "approach_rate=0.01",
+                    "--abs", "slack", "--torque-regularization", "0.001", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    options = json.loads(out.read_text())["problem_options"]
+    assert {key: options[key] for key in ("clearance", "lift_off", "friction_coefficient", "approach_rate",
+                                          "absolute_value", "torque_regularization", "start_pose")} == {
+        "clearance": "chord", "lift_off": False, "friction_coefficient": 2, "approach_rate": 0.01,
+        "absolute_value": "slack", "torque_regularization": 0.001, "start_pose": "on-ground"}
+    assert options["limits"]["tau_max"] > 0  # the experiment's limits, recorded with the options
+
+
+@pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
+def test_compass_gait_optimum_with_scuffing_allowed_is_the_passive_gait(invoke, tmp_path, transcription):
+    """The passive walker needs no energy, so the optimizer must find (close to) zero (docs/deviations.md, Compass
+    gait). The tie-break is needed: the net-power cost is blind to torque, and without it the solvers stop at
+    torques whose power vanishes only at the quadrature points (verified ACOT 0.0045 HS, 0.29 DMOC)."""
+    out = tmp_path / "compass.json"
+    result = invoke("solve", "-e", "compass-gait", "-t", transcription, "--N", "40", "--steps", "2",
+                    "-p", "clearance=off", "-p", "torque_regularization=1e-4", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["complete"] and data["acot"] < 1e-3
+    assert all(step["push_off_impulse"] < 0.01 for step in data["steps"])

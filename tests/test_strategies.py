@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -262,3 +263,48 @@ def test_whole_walk_chains_its_steps_and_improves_on_one_phase(forward):
         start = np.r_[after.trajectory.q[0], after.trajectory.dq[0]]
         np.testing.assert_allclose(start, before.next_state, atol=1e-7)
     assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
+
+
+def _short_slope(n_steps: int):
+    from gaitbench.experiment import Experiment
+    from gaitbench.robot import RobotParameters
+    from gaitbench.terrain import Terrain
+
+    return Experiment(name="short-slope", description=f"{n_steps} 0.5 m steps up a 0.1 rad slope",
+                      robot=RobotParameters(m1=20.0, m2=20.0, M=40.0, l=1.0, a=0.5),
+                      terrain=Terrain.slope([0.5] * n_steps, 0.1),
+                      initial_state=[0.2187, -0.2187, 0.0, 0.0, -1.0924, -0.3774, 0.0, 0.0], step_duration=0.7343)
+
+
+def test_whole_walk_without_a_step_count_solves_the_full_walk():
+    """steps = None is the experiment's full walk (it once crashed asking for step n + 1)."""
+    experiment = _short_slope(3)
+    problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)
+    reported = []
+    walk = REGISTRY.create("strategy", "whole-walk").solve(problem, on_step=lambda step: reported.append(step.index))
+    assert walk.complete, walk.failure
+    assert walk.requested_steps == experiment.n_steps == len(walk.steps) == 3
+    assert reported == [1, 2, 3] and [step.index for step in walk.steps] == [1, 2, 3]
+    assert [step.stance for step in walk.steps] == [1, 2, 1]
+    assert walk.acot is not None and all(step.verification.max_defect < 1e-6 for step in walk.steps)
+
+
+def test_whole_walk_command_without_steps_walks_every_step(tmp_path):
+    out = tmp_path / "whole.json"
+    plugins = Path(__file__).resolve().parent.parent / "examples" / "plugins"
+    result = CliRunner().invoke(main, ["--plugins-dir", str(plugins), "solve", "-e", "gentle-slope", "-t", "dmoc",
+                                       "-S", "whole-walk", "--N", "8", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["complete"] and data["requested_steps"] == len(data["steps"]) == 5
+
+
+@pytest.mark.slow
+def test_whole_walk_solves_the_full_forward_walk(forward):
+    """All 11 forward steps in one NLP (HS, N = 20): measured 43 s wall, ACOT 0.287, 334 IPOPT iterations."""
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 20)
+    walk = REGISTRY.create("strategy", "whole-walk").solve(problem)
+    assert walk.complete, walk.failure
+    assert len(walk.steps) == forward.n_steps == 11
+    assert 0 < walk.acot < 1 and all(step.verification.max_defect < 1e-6 for step in walk.steps)

@@ -156,6 +156,20 @@ def test_shipped_suites_keep_the_file_text():
          ["[suite].problem_options.absolute_value: expected 'slack' or 'smooth', found a string 'abs'"]),
         (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { unilateral_contact = 1 }'),
          ["[suite].problem_options.unilateral_contact: expected true or false, found an integer (1)"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { clearance = "of" }'),
+         ["[suite].problem_options.clearance: expected 'terrain', 'chord' or 'off', found a string 'of'"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { angle_bounds = "printed" }'),
+         ["[suite].problem_options.angle_bounds: expected 'physical' or 'thesis', found a string 'printed'"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { start_pose = 1 }'),
+         ["[suite].problem_options.start_pose: expected 'on-ground' or 'printed', found an integer (1)"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { lift_off = "no" }'),
+         ["[suite].problem_options.lift_off: expected true or false, found a string 'no'"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { lift_off_rate = -0.1 }'),
+         ["[suite].problem_options.lift_off_rate: expected a non-negative number, found a float (-0.1)"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { friction_coefficient = true }'),
+         ["[suite].problem_options.friction_coefficient: expected a non-negative number, found a boolean (true)"]),
+        (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { friction_coefficient = "0.8" }'),
+         ["[suite].problem_options.friction_coefficient: expected a non-negative number, found a string '0.8'"]),
         (BASE.replace('name = "t"', 'name = "t"\nplugins = ["no-such-dir"]'),
          ["[suite].plugins[0]: plugin directory 'no-such-dir'", "does not exist"]),
         (BASE + '[[exclude]]\nsolver = "ipopz"\n', ["[[exclude]][0]: matches no case", "solver = ['ipopz']"]),
@@ -326,6 +340,23 @@ def test_explicit_methods_carry_their_labels(tmp_path):
 def test_n_range_is_inclusive(tmp_path):
     suite = _load(tmp_path, BASE.replace("N = [10, 20]", "N = { start = 10, stop = 30, step = 10 }"))
     assert sorted({case.n_nodes for case in suite.cases}) == [10, 20, 30]
+
+
+def test_every_problem_option_is_accepted_with_an_allowed_value(tmp_path):
+    from gaitbench.gait_problem import OPTION_CHOICES, ProblemOptions
+    from gaitbench.suite_schema import problem_option_kinds
+
+    assert set(problem_option_kinds()) == {f for f in ProblemOptions.__dataclass_fields__ if f != "limits"}
+    for name, choices in OPTION_CHOICES.items():
+        for choice in choices:
+            text = BASE.replace('name = "t"', f'name = "t"\nproblem_options = {{ {name} = "{choice}" }}')
+            assert _load(tmp_path, text).cases[0].problem_options == {name: choice}
+    overrides = ('{ clearance = "off", lift_off = false, lift_off_rate = 0.01, angle_bounds = "thesis", '
+                 'start_pose = "printed", friction_coefficient = 0.8, unilateral_contact = true }')
+    case = _load(tmp_path, BASE.replace('name = "t"', f'name = "t"\nproblem_options = {overrides}')).cases[0]
+    assert case.problem_options == {"clearance": "off", "lift_off": False, "lift_off_rate": 0.01,
+                                    "angle_bounds": "thesis", "start_pose": "printed", "friction_coefficient": 0.8,
+                                    "unilateral_contact": True}
 
 
 def test_suite_settings_reach_every_case(tmp_path):
