@@ -26,7 +26,7 @@ def test_structured_functions_equal_the_flat_graph(transcription, phase, absolut
     assert nlp.interval_blocks, "Hermite–Simpson declares its defects per interval, DMOC its interior momentum balance"
     rng = np.random.default_rng(3)
     x, lam = rng.normal(size=nlp.n_variables), rng.normal(size=nlp.n_constraints)
-    p = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09]
+    p = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09, 0.0]
     sigma = ca.SX.sym("sigma")
     multipliers = ca.SX.sym("lam", nlp.n_constraints)
     flat_hessian = ca.hessian(sigma * nlp.f + ca.dot(multipliers, nlp.g), nlp.x)[0]

@@ -381,7 +381,8 @@ def test_stop_columns_record_geometry_solver_and_complete_walks(tmp_path: Path) 
     """Real walks: one stopped by its geometry before any solve, one by the solver's iteration limit, one complete;
     and a timeout the run recorded without a walk."""
     geometry = Case(PluginChoice("downward-slope"), 8, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
-                    PluginChoice("one-phase"), steps=2, method="geometry")
+                    PluginChoice("one-phase"), steps=2, method="geometry",
+                    problem_options={"angle_bounds": "thesis"})  # the printed bounds refuse step 1
     solver = walk_case(8, max_iterations=5)
     complete = walk_case(8)
     lost = walk_case(10)
@@ -395,7 +396,8 @@ def test_stop_columns_record_geometry_solver_and_complete_walks(tmp_path: Path) 
     rows = rows_by_key(tmp_path)
     columns = ("status", "stop_cause", "stop_step", "stop_status", "retries")
     assert tuple(rows[geometry.key][c] for c in columns) == ("incomplete", "geometry", 1, "infeasible_geometry", 0)
-    assert tuple(rows[solver.key][c] for c in columns) == ("incomplete", "solver", 1, "iteration_limit", 0)
+    # The ladder's three rungs (adaptive μ, First-Phase seed, both) fail within 5 iterations too.
+    assert tuple(rows[solver.key][c] for c in columns) == ("incomplete", "solver", 1, "iteration_limit", 3)
     got = rows[complete.key]
     assert (got["status"], got["stop_cause"], got["retries"]) == ("solved", "complete", 0)
     assert got["stop_step"] is None or np.isnan(got["stop_step"])

@@ -23,7 +23,7 @@ def _step_nlp(transcription: str):
     return load_registry().create("transcription", transcription).build(structure).nlp
 
 
-STEP_PARAMETERS = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09]
+STEP_PARAMETERS = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09, 0.0]
 
 
 @pytest.mark.parametrize("case", ["hs071", "hermite-simpson", "dmoc"])
