@@ -112,17 +112,6 @@ def test_ripopt_solves_hs071_with_ipopt_multipliers():
     np.testing.assert_allclose(result.multipliers, reference.multipliers, atol=1e-6)  # CasADi's sign convention
 
 
-def test_ripopt_solves_the_hermite_simpson_gait_step_to_ipopts_optimum():
-    """On the DMOC step ripopt ends at another local minimum (tests/test_solver_conformance.py)."""
-    problem = gait_step("hermite-simpson", 20)
-    result = _solve(problem)
-    assert result.status is SolverStatus.CONVERGED, result.message
-    assert abs(result.objective - problem.f_star) <= 1e-6
-    assert result.constraint_violation <= 1e-6
-    assert 20 <= result.iterations <= 150
-    assert result.multipliers.shape == (problem.nlp.n_constraints,)  # the lifting constraints' are left out
-
-
 @pytest.mark.slow
 def test_ripopt_solves_the_hermite_simpson_gait_step_to_ipopts_optimum():
     problem = gait_step("hermite-simpson", 20)
