@@ -1,0 +1,82 @@
+"""Do the walks complete? A completion table rendered from a results store, for the record in benchmarks/results/.
+
+Run:    .venv/bin/gaitbench run benchmarks/suites/complete-walks.toml --jobs 2
+        .venv/bin/python benchmarks/completion.py results/complete-walks --out benchmarks/results/complete_walks.md
+
+Per experiment and method: how many walks walked every step, the N of those that stopped with the cause, step and
+status recorded by the store, and the solve retries the walks needed (docs/solvers.md, "Retries"). Every figure is
+read from the store; the table names the commits the cases ran at.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pandas as pd
+
+from gaitbench import load_results
+
+
+def completion_table(frame: pd.DataFrame) -> pd.DataFrame:
+    """One row per experiment and method: walks, complete walks, retries, wall time, and the walks that stopped."""
+    rows = []
+    for (experiment, method), group in frame.groupby(["experiment", "method"], sort=True):
+        complete = group["status"] == "solved"
+        stopped = group[~complete].sort_values("N")
+        rows.append({
+            "experiment": experiment,
+            "method": method,
+            "walks": len(group),
+            "complete": int(complete.sum()),
+            "steps solved": int(group["steps_solved"].fillna(0).sum()),
+            "retries": int(pd.to_numeric(group["retries"], errors="coerce").fillna(0).sum()),
+            "case time (s)": round(float(group["wall_time_s"].sum()), 1),
+            "stopped (N: cause at step, status)": "; ".join(
+                f"{int(row.N)}: {row.stop_cause} at {_step(row.stop_step)}, {row.stop_status}"
+                for row in stopped.itertuples()) or "—",
+        })
+    return pd.DataFrame(rows)
+
+
+def markdown_table(table: pd.DataFrame) -> str:
+    lines = ["| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(str(value) for value in row) + " |" for row in table.itertuples(index=False)]
+    return "\n".join(lines)
+
+
+def _step(value) -> str:
+    return "—" if pd.isna(value) else str(int(value))
+
+
+def render(store: Path) -> str:
+    frame = load_results(store)
+    commits = sorted({row.get("git_commit", "?") for row in frame["provenance"] if isinstance(row, dict)})
+    table = completion_table(frame)
+    total, complete = int(table["walks"].sum()), int(table["complete"].sum())
+    lines = [
+        f"# Completion: {store.name}",
+        "",
+        f"{complete} of {total} walks complete ({100 * complete / total:.0f} %). Rendered by "
+        f"`benchmarks/completion.py` from the store; cases ran at {', '.join(commits)}.",
+        "",
+        markdown_table(table),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("store", type=Path)
+    parser.add_argument("--out", type=Path, help="write the table here (default: print it)")
+    args = parser.parse_args()
+    text = render(args.store)
+    if args.out:
+        args.out.write_text(text)
+    else:
+        print(text)
+
+
+if __name__ == "__main__":
+    main()
