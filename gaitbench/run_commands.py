@@ -42,9 +42,10 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle.
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
-    the rest. Exit status 1 if any case failed, 2 if the suite is invalid.
+    the rest. Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
     """
     from gaitbench.runner import RunRefused, run_suite
+    from gaitbench.store import StoreError
     from gaitbench.suite import SuiteError, load_suite
 
     if state.plugin_dirs:  # through the environment, so worker processes load them too
@@ -69,7 +70,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, on_start=progress.start, on_outcome=progress.advance)
-        except RunRefused as error:
+        except (RunRefused, StoreError) as error:
             raise click.ClickException(str(error)) from None
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, "
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")

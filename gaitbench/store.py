@@ -5,9 +5,12 @@ Layout of a store directory::
     results.sqlite          runs (one row per `gaitbench run` session) and cases (one row per case key)
     cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked
 
-Only the process that runs the suite writes: workers return their results and the runner records each one as
-soon as it arrives. A case's files are written to a temporary directory and renamed into place before its row
-is committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
+Only the processes that run suites write: workers return their results and the runner records each one as soon
+as it arrives. A case's files are written to a temporary directory and renamed into place before its row is
+committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
+
+Readers open the store read-only and never change it; a file that is not a gaitbench store is refused before
+anything is written to it.
 """
 
 from __future__ import annotations
@@ -18,11 +21,19 @@ import os
 import shutil
 import sqlite3
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 DATABASE = "results.sqlite"
 CASES_DIR = "cases"
+
+APPLICATION_ID = int.from_bytes(b"gbch", "big")
+"""``PRAGMA application_id`` of a gaitbench store: how a store is told from another SQLite file before anything is
+written (stores written before it existed are recognized by their tables, and stamped when next written)."""
+
+STORE_TABLES = {"runs", "cases"}
 
 FINISHED_STATUSES = ("solved", "incomplete", "error", "timeout", "crashed")
 """``solved``: every step solved and verified. ``incomplete``: the method failed at a step (a result, not a
@@ -105,7 +116,6 @@ RUN_COLUMNS: dict[str, str] = {
     "provenance": "TEXT",
 }
 
-
 class StoreError(Exception):
     """A store that is missing, unreadable or not a gaitbench store; the message says which path and why."""
 
@@ -117,40 +127,89 @@ class ResultStore:
         self.directory = directory
         self._db = connection
 
+    @property
+    def database(self) -> Path:
+        return self.directory / DATABASE
+
     @classmethod
     def create(cls, directory: str | Path) -> ResultStore:
-        """Open the store at ``directory`` for writing, creating it (and its tables) if needed."""
+        """Open the store at ``directory`` for writing, creating it (and its tables) if needed.
+
+        :class:`StoreError` (one line naming the path) if the directory cannot be written or ``results.sqlite`` is
+        not a gaitbench store; such a file is left exactly as it was.
+        """
         directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        store = cls(directory, _connect(directory / DATABASE))
-        with store._db:
-            store._db.execute(_create_table("runs", RUN_COLUMNS))
-            store._db.execute(_create_table("cases", CASE_COLUMNS))
-            _add_missing_columns(store._db)
+        database = directory / DATABASE
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise StoreError(f"{directory}: cannot create the results store here ({_reason(error)})") from None
+        _check_file(database)
+        try:
+            connection = sqlite3.connect(database, timeout=30, isolation_level=None)
+        except sqlite3.Error as error:
+            raise StoreError(f"{database}: cannot open the results store for writing ({error})") from None
+        store = cls(directory, connection)
+        try:
+            connection.row_factory = sqlite3.Row
+            with store._write():  # checked again under the write lock: what the WAL holds, and a file made meanwhile
+                _check_schema(connection, database)
+            # readers (`runs show` during a run) never block the writer
+            connection.execute("PRAGMA journal_mode=WAL")
+            connection.execute("PRAGMA synchronous=FULL")
+            with store._write():
+                for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
+                    connection.execute(_create_table(table, columns))
+                _add_missing_columns(connection)
+                connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        except sqlite3.Error as error:
+            connection.close()
+            raise StoreError(f"{database}: cannot write the results store ({error})") from None
+        except StoreError:
+            connection.close()
+            raise
         return store
 
     @classmethod
     def open(cls, directory: str | Path) -> ResultStore:
-        """Open an existing store; :class:`StoreError` if there is none at ``directory``."""
+        """Open an existing store for reading; :class:`StoreError` if there is none at ``directory``.
+
+        The connection is read-only (``immutable`` too where the directory cannot be written, which a WAL database
+        needs for its lock files), so a store in a read-only place can be read and reading never changes one. A
+        store written before some columns existed gains them here when it can be written (see
+        :func:`_add_missing_columns`); otherwise it is read without them.
+        """
         directory = Path(directory)
         database = directory / DATABASE if directory.is_dir() else directory
         if not database.is_file():
             raise StoreError(f"{directory}: no results store here (expected {DATABASE}); "
                              "pass the directory given to `gaitbench run --store`, or the suite's output directory")
+        _check_file(database)
+        writable = os.access(database.parent, os.W_OK) and os.access(database, os.W_OK)
+        if writable:
+            _migrate(database)
         try:
-            connection = _connect(database)
+            connection = _connect_read_only(database, immutable=not writable)
+            _check_schema(connection, database)
             connection.execute("SELECT case_key FROM cases LIMIT 1")
         except sqlite3.DatabaseError as error:
-            raise StoreError(f"{database}: not a gaitbench results store ({error})") from error
-        try:
-            with connection:
-                _add_missing_columns(connection)
-        except sqlite3.OperationalError:  # a read-only store is still read: its rows lack the new columns
-            pass
+            raise StoreError(f"{database}: not a gaitbench results store ({error})") from None
         return cls(database.parent, connection)
 
     def close(self) -> None:
         self._db.close()
+
+    @contextmanager
+    def _write(self) -> Iterator[None]:
+        """A write transaction that takes SQLite's write lock at once (``BEGIN IMMEDIATE``): what is read inside it
+        stays true until the commit."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
 
     def __enter__(self) -> ResultStore:
         return self
@@ -161,11 +220,11 @@ class ResultStore:
     # --- runs -----------------------------------------------------------------------------------------------
 
     def start_run(self, run: dict[str, Any]) -> None:
-        with self._db:
+        with self._write():
             self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(run, RUN_COLUMNS))
 
     def finish_run(self, run_id: str, finished_at: str) -> None:
-        with self._db:
+        with self._write():
             self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
 
     def runs(self) -> list[dict[str, Any]]:
@@ -193,20 +252,23 @@ class ResultStore:
         ``files`` maps file names to their contents; the row's path columns should name them through
         :func:`case_file`.
         """
-        if files:
-            target = self.directory / case_file(row["case_key"])
-            staging = Path(tempfile.mkdtemp(prefix=f".{row['case_key']}-", dir=self.directory))
-            try:
-                for name, content in files.items():
-                    (staging / name).write_bytes(content)
-                if target.exists():  # a retried case replaces its earlier files
-                    shutil.rmtree(target)
-                target.parent.mkdir(exist_ok=True)
-                os.replace(staging, target)
-            finally:
-                shutil.rmtree(staging, ignore_errors=True)
-        with self._db:
-            self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+        try:
+            if files:
+                target = self.directory / case_file(row["case_key"])
+                staging = Path(tempfile.mkdtemp(prefix=f".{row['case_key']}-", dir=self.directory))
+                try:
+                    for name, content in files.items():
+                        (staging / name).write_bytes(content)
+                    if target.exists():  # a retried case replaces its earlier files
+                        shutil.rmtree(target)
+                    target.parent.mkdir(exist_ok=True)
+                    os.replace(staging, target)
+                finally:
+                    shutil.rmtree(staging, ignore_errors=True)
+            with self._write():
+                self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+        except (OSError, sqlite3.Error) as error:
+            raise StoreError(f"{self.directory}: cannot record case {row['case_key']} ({_reason(error)})") from None
 
     def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
         """Stored case rows (JSON columns decoded, every column of :data:`CASE_COLUMNS` present, null where a
@@ -245,12 +307,88 @@ def load_results(path: str | Path):
     return pd.DataFrame(rows, columns=list(CASE_COLUMNS))
 
 
-def _connect(database: Path) -> sqlite3.Connection:
-    connection = sqlite3.connect(database, timeout=30)
+def _connect_read_only(database: Path, immutable: bool) -> sqlite3.Connection:
+    uri = database.resolve().as_uri() + "?mode=ro" + ("&immutable=1" if immutable else "")
+    connection = sqlite3.connect(uri, uri=True, timeout=30, isolation_level=None)
     connection.row_factory = sqlite3.Row
-    connection.execute("PRAGMA journal_mode=WAL")  # readers (`runs show` during a run) never block the writer
-    connection.execute("PRAGMA synchronous=FULL")
     return connection
+
+
+def _check_file(database: Path) -> None:
+    """Refuse, before anything is written, a ``results.sqlite`` that is not a gaitbench store (StoreError).
+
+    Reads the SQLite header (magic, application id) and, for a file without gaitbench's application id, its tables,
+    through an immutable read-only connection that touches nothing, not even lock files.
+    """
+    try:
+        with open(database, "rb") as file:
+            header = file.read(100)
+    except FileNotFoundError:
+        return
+    except OSError as error:
+        raise StoreError(f"{database}: cannot read the results store ({_reason(error)})") from None
+    if not header:
+        return  # an empty file is an empty database: a new store
+    if not header.startswith(b"SQLite format 3\0"):
+        raise StoreError(f"{database}: not a gaitbench results store (not an SQLite database); nothing was changed")
+    application_id = int.from_bytes(header[68:72], "big") if len(header) >= 72 else 0
+    if application_id == APPLICATION_ID:
+        return
+    if application_id:
+        raise StoreError(f"{database}: not a gaitbench results store (an SQLite file of another application, "
+                         f"application_id {application_id:#x}); nothing was changed")
+    try:
+        connection = _connect_read_only(database, immutable=True)
+        try:
+            _check_schema(connection, database)
+        finally:
+            connection.close()
+    except sqlite3.DatabaseError as error:
+        raise StoreError(f"{database}: not a gaitbench results store ({error}); nothing was changed") from None
+
+
+def _check_schema(connection: sqlite3.Connection, database: Path) -> None:
+    """StoreError unless the database is empty, has gaitbench's application id, or holds only gaitbench's tables
+    with a ``cases.case_key`` column (a store from before the application id)."""
+    if connection.execute("PRAGMA application_id").fetchone()[0] == APPLICATION_ID:
+        return
+    tables = {row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if not tables:
+        return
+    columns = {row[1] for row in connection.execute("PRAGMA table_info(cases)")}
+    if tables <= STORE_TABLES and "case_key" in columns:
+        return
+    foreign = ", ".join(sorted(tables - STORE_TABLES) or sorted(tables))
+    raise StoreError(f"{database}: not a gaitbench results store (it holds tables {foreign}); nothing was changed")
+
+
+def _migrate(database: Path) -> None:
+    """Add the columns an older gaitbench's store lacks, if any, when it can be written (else it is read as is)."""
+    try:
+        connection = _connect_read_only(database, immutable=False)
+        try:
+            missing = _missing_columns(connection)
+        finally:
+            connection.close()
+        if not missing:
+            return
+        connection = sqlite3.connect(database, timeout=5, isolation_level=None)
+        try:
+            connection.execute("BEGIN IMMEDIATE")
+            _add_missing_columns(connection)
+            connection.execute("COMMIT")
+        finally:
+            connection.close()
+    except sqlite3.Error:  # read-only after all, locked, or not a store (which open() reports): read as it is
+        pass
+
+
+def _missing_columns(connection: sqlite3.Connection) -> list[tuple[str, str, str]]:
+    missing = []
+    for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
+        present = {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
+        missing += [(table, column, kind) for column, kind in columns.items() if present and column not in present]
+    return missing
 
 
 def _create_table(name: str, columns: dict[str, str]) -> str:
@@ -262,11 +400,8 @@ def _add_missing_columns(connection: sqlite3.Connection) -> None:
 
     Only additions are migrated; SQLite's ``ALTER TABLE ADD COLUMN`` keeps the existing rows and is cheap.
     """
-    for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
-        present = {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
-        for column, kind in columns.items():
-            if present and column not in present:
-                connection.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
+    for table, column, kind in _missing_columns(connection):
+        connection.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
 
 
 def _insert(table: str, columns: dict[str, str], replace: bool) -> str:
@@ -304,3 +439,10 @@ def _json_default(value: Any) -> Any:
     if hasattr(value, "tolist"):
         return value.tolist()
     return str(value)
+
+
+def _reason(error: Exception) -> str:
+    if isinstance(error, OSError) and error.strerror:
+        return error.strerror
+    return str(error)
+

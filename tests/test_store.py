@@ -1,0 +1,221 @@
+"""The store's reliability: clear errors on files that are not stores, and reading a store in a read-only place."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import sqlite3
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from click.testing import CliRunner
+
+import gaitbench
+from gaitbench.case import Case, PluginChoice
+from gaitbench.cli import main
+from gaitbench.runner import CaseOutcome, run_suite
+from gaitbench.store import DATABASE, ResultStore, StoreError
+
+GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "COLUMNS": "200"}
+
+
+def fake_case(n_nodes: int, tag: str = "") -> Case:
+    return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice("ipopt", {"tag": tag}),
+                PluginChoice("one-phase"), steps=1, method="OP-DC")
+
+
+def suite_of(cases: list[Case], name: str = "test") -> SimpleNamespace:
+    return SimpleNamespace(name=name, path=Path(f"{name}.toml"), text="# test suite", cases=cases)
+
+
+class Instant:
+    """An executor that solves nothing: each case it takes comes back at once as solved, with a walk file."""
+
+    name, jobs = "instant", 1
+
+    def __init__(self, during=None) -> None:
+        self.taken: list[str] = []
+        self.during = during  # called as the executor takes its third case
+
+    def run(self, cases):
+        for case in cases:
+            self.taken.append(case.key)
+            if len(self.taken) == 3 and self.during is not None:
+                self.during()
+            yield CaseOutcome(case, "solved", "", 0.0, files={"walk.json": b"{}"})
+
+
+def tiny_suite(path: Path, name: str, n_values: list[int], transcriptions: list[str],
+               experiment: str = "forward") -> Path:
+    path.write_text(textwrap.dedent(f"""
+        [suite]
+        name = "{name}"
+        steps = 1
+        time_limit_s = 60
+        [sweep]
+        experiments = ["{experiment}"]
+        N = {n_values}
+        transcriptions = {transcriptions}
+        solvers = ["ipopt"]
+        strategies = ["one-phase"]
+    """))
+    return path
+
+
+def dead_pid() -> int:
+    process = subprocess.Popen(["true"])
+    process.wait()
+    return process.pid
+
+
+def other_run(store: Path, run_id: str, claims: tuple[str, ...] = (), **values) -> None:
+    """A run of another process (by default on this host, pid 1, heartbeat now), holding claims on ``claims``."""
+    from gaitbench.store import _now
+
+    ResultStore.create(store).close()
+    row = {"run_id": run_id, "suite": "test", "started_at": _now(), "heartbeat_at": _now(),
+           "host": socket.gethostname(), "pid": 1} | values
+    with sqlite3.connect(store / DATABASE) as db:
+        db.execute(f"INSERT INTO runs ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
+        db.executemany("INSERT INTO claims (case_key, run_id) VALUES (?, ?)", [(key, run_id) for key in claims])
+    db.close()
+
+
+def listing(directory: Path) -> dict[str, bytes]:
+    return {path.relative_to(directory).as_posix(): path.read_bytes() if path.is_file() else b""
+            for path in sorted(directory.rglob("*"))}
+
+
+# --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------
+
+@pytest.fixture
+def suite_file(tmp_path: Path) -> Path:
+    return tiny_suite(tmp_path / "tiny.toml", "tiny", [6], ["hermite-simpson"])
+
+
+def run_cli(*args: str) -> SimpleNamespace:
+    result = CliRunner().invoke(main, list(args))
+    lines = [line for line in result.output.splitlines() if line.strip() and "━" not in line]
+    return SimpleNamespace(code=result.exit_code, lines=lines, exception=result.exception, output=result.output)
+
+
+def assert_one_line_error(result: SimpleNamespace, *fragments: str) -> None:
+    assert result.code == 1, result.output
+    assert isinstance(result.exception, SystemExit), repr(result.exception)  # a ClickException, not a crash
+    errors = [line for line in result.lines if line.startswith("Error:")]
+    assert len(errors) == 1, result.output
+    for fragment in fragments:
+        assert fragment in errors[0], errors[0]
+
+
+def test_a_store_that_cannot_be_created_is_one_line(tmp_path: Path, suite_file: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("a regular file, so nothing can be made under it, even by root")
+    store = blocker / "store"
+    result = run_cli("run", str(suite_file), "--store", str(store), "--executor", "inprocess", "--no-report")
+    assert_one_line_error(result, str(store), "cannot create the results store")
+    database = tmp_path / "dir-db"
+    (database / DATABASE).mkdir(parents=True)  # results.sqlite that SQLite cannot open
+    result = run_cli("run", str(suite_file), "--store", str(database), "--executor", "inprocess", "--no-report")
+    assert_one_line_error(result, str(database / DATABASE))
+
+
+def test_a_file_that_is_not_sqlite_is_one_line_and_unchanged(tmp_path: Path, suite_file: Path) -> None:
+    (tmp_path / "store").mkdir()
+    database = tmp_path / "store" / DATABASE
+    database.write_bytes(b"these are my notes, not a database\n" * 20)
+    before = listing(tmp_path / "store")
+    result = run_cli("run", str(suite_file), "--store", str(tmp_path / "store"), "--executor", "inprocess",
+                     "--no-report")
+    assert_one_line_error(result, str(database), "not an SQLite database")
+    assert_one_line_error(run_cli("runs", "show", str(tmp_path / "store")), str(database))
+    assert listing(tmp_path / "store") == before
+
+
+def test_a_foreign_sqlite_file_is_refused_and_never_modified(tmp_path: Path, suite_file: Path) -> None:
+    store = tmp_path / "store"
+    store.mkdir()
+    with sqlite3.connect(store / DATABASE) as db:
+        db.execute("CREATE TABLE people (name TEXT)")
+        db.execute("INSERT INTO people VALUES ('Ada')")
+    db.close()
+    before = listing(store)
+    result = run_cli("run", str(suite_file), "--store", str(store), "--executor", "inprocess", "--no-report")
+    assert_one_line_error(result, str(store / DATABASE), "not a gaitbench results store", "people")
+    assert_one_line_error(run_cli("runs", "show", str(store)), str(store / DATABASE), "not a gaitbench")
+    assert_one_line_error(run_cli("report", str(store), "--out", str(tmp_path / "report")), "not a gaitbench")
+    with pytest.raises(StoreError, match="not a gaitbench results store"):
+        gaitbench.load_results(store)
+    assert listing(store) == before  # same bytes (no `runs` table, still a rollback journal), no -wal or -shm
+    with sqlite3.connect(f"file:{store / DATABASE}?mode=ro", uri=True) as db:
+        assert db.execute("PRAGMA journal_mode").fetchone()[0] == "delete"
+
+
+def test_another_application_s_file_is_told_by_its_application_id(tmp_path: Path) -> None:
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        db.execute("PRAGMA application_id = 1234")
+        db.execute("CREATE TABLE cases (case_key TEXT)")  # even with a table of the same name
+    db.close()
+    with pytest.raises(StoreError, match="another application"):
+        ResultStore.create(tmp_path)
+
+
+def test_an_empty_or_older_store_is_accepted_and_stamped(tmp_path: Path) -> None:
+    (tmp_path / DATABASE).touch()
+    ResultStore.create(tmp_path).close()
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        assert db.execute("PRAGMA application_id").fetchone()[0] == int.from_bytes(b"gbch", "big")
+
+
+# --- 3. a store in a read-only place ----------------------------------------------------------------------------
+
+def test_a_store_in_a_read_only_place_is_read_without_a_write(tmp_path: Path, monkeypatch) -> None:
+    """runs show, report and load_results on a store copied into a read-only directory.
+
+    The tests run as root, whom permissions do not stop, so the directory is made read-only (0555, files 0444) and
+    os.access is made to say so: what this checks is that reading takes the read-only path (mode=ro, immutable)
+    and writes nothing at all, no byte of the database and no -wal/-shm lock file, which is what a really
+    read-only place needs. A store missing a newer column is read without it.
+    """
+    cases = [fake_case(6), fake_case(7)]
+    source = tmp_path / "source"
+    run_suite(suite_of(cases), source, Instant())
+    place = tmp_path / "readonly" / "store"
+    shutil.copytree(source, place, ignore=shutil.ignore_patterns("*-wal", "*-shm"))
+    with sqlite3.connect(place / DATABASE) as db:
+        db.execute("ALTER TABLE cases DROP COLUMN retries")  # as a store written before the column existed
+    db.close()
+    for path in place.rglob("*"):
+        path.chmod(0o555 if path.is_dir() else 0o444)
+    place.chmod(0o555)
+    real_access = os.access
+
+    def access(path, mode, *args, **kwargs) -> bool:
+        if mode & os.W_OK and isinstance(path, (str, Path)) and Path(path).resolve().is_relative_to(place.resolve()):
+            return False
+        return real_access(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setenv("COLUMNS", "200")
+    before = listing(place)
+    try:
+        frame = gaitbench.load_results(place)
+        assert len(frame) == 2 and frame.retries.isna().all()
+        shown = run_cli("runs", "show", str(place))
+        assert shown.code == 0, shown.output
+        assert "solved" in shown.output
+        listed = run_cli("runs", "list", str(place))
+        assert listed.code == 0 and "test" in listed.output, listed.output
+        report = run_cli("report", str(place), "--out", str(tmp_path / "report"))
+        assert report.code == 0, report.output
+        assert (tmp_path / "report" / "index.html").exists()
+        assert listing(place) == before
+    finally:
+        for path in [place, *place.rglob("*")]:
+            path.chmod(0o755 if path.is_dir() else 0o644)
