@@ -9,8 +9,10 @@ Only the processes that run suites write: workers return their results and the r
 as it arrives. A case's files are written to a temporary directory and renamed into place before its row is
 committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
 
-Readers open the store read-only and never change it; a file that is not a gaitbench store is refused before
-anything is written to it.
+Several runs may share a store: each claims a case (table ``claims``, under SQLite's write lock) right before it
+starts it, so no case is solved twice, and a claim dies with its run (same host: the process is gone; any host:
+no heartbeat for :data:`LEASE_S`). Readers open the store read-only and never change it; a file that is not a
+gaitbench store is refused before anything is written to it.
 """
 
 from __future__ import annotations
@@ -19,10 +21,14 @@ import json
 import math
 import os
 import shutil
+import socket
 import sqlite3
 import tempfile
-from collections.abc import Iterator
+import threading
+import time
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +39,14 @@ APPLICATION_ID = int.from_bytes(b"gbch", "big")
 """``PRAGMA application_id`` of a gaitbench store: how a store is told from another SQLite file before anything is
 written (stores written before it existed are recognized by their tables, and stamped when next written)."""
 
-STORE_TABLES = {"runs", "cases"}
+HEARTBEAT_S = 20.0
+"""How often a running suite refreshes its run's ``heartbeat_at``."""
+
+LEASE_S = 120.0
+"""A run whose heartbeat is older than this is dead, and its claims free: the only test for a run on another host
+(on the same host a run is also dead as soon as its process is)."""
+
+STORE_TABLES = {"runs", "cases", "claims"}
 
 FINISHED_STATUSES = ("solved", "incomplete", "error", "timeout", "crashed")
 """``solved``: every step solved and verified. ``incomplete``: the method failed at a step (a result, not a
@@ -114,7 +127,21 @@ RUN_COLUMNS: dict[str, str] = {
     "started_at": "TEXT",
     "finished_at": "TEXT",
     "provenance": "TEXT",
+    "host": "TEXT",
+    "pid": "INTEGER",
+    "heartbeat_at": "TEXT",
 }
+
+CLAIM_COLUMNS: dict[str, str] = {
+    "case_key": "TEXT PRIMARY KEY",
+    "run_id": "TEXT NOT NULL",
+    "claimed_at": "TEXT",
+}
+"""A case being solved and by which run; the row goes when the case's row is written or its run ends."""
+
+_OPEN_RUNS: set[str] = set()
+"""Runs this process is running: a claim whose pid is this process's is alive only if its run is one of them."""
+
 
 class StoreError(Exception):
     """A store that is missing, unreadable or not a gaitbench store; the message says which path and why."""
@@ -154,11 +181,11 @@ class ResultStore:
             connection.row_factory = sqlite3.Row
             with store._write():  # checked again under the write lock: what the WAL holds, and a file made meanwhile
                 _check_schema(connection, database)
-            # readers (`runs show` during a run) never block the writer
+            # readers (`runs show` during a run) never block the writer, and several runs can share the store
             connection.execute("PRAGMA journal_mode=WAL")
             connection.execute("PRAGMA synchronous=FULL")
             with store._write():
-                for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
+                for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS), ("claims", CLAIM_COLUMNS)):
                     connection.execute(_create_table(table, columns))
                 _add_missing_columns(connection)
                 connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
@@ -202,7 +229,7 @@ class ResultStore:
     @contextmanager
     def _write(self) -> Iterator[None]:
         """A write transaction that takes SQLite's write lock at once (``BEGIN IMMEDIATE``): what is read inside it
-        stays true until the commit."""
+        stays true until the commit, which is what makes claims and run ids race-free between processes."""
         self._db.execute("BEGIN IMMEDIATE")
         try:
             yield
@@ -219,13 +246,78 @@ class ResultStore:
 
     # --- runs -----------------------------------------------------------------------------------------------
 
-    def start_run(self, run: dict[str, Any]) -> None:
+    def start_run(self, run: dict[str, Any]) -> str:
+        """Record a run starting in this process and return its id: ``run["run_id"]``, or with ``-2``, ``-3``, ...
+        when that is taken (runs of one suite started within a second), chosen under the write lock so that
+        concurrent runs never collide."""
+        stem = run["run_id"]
         with self._write():
-            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(run, RUN_COLUMNS))
+            taken = {row[0] for row in self._db.execute(
+                "SELECT run_id FROM runs WHERE run_id = ? OR run_id LIKE ?", (stem, f"{stem}-%"))}
+            run_id = next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
+                          if run_id not in taken)
+            values = run | {"run_id": run_id, "host": socket.gethostname(), "pid": os.getpid(),
+                            "heartbeat_at": _now()}
+            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(values, RUN_COLUMNS))
+        _OPEN_RUNS.add(run_id)
+        return run_id
 
-    def finish_run(self, run_id: str, finished_at: str) -> None:
+    def finish_run(self, run_id: str, finished_at: str | None) -> None:
+        """End a run: its claims go, and ``finished_at`` is set (left null for a run that was stopped)."""
+        _OPEN_RUNS.discard(run_id)
         with self._write():
-            self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+            self._db.execute("DELETE FROM claims WHERE run_id = ?", (run_id,))
+            if finished_at is not None:
+                self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+
+    @contextmanager
+    def heartbeat(self, run_id: str) -> Iterator[None]:
+        """Keep ``run_id`` alive for other runs (its ``heartbeat_at``, every :data:`HEARTBEAT_S`) while inside."""
+        stop = threading.Event()
+
+        def beat() -> None:
+            connection = sqlite3.connect(self.database, timeout=30, isolation_level=None)
+            try:
+                while not stop.wait(HEARTBEAT_S):
+                    try:
+                        connection.execute("UPDATE runs SET heartbeat_at = ? WHERE run_id = ?", (_now(), run_id))
+                    except sqlite3.Error:  # busy or failing: the lease outlasts a few missed beats
+                        pass
+            finally:
+                connection.close()
+
+        thread = threading.Thread(target=beat, name=f"heartbeat {run_id}", daemon=True)
+        thread.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            thread.join()
+
+    def live_runs(self, exclude: str | None = None) -> list[dict[str, Any]]:
+        """The runs working on this store now (unfinished, process alive, heartbeat fresh), but ``exclude``."""
+        rows = self._db.execute("SELECT * FROM runs WHERE finished_at IS NULL").fetchall()
+        return [dict(row) for row in rows if row["run_id"] != exclude and run_alive(row)]
+
+    def claim(self, case_key: str, run_id: str, expected: str | None) -> str:
+        """Claim a case for ``run_id`` before starting it: ``"claimed"``, ``"running"`` (a live run holds it) or
+        ``"done"`` (its row changed since the run read it: another run finished it).
+
+        ``expected`` is the run id of the case's row when this run planned it (``""`` for a row without one, None
+        for no row). A claim whose run is dead is taken over.
+        """
+        with self._write():
+            holder = self._db.execute(
+                "SELECT runs.* FROM claims LEFT JOIN runs ON runs.run_id = claims.run_id WHERE claims.case_key = ?",
+                (case_key,)).fetchone()
+            if holder is not None and holder["run_id"] not in (None, run_id) and run_alive(holder):
+                return "running"
+            stored = self._db.execute("SELECT run_id FROM cases WHERE case_key = ?", (case_key,)).fetchone()
+            if (None if stored is None else stored[0] or "") != expected:
+                return "done"
+            self._db.execute(_insert("claims", CLAIM_COLUMNS, replace=True),
+                             _row({"case_key": case_key, "run_id": run_id, "claimed_at": _now()}, CLAIM_COLUMNS))
+        return "claimed"
 
     def runs(self) -> list[dict[str, Any]]:
         """Every run, oldest first, with how many of the stored cases it computed and how many failed."""
@@ -246,8 +338,13 @@ class ResultStore:
             return {key for (key,) in self._db.execute(query, RETRYABLE_STATUSES)}
         return {key for (key,) in self._db.execute(query)}
 
+    def case_runs(self) -> dict[str, str]:
+        """The run id of every stored case (``""`` where a row has none): what :meth:`claim` expects."""
+        return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
+
     def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> None:
-        """Write one finished case: its files first (renamed into place as one directory), then its row.
+        """Write one finished case: its files first (renamed into place as one directory), then its row, which
+        releases the case's claim.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
         :func:`case_file`.
@@ -267,6 +364,8 @@ class ResultStore:
                     shutil.rmtree(staging, ignore_errors=True)
             with self._write():
                 self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+                self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?",
+                                 (row["case_key"], row.get("run_id")))
         except (OSError, sqlite3.Error) as error:
             raise StoreError(f"{self.directory}: cannot record case {row['case_key']} ({_reason(error)})") from None
 
@@ -441,8 +540,45 @@ def _json_default(value: Any) -> Any:
     return str(value)
 
 
+def run_alive(run: Mapping[str, Any]) -> bool:
+    """Whether a ``runs`` row is a run still working: not finished, its process alive when it is on this host, and
+    its heartbeat younger than :data:`LEASE_S` (which also ends a run whose pid was reused or that hangs)."""
+    if run["finished_at"]:
+        return False
+    keys = run.keys()
+    host = run["host"] if "host" in keys else None
+    pid = run["pid"] if "pid" in keys else None
+    if host == socket.gethostname() and pid:
+        if pid == os.getpid():
+            return run["run_id"] in _OPEN_RUNS
+        if not _process_alive(pid):
+            return False
+    beat = (run["heartbeat_at"] if "heartbeat_at" in keys else None) or run["started_at"]
+    try:
+        age = time.time() - datetime.fromisoformat(beat).timestamp()
+    except (TypeError, ValueError):
+        return False
+    return age < LEASE_S
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    try:  # a zombie (killed, not yet reaped by its parent) is dead
+        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
 def _reason(error: Exception) -> str:
     if isinstance(error, OSError) and error.strerror:
         return error.strerror
     return str(error)
 
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")

@@ -1,14 +1,17 @@
-"""The store's reliability: clear errors on files that are not stores, and reading a store in a read-only place."""
+"""The store's reliability: runs sharing a store, clear errors on files that are not stores, and reading a store
+in a read-only place."""
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import sqlite3
 import subprocess
 import sys
 import textwrap
+import threading
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -90,6 +93,115 @@ def other_run(store: Path, run_id: str, claims: tuple[str, ...] = (), **values) 
 def listing(directory: Path) -> dict[str, bytes]:
     return {path.relative_to(directory).as_posix(): path.read_bytes() if path.is_file() else b""
             for path in sorted(directory.rglob("*"))}
+
+
+# --- 1. one store, several runs ---------------------------------------------------------------------------------
+
+def test_two_processes_on_one_store_solve_each_case_once(tmp_path: Path) -> None:
+    """Two `gaitbench run` processes on one store of 10 real cases (one without --resume and a local pool, one with
+    --resume in-process) solve 10 cases between them: each process counts the outcomes it recorded."""
+    suite = tiny_suite(tmp_path / "shared.toml", "shared", [6, 7, 8, 9, 10], ["hermite-simpson", "trapezoidal"])
+    store = tmp_path / "store"
+    command = [GAITBENCH, "run", str(suite), "--store", str(store), "--no-report"]
+    first = subprocess.Popen([*command, "--executor", "local", "--jobs", "1"], env=ENV, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    second = subprocess.Popen([*command, "--executor", "inprocess", "--resume"], env=ENV, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    outputs = [process.communicate(timeout=600) for process in (first, second)]
+    summaries = {}
+    for process, (_, stderr) in zip((first, second), outputs, strict=True):
+        assert process.returncode == 0, stderr
+        assert "Traceback" not in stderr
+        found = re.search(r"run (\S+): (\d+) solved, (\d+) failed", stderr)
+        assert found, stderr
+        summaries[found[1]] = int(found[2]) + int(found[3])
+    assert len(summaries) == 2  # distinct run ids
+    assert sum(summaries.values()) == 10, summaries  # every case solved once: none twice, none lost
+    rows = gaitbench.load_results(store)
+    assert len(rows) == 10 and set(rows.status) == {"solved"}
+    assert rows.run_id.value_counts().to_dict() == {run: count for run, count in summaries.items() if count}
+    with ResultStore.open(store) as opened:
+        assert all(run["finished_at"] for run in opened.runs())
+
+
+def test_a_run_started_during_another_shares_its_cases(tmp_path: Path) -> None:
+    """A run started (without --resume) while another runs on the store, after that one has recorded two cases,
+    takes the cases nobody holds; the first leaves it those and keeps the one it had claimed."""
+    cases = [fake_case(6 + n) for n in range(10)]
+    inner = Instant()
+    later = []
+    outer = Instant(during=lambda: later.append(run_suite(suite_of(cases), tmp_path, inner)))
+    first = run_suite(suite_of(cases), tmp_path, outer)
+    second = later[0]
+    assert len(outer.taken) == 3 and len(inner.taken) == 7
+    assert not set(outer.taken) & set(inner.taken)
+    assert (first.solved, first.elsewhere, second.solved, second.elsewhere, second.skipped) == (3, 7, 7, 1, 2)
+    rows = gaitbench.load_results(tmp_path)
+    assert sorted(rows.run_id.value_counts()) == [3, 7] and len(rows) == 10
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        assert db.execute("SELECT COUNT(*) FROM claims").fetchone()[0] == 0  # every claim released
+
+
+def test_run_ids_are_unique_when_runs_start_at_once(tmp_path: Path) -> None:
+    ResultStore.create(tmp_path).close()
+    start = threading.Barrier(6)
+    ids, errors = [], []
+
+    def begin() -> None:
+        try:
+            with ResultStore.create(tmp_path) as store:
+                start.wait()
+                ids.append(store.start_run({"run_id": "20261201-210000-test", "suite": "test"}))
+                store.finish_run(ids[-1], None)
+        except Exception as error:  # noqa: BLE001 - any failure of a starting run is what this test looks for
+            errors.append(error)
+
+    threads = [threading.Thread(target=begin) for _ in range(6)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert not errors
+    assert sorted(ids) == ["20261201-210000-test", *(f"20261201-210000-test-{n}" for n in range(2, 7))]
+
+
+def test_claims_of_dead_runs_expire_and_live_ones_are_left(tmp_path: Path) -> None:
+    """--resume takes back the cases claimed by a run whose process is gone (this host) or whose heartbeat is stale
+    (another host), and leaves a case claimed by a live run on another host."""
+    dead, stale, live, free = (fake_case(n) for n in (6, 7, 8, 9))
+    other_run(tmp_path, "dead", (dead.key,), pid=dead_pid())
+    other_run(tmp_path, "stale", (stale.key,), host="elsewhere.example", heartbeat_at="2026-01-01T00:00:00+00:00")
+    other_run(tmp_path, "live", (live.key,), host="elsewhere.example")
+    executor = Instant()
+    summary = run_suite(suite_of([dead, stale, live, free]), tmp_path, executor, resume=True)
+    assert set(executor.taken) == {dead.key, stale.key, free.key}
+    assert summary.elsewhere == 1
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        assert db.execute("SELECT case_key, run_id FROM claims").fetchall() == [(live.key, "live")]
+
+
+def test_a_second_run_after_a_finished_one_is_still_refused_without_resume(tmp_path: Path) -> None:
+    from gaitbench.runner import RunRefused
+
+    cases = [fake_case(6), fake_case(7)]
+    run_suite(suite_of(cases), tmp_path, Instant())
+    with pytest.raises(RunRefused, match="pass --resume"):
+        run_suite(suite_of(cases), tmp_path, Instant())
+
+
+def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
+    from gaitbench.store import run_alive
+
+    here = socket.gethostname()
+    now = "2999-01-01T00:00:00+00:00"  # a heartbeat from the future is fresh
+    row = {"run_id": "not-a-run-of-this-process", "finished_at": None, "started_at": now, "heartbeat_at": now,
+           "host": here}
+    assert run_alive(row | {"pid": os.getppid()})
+    assert not run_alive(row | {"pid": dead_pid()})
+    assert not run_alive(row | {"pid": os.getppid(), "finished_at": now})
+    assert not run_alive(row | {"pid": os.getppid(), "heartbeat_at": "2000-01-01T00:00:00+00:00"})
+    assert run_alive(row | {"pid": 1, "host": "elsewhere.example"})
+    assert not run_alive(row | {"pid": os.getpid()})  # this process, but not one of its runs
 
 
 # --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------
