@@ -70,7 +70,8 @@ class LocalPoolExecutor:
         from pebble import ProcessPool
 
         # spawn, not fork: the parent has threads (progress display, SQLite), which fork would copy mid-state
-        pool = ProcessPool(max_workers=self.jobs, context=multiprocessing.get_context("spawn"))
+        pool = ProcessPool(max_workers=self.jobs, context=multiprocessing.get_context("spawn"),
+                           initializer=_worker_started)
         upcoming = iter(cases)
         running = {}
 
@@ -102,6 +103,32 @@ def _pool_outcome(future, case: Case) -> CaseOutcome:
         return failed_outcome(case, "crashed", _exit_message(error.exitcode))
     except Exception as error:  # the outcome could not be sent back (e.g. unpicklable)
         return failed_outcome(case, "error", f"{type(error).__name__}: {error}")
+
+
+def _worker_started() -> None:
+    """Pool worker initializer: ignore a SIGTERM that comes while the worker is already exiting.
+
+    Pebble stops a pool by closing its channels (idle workers then exit on their own) and sending each worker
+    SIGTERM, whose handler ends the process at once (``os._exit``). Landing in the middle of a worker's own exit,
+    it cut the multiprocessing finalizers short between unlinking a semaphore that a plugin had created (pyomo
+    makes one on import) and telling the resource tracker, which then warned of "leaked semaphore objects" after
+    clean runs. A worker already exiting finishes by itself (Pebble kills it if it takes more than 3 s); any
+    other SIGTERM (a case past its time limit) still ends it at once.
+    """
+    from multiprocessing import util
+
+    stop_now = signal.getsignal(signal.SIGTERM)
+
+    def on_sigterm(signum: int, frame) -> None:
+        if util.is_exiting():
+            return
+        if callable(stop_now):
+            stop_now(signum, frame)
+        else:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    signal.signal(signal.SIGTERM, on_sigterm)
 
 
 class DaskExecutor:

@@ -260,6 +260,7 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                                   "started_at": _now(), "provenance": provenance()})
         finished_at = None
         try:
+            store.clean_leftovers(run_id)
             if on_start:
                 on_start(len(pending), len(present))
             solved = failed = 0

@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import socket
 import sqlite3
@@ -47,6 +48,7 @@ LEASE_S = 120.0
 (on the same host a run is also dead as soon as its process is)."""
 
 STORE_TABLES = {"runs", "cases", "claims"}
+_STAGING = re.compile(r"^\.[0-9a-f]{16}-")
 
 FINISHED_STATUSES = ("solved", "incomplete", "error", "timeout", "crashed")
 """``solved``: every step solved and verified. ``incomplete``: the method failed at a step (a result, not a
@@ -319,6 +321,27 @@ class ResultStore:
                              _row({"case_key": case_key, "run_id": run_id, "claimed_at": _now()}, CLAIM_COLUMNS))
         return "claimed"
 
+    def clean_leftovers(self, run_id: str) -> list[str]:
+        """Remove what a killed run can leave (staging directories ``.KEY-xxxx``, case directories that no row
+        names) unless another run is live, whose files these might be; the paths removed, relative to the store.
+
+        Under the write lock, so that no run can start (and begin writing files) between the check and the removal.
+        """
+        removed = []
+        with self._write():
+            if self.live_runs(exclude=run_id):
+                return removed
+            named = {row[0] for row in self._db.execute(
+                "SELECT case_key FROM cases WHERE walk_path IS NOT NULL OR tracking_path IS NOT NULL")}
+            staging = [path for path in self.directory.iterdir() if path.is_dir() and _STAGING.match(path.name)]
+            cases_dir = self.directory / CASES_DIR
+            unnamed = [path for path in cases_dir.iterdir() if path.is_dir() and path.name not in named] \
+                if cases_dir.is_dir() else []
+            for path in (*staging, *unnamed):
+                shutil.rmtree(path, ignore_errors=True)
+                removed.append(path.relative_to(self.directory).as_posix())
+        return removed
+
     def runs(self) -> list[dict[str, Any]]:
         """Every run, oldest first, with how many of the stored cases it computed and how many failed."""
         rows = self._db.execute(
@@ -347,7 +370,7 @@ class ResultStore:
         releases the case's claim.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
-        :func:`case_file`.
+        :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``.
         """
         try:
             if files:
@@ -356,6 +379,7 @@ class ResultStore:
                 try:
                     for name, content in files.items():
                         (staging / name).write_bytes(content)
+                    staging.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would hide the results from other users
                     if target.exists():  # a retried case replaces its earlier files
                         shutil.rmtree(target)
                     target.parent.mkdir(exist_ok=True)
@@ -572,6 +596,19 @@ def _process_alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
     except (OSError, IndexError):
         return True
+
+
+def _umask() -> int:
+    """This process's umask, read without changing it where Linux tells it (changing it races other threads)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _reason(error: Exception) -> str:

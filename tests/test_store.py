@@ -1,5 +1,5 @@
-"""The store's reliability: runs sharing a store, clear errors on files that are not stores, and reading a store
-in a read-only place."""
+"""The store's reliability: runs sharing a store, clear errors on files that are not stores, reading a store in a
+read-only place, and what a killed run leaves behind."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from click.testing import CliRunner
 import gaitbench
 from gaitbench.case import Case, PluginChoice
 from gaitbench.cli import main
-from gaitbench.runner import CaseOutcome, run_suite
+from gaitbench.runner import CaseOutcome, case_row, run_suite
 from gaitbench.store import DATABASE, ResultStore, StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
@@ -331,3 +331,93 @@ def test_a_store_in_a_read_only_place_is_read_without_a_write(tmp_path: Path, mo
     finally:
         for path in [place, *place.rglob("*")]:
             path.chmod(0o755 if path.is_dir() else 0o644)
+
+
+# --- 7. kill-safety at the edges --------------------------------------------------------------------------------
+
+def test_resume_removes_what_a_killed_run_left(tmp_path: Path) -> None:
+    kept = fake_case(6)
+    run_suite(suite_of([kept]), tmp_path, Instant())
+    staging = tmp_path / f".{fake_case(7).key}-k1lled00"
+    staging.mkdir()
+    (staging / "walk.json").write_text("{}")
+    rowless = tmp_path / "cases" / fake_case(8).key
+    rowless.mkdir()
+    (rowless / "walk.json").write_text("{}")
+    other = tmp_path / ".not-gaitbench"
+    other.mkdir()
+
+    run_suite(suite_of([kept, fake_case(9)]), tmp_path, Instant(), resume=True)
+    assert not staging.exists() and not rowless.exists()
+    assert other.exists() and (tmp_path / "cases" / kept.key / "walk.json").exists()
+
+
+def test_leftovers_are_kept_while_another_run_is_live(tmp_path: Path) -> None:
+    other_run(tmp_path, "other", pid=os.getppid())  # a live process on this host, heartbeat fresh
+    staging = tmp_path / f".{fake_case(7).key}-inflight"
+    staging.mkdir()
+    run_suite(suite_of([fake_case(6)]), tmp_path, Instant(), resume=True)
+    assert staging.exists()  # it may be the other run's case being written
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o002])
+def test_case_directories_follow_the_umask(tmp_path: Path, umask: int) -> None:
+    old = os.umask(umask)
+    try:
+        with ResultStore.create(tmp_path) as store:
+            store.start_run({"run_id": "r", "suite": "test"})
+            outcome = CaseOutcome(fake_case(6), "solved", "", 0.0)
+            store.record_case(case_row(outcome, "test", "r"), {"walk.json": b"{}"})
+            store.finish_run("r", None)
+    finally:
+        os.umask(old)
+    directory = tmp_path / "cases" / fake_case(6).key
+    assert directory.stat().st_mode & 0o777 == 0o777 & ~umask
+    assert (directory / "walk.json").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+SLOW_EXIT_PLUGIN = '''
+"""Makes the race of a pool's shutdown certain: a semaphore registered with the resource tracker, as pyomo makes on
+import, and a worker exit that takes a while, so that Pebble's SIGTERM lands in the middle of it."""
+import inspect
+import multiprocessing
+import multiprocessing.util
+import time
+
+from gaitbench import Registration, hookimpl
+
+LOCK = multiprocessing.get_context("spawn").Lock()
+
+
+def slow_exit():
+    killed = any(frame.function == "process_exit" for frame in inspect.stack())
+    time.sleep(0.3 if killed else 1.5)  # both well within Pebble's 3 s before SIGKILL
+
+
+multiprocessing.util.Finalize(None, slow_exit, exitpriority=10)  # runs before the lock's own finalizer (0)
+
+
+def slow_forward():
+    from plugins.thesis_experiments import forward
+
+    time.sleep(1.0)  # each of the two workers takes one case
+    return forward()
+
+
+@hookimpl
+def register_experiments():
+    return [Registration("slow-forward", "forward, slowly", slow_forward)]
+'''
+
+
+def test_a_local_pool_run_leaks_no_semaphore(tmp_path: Path) -> None:
+    plugins = tmp_path / "plugins"
+    plugins.mkdir()
+    (plugins / "slow_exit.py").write_text(SLOW_EXIT_PLUGIN)
+    suite = tiny_suite(tmp_path / "pool.toml", "pool", [6, 7], ["hermite-simpson"], experiment="slow-forward")
+    result = subprocess.run([GAITBENCH, "--plugins-dir", str(plugins), "run", str(suite), "--store",
+                             str(tmp_path / "store"), "--jobs", "2", "--no-report"],
+                            capture_output=True, text=True, env=ENV, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "2 solved" in result.stderr
+    assert "leaked semaphore" not in result.stderr, result.stderr
