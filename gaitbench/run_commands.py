@@ -207,10 +207,14 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     for column in JSON_COLUMNS:  # nested values as JSON text: one flat, typed table for CSV and Parquet alike
         frame[column] = frame[column].map(lambda value: None if value is None else json.dumps(value))
     out = out or Path(store_dir) / f"cases.{fmt}"
-    if fmt == "csv":
-        frame.to_csv(out, index=False)
-    else:
-        frame.to_parquet(out, index=False)
+    try:
+        if fmt == "csv":
+            frame.to_csv(out, index=False)
+        else:
+            frame.to_parquet(out, index=False)
+    except OSError as error:  # e.g. the default, inside a store in a read-only place
+        raise click.ClickException(f"{out}: cannot write the export ({error.strerror or error}); "
+                                   "choose another file with --out") from None
     Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
 
 

@@ -324,6 +324,8 @@ def test_a_store_in_a_read_only_place_is_read_without_a_write(tmp_path: Path, mo
         assert "solved" in shown.output
         listed = run_cli("runs", "list", str(place))
         assert listed.code == 0 and "test" in listed.output, listed.output
+        exported = run_cli("runs", "export", str(place), "--out", str(tmp_path / "cases.csv"))
+        assert exported.code == 0 and (tmp_path / "cases.csv").exists(), exported.output
         report = run_cli("report", str(place), "--out", str(tmp_path / "report"))
         assert report.code == 0, report.output
         assert (tmp_path / "report" / "index.html").exists()
@@ -331,6 +333,13 @@ def test_a_store_in_a_read_only_place_is_read_without_a_write(tmp_path: Path, mo
     finally:
         for path in [place, *place.rglob("*")]:
             path.chmod(0o755 if path.is_dir() else 0o644)
+
+
+def test_an_export_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
+    run_suite(suite_of([fake_case(6)]), tmp_path / "store", Instant())
+    out = tmp_path / "file" / "cases.csv"
+    (tmp_path / "file").write_text("a regular file, so nothing can be written under it")
+    assert_one_line_error(run_cli("runs", "export", str(tmp_path / "store"), "--out", str(out)), str(out))
 
 
 # --- 7. kill-safety at the edges --------------------------------------------------------------------------------
@@ -421,3 +430,4 @@ def test_a_local_pool_run_leaks_no_semaphore(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert "2 solved" in result.stderr
     assert "leaked semaphore" not in result.stderr, result.stderr
+
