@@ -108,13 +108,15 @@ class _CaseProgress:
         self.task = None
 
     def __enter__(self) -> _CaseProgress:
-        self.progress.__enter__()
         return self
 
     def __exit__(self, *exc_info) -> None:
-        self.progress.__exit__(*exc_info)
+        if self.task is not None:
+            self.progress.__exit__(*exc_info)
 
     def start(self, to_run: int, skipped: int) -> None:
+        """Show the bar once the run has started, so that an error before it (the store) stays one line."""
+        self.progress.__enter__()
         if skipped:
             self.console.print(f"{skipped} cases already in the store are skipped")
         self.task = self.progress.add_task("cases", total=to_run, done=0, failed=0, left=to_run)
