@@ -475,7 +475,8 @@ def _check_schema(connection: sqlite3.Connection, database: Path) -> None:
     with a ``cases.case_key`` column (a store from before the application id)."""
     if connection.execute("PRAGMA application_id").fetchone()[0] == APPLICATION_ID:
         return
-    tables = {row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    tables = {row[0] for row in connection.execute(
+        "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite\\_%' ESCAPE '\\'")}
     if not tables:
         return
     columns = {row[1] for row in connection.execute("PRAGMA table_info(cases)")}

@@ -279,10 +279,22 @@ def test_another_application_s_file_is_told_by_its_application_id(tmp_path: Path
 
 
 def test_an_empty_or_older_store_is_accepted_and_stamped(tmp_path: Path) -> None:
-    (tmp_path / DATABASE).touch()
-    ResultStore.create(tmp_path).close()
-    with sqlite3.connect(tmp_path / DATABASE) as db:
-        assert db.execute("PRAGMA application_id").fetchone()[0] == int.from_bytes(b"gbch", "big")
+    empty, older = tmp_path / "empty", tmp_path / "older"
+    empty.mkdir()
+    (empty / DATABASE).touch()
+    older.mkdir()
+    with sqlite3.connect(older / DATABASE) as db:  # before the application id, and analyzed (sqlite_stat1)
+        db.execute("CREATE TABLE runs (run_id TEXT PRIMARY KEY, suite TEXT, started_at TEXT, finished_at TEXT)")
+        db.execute("CREATE TABLE cases (case_key TEXT PRIMARY KEY, run_id TEXT, status TEXT)")
+        db.execute("INSERT INTO cases VALUES ('old', 'r0', 'solved')")
+        db.execute("ANALYZE")
+    db.close()
+    for store in (empty, older):
+        ResultStore.create(store).close()
+        with sqlite3.connect(store / DATABASE) as db:
+            assert db.execute("PRAGMA application_id").fetchone()[0] == int.from_bytes(b"gbch", "big")
+        db.close()
+    assert list(gaitbench.load_results(older).case_key) == ["old"]
 
 
 # --- 3. a store in a read-only place ----------------------------------------------------------------------------
