@@ -1,6 +1,8 @@
 """Where cases run: in this process, in a local pool of worker processes, or on a Dask cluster.
 
-Every executor takes cases and yields their outcomes as they finish, so the runner records each at once.
+Every executor takes cases and yields their outcomes as they finish, so the runner records each at once. It asks
+for the next case only when it can start it (a worker is free), because taking a case is what claims it for this
+run in the store (:func:`gaitbench.runner.run_suite`): runs sharing a store then split the cases, largest first.
 The time limit per case is passed to the solver (so a slow solve ends with its own ``time_limit`` status) and,
 outside the in-process executor, also enforced from outside: a case still running at 1.25 × its limit + 30 s
 has its process stopped and is recorded as ``timeout``. A worker that dies takes only its case with it
@@ -20,7 +22,6 @@ import tempfile
 import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import TimeoutError as FutureTimeout
-from concurrent.futures import as_completed
 from pathlib import Path
 
 from gaitbench.case import Case
@@ -64,26 +65,70 @@ class LocalPoolExecutor:
 
     def run(self, cases: Iterable[Case]) -> Iterator[CaseOutcome]:
         import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, wait
 
-        from pebble import ProcessExpired, ProcessPool
+        from pebble import ProcessPool
 
         # spawn, not fork: the parent has threads (progress display, SQLite), which fork would copy mid-state
-        pool = ProcessPool(max_workers=self.jobs, context=multiprocessing.get_context("spawn"))
+        pool = ProcessPool(max_workers=self.jobs, context=multiprocessing.get_context("spawn"),
+                           initializer=_worker_started)
+        upcoming = iter(cases)
+        running = {}
+
+        def fill() -> None:
+            while len(running) < self.jobs and (case := next(upcoming, None)) is not None:
+                running[pool.schedule(run_case, (case,), timeout=hard_limit(case))] = case
+
         try:
-            futures = {pool.schedule(run_case, (case,), timeout=hard_limit(case)): case for case in cases}
-            for future in as_completed(futures):
-                case = futures[future]
-                try:
-                    yield future.result()
-                except FutureTimeout:
-                    yield failed_outcome(case, "timeout", _timeout_message(case), hard_limit(case) or 0.0)
-                except ProcessExpired as error:
-                    yield failed_outcome(case, "crashed", _exit_message(error.exitcode))
-                except Exception as error:  # the outcome could not be sent back (e.g. unpicklable)
-                    yield failed_outcome(case, "error", f"{type(error).__name__}: {error}")
+            fill()
+            while running:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                finished = [(future, running.pop(future)) for future in done]
+                fill()  # the freed workers start their next cases while these are recorded
+                for future, case in finished:
+                    yield _pool_outcome(future, case)
         finally:
             pool.stop()
             pool.join()
+
+
+def _pool_outcome(future, case: Case) -> CaseOutcome:
+    from pebble import ProcessExpired
+
+    try:
+        return future.result()
+    except FutureTimeout:
+        return failed_outcome(case, "timeout", _timeout_message(case), hard_limit(case) or 0.0)
+    except ProcessExpired as error:
+        return failed_outcome(case, "crashed", _exit_message(error.exitcode))
+    except Exception as error:  # the outcome could not be sent back (e.g. unpicklable)
+        return failed_outcome(case, "error", f"{type(error).__name__}: {error}")
+
+
+def _worker_started() -> None:
+    """Pool worker initializer: ignore a SIGTERM that comes while the worker is already exiting.
+
+    Pebble stops a pool by closing its channels (idle workers then exit on their own) and sending each worker
+    SIGTERM, whose handler ends the process at once (``os._exit``). Landing in the middle of a worker's own exit,
+    it cut the multiprocessing finalizers short between unlinking a semaphore that a plugin had created (pyomo
+    makes one on import) and telling the resource tracker, which then warned of "leaked semaphore objects" after
+    clean runs. A worker already exiting finishes by itself (Pebble kills it if it takes more than 3 s); any
+    other SIGTERM (a case past its time limit) still ends it at once.
+    """
+    from multiprocessing import util
+
+    stop_now = signal.getsignal(signal.SIGTERM)
+
+    def on_sigterm(signum: int, frame) -> None:
+        if util.is_exiting():
+            return
+        if callable(stop_now):
+            stop_now(signum, frame)
+        else:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    signal.signal(signal.SIGTERM, on_sigterm)
 
 
 class DaskExecutor:
@@ -110,10 +155,21 @@ class DaskExecutor:
                                    dashboard_address=None)
         try:
             with Client(self.scheduler or cluster, timeout="30s") as client:
-                futures = {client.submit(run_case_served, case, key=f"case-{case.key}", pure=False): case
-                           for case in cases}
-                for future in dask_completed(futures):
-                    case = futures[future]
+                upcoming = iter(cases)
+                running = {}
+                completed = dask_completed()
+
+                def fill() -> None:  # as many cases as the cluster has threads now (workers may come and go)
+                    slots = max(self.jobs, sum(client.nthreads().values()))
+                    while len(running) < slots and (case := next(upcoming, None)) is not None:
+                        future = client.submit(run_case_served, case, key=f"case-{case.key}", pure=False)
+                        running[future] = case
+                        completed.add(future)
+
+                fill()
+                for future in completed:
+                    case = running.pop(future)
+                    fill()
                     try:
                         yield future.result()
                     except Exception as error:  # the worker was lost (KilledWorker) or the task failed

@@ -42,9 +42,11 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle.
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
-    the rest. Exit status 1 if any case failed, 2 if the suite is invalid.
+    the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
+    Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
     """
     from gaitbench.runner import RunRefused, run_suite
+    from gaitbench.store import StoreError
     from gaitbench.suite import SuiteError, load_suite
 
     if state.plugin_dirs:  # through the environment, so worker processes load them too
@@ -68,10 +70,12 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     with _CaseProgress(console) as progress:
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
-                                retry_failed=retry_failed, on_start=progress.start, on_outcome=progress.advance)
-        except RunRefused as error:
+                                retry_failed=retry_failed, on_start=progress.start, on_outcome=progress.advance,
+                                on_elsewhere=progress.elsewhere)
+        except (RunRefused, StoreError) as error:
             raise click.ClickException(str(error)) from None
-    console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, "
+    shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
+    console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
     if write_report:
         from gaitbench.reports import write_report as write
@@ -96,7 +100,7 @@ class _CaseProgress:
 
     def __init__(self, console: Console) -> None:
         self.console = console
-        self.done = self.failed = 0
+        self.done = self.failed = self.taken = 0
         self.progress = Progress(
             TextColumn("{task.description}"), BarColumn(),
             TextColumn("{task.fields[done]} done · {task.fields[failed]} failed · {task.fields[left]} left"),
@@ -104,16 +108,24 @@ class _CaseProgress:
         self.task = None
 
     def __enter__(self) -> _CaseProgress:
-        self.progress.__enter__()
         return self
 
     def __exit__(self, *exc_info) -> None:
-        self.progress.__exit__(*exc_info)
+        if self.task is not None:
+            self.progress.__exit__(*exc_info)
 
     def start(self, to_run: int, skipped: int) -> None:
+        """Show the bar once the run has started, so that an error before it (the store) stays one line."""
+        self.progress.__enter__()
         if skipped:
             self.console.print(f"{skipped} cases already in the store are skipped")
         self.task = self.progress.add_task("cases", total=to_run, done=0, failed=0, left=to_run)
+
+    def elsewhere(self, case) -> None:
+        """A case another run sharing the store took: no longer left for this one."""
+        self.taken += 1
+        total = self.progress.tasks[0].total or 0
+        self.progress.update(self.task, advance=1, left=int(total) - self.done - self.taken)
 
     def advance(self, outcome) -> None:
         self.done += 1
@@ -122,7 +134,8 @@ class _CaseProgress:
             self.console.print(Text(f"{outcome.status}: {outcome.case.label}: {outcome.message}", style="yellow"),
                                soft_wrap=True)
         total = self.progress.tasks[0].total or 0
-        self.progress.update(self.task, advance=1, done=self.done, failed=self.failed, left=int(total) - self.done)
+        self.progress.update(self.task, advance=1, done=self.done, failed=self.failed,
+                             left=int(total) - self.done - self.taken)
 
 
 @click.group("runs")
@@ -134,7 +147,7 @@ def runs() -> None:
 @click.argument("stores", nargs=-1, type=click.Path(path_type=Path))
 def runs_list(stores: tuple[Path, ...]) -> None:
     """List the runs of each STORE (default: every store under ./results)."""
-    from gaitbench.store import DATABASE, ResultStore, StoreError
+    from gaitbench.store import DATABASE, ResultStore, StoreError, run_alive
 
     paths = list(stores) or sorted(path.parent for path in Path("results").glob(f"*/{DATABASE}"))
     if not paths:
@@ -148,7 +161,7 @@ def runs_list(stores: tuple[Path, ...]) -> None:
                 for row in store.runs():
                     table.add_row(str(path), row["run_id"], row["suite"], row["executor"], str(row["jobs"]),
                                   str(row["cases_total"]), str(row["cases_done"]), str(row["cases_failed"] or 0),
-                                  str(row["cases_skipped"]), row["finished_at"] or "not finished")
+                                  str(row["cases_skipped"]), row["finished_at"] or _unfinished(row, run_alive))
         except StoreError as error:
             raise click.ClickException(str(error)) from None
     Console().print(table)
@@ -196,11 +209,21 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     for column in JSON_COLUMNS:  # nested values as JSON text: one flat, typed table for CSV and Parquet alike
         frame[column] = frame[column].map(lambda value: None if value is None else json.dumps(value))
     out = out or Path(store_dir) / f"cases.{fmt}"
-    if fmt == "csv":
-        frame.to_csv(out, index=False)
-    else:
-        frame.to_parquet(out, index=False)
+    try:
+        if fmt == "csv":
+            frame.to_csv(out, index=False)
+        else:
+            frame.to_parquet(out, index=False)
+    except OSError as error:  # e.g. the default, inside a store in a read-only place
+        raise click.ClickException(f"{out}: cannot write the export ({error.strerror or error}); "
+                                   "choose another file with --out") from None
     Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
+
+
+def _unfinished(run: dict, alive) -> str:
+    if alive(run):
+        return f"running (pid {run['pid']} on {run['host']})"
+    return "not finished"
 
 
 def _number(value, spec: str) -> str:

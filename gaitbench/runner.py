@@ -2,7 +2,8 @@
 
 :func:`run_case` is what a worker does with one case; it never raises, so a failing method, a broken plugin or
 bad options become a recorded status. :func:`run_suite` hands the cases that are not yet in the store to an
-executor (:mod:`gaitbench.executors`) and records each outcome as it arrives.
+executor (:mod:`gaitbench.executors`), claiming each as the executor takes it so that runs sharing a store never
+solve a case twice, and records each outcome as it arrives.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import tempfile
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -224,44 +225,85 @@ class RunSummary:
     solved: int
     failed: int
     wall_time_s: float
+    elsewhere: int = 0
+    """Cases of this run that another run sharing the store solved (or was solving when this one ended)."""
 
 
 def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
               on_start: Callable[[int, int], None] | None = None,
-              on_outcome: Callable[[CaseOutcome], None] | None = None) -> RunSummary:
+              on_outcome: Callable[[CaseOutcome], None] | None = None,
+              on_elsewhere: Callable[[Case], None] | None = None) -> RunSummary:
     """Run every case of ``suite`` that the store does not hold yet, recording each as it finishes.
 
-    Without ``resume`` a store that already holds cases of this suite is refused (nothing is overwritten);
-    with it, finished cases are skipped (and failed ones re-run with ``retry_failed``).
-    ``on_start(to_run, skipped)`` and ``on_outcome(outcome)`` feed a progress display.
+    Without ``resume`` a store that already holds cases of this suite is refused (nothing is overwritten), unless
+    another run is working on it now: then this run shares that work. Each case is claimed right before the
+    executor starts it, so runs sharing a store split the cases between them; a case another live run has claimed
+    or finished meanwhile is left to it (``on_elsewhere``). With ``resume``, finished cases are skipped (and failed
+    ones re-run with ``retry_failed``), and a dead run's claims are taken over. ``on_start(to_run, skipped)`` and
+    ``on_outcome(outcome)`` feed a progress display.
     """
     started = time.perf_counter()
     with ResultStore.create(store_dir) as store:
+        stored = store.case_runs()
         finished = store.finished_keys(retry_failed=retry_failed)
         present = [case for case in suite.cases if case.key in finished]
-        if present and not resume:
+        if present and not resume and not store.live_runs():
             raise RunRefused(
                 f"{store.directory} already holds {len(present)} of the {len(suite.cases)} cases of this suite; "
                 "pass --resume to run only the missing ones, or --store to write somewhere else"
             )
         pending = largest_first([case for case in suite.cases if case.key not in finished])
-        run_id = _new_run_id(store, suite.name)
-        store.start_run({"run_id": run_id, "suite": suite.name, "suite_path": str(suite.path),
-                         "suite_text": suite.text, "executor": executor.name, "jobs": executor.jobs,
-                         "cases_total": len(suite.cases), "cases_skipped": len(present),
-                         "started_at": _now(), "provenance": provenance()})
-        if on_start:
-            on_start(len(pending), len(present))
-        solved = failed = 0
-        for outcome in executor.run(pending):
-            store.record_case(case_row(outcome, suite.name, run_id), outcome.files)
-            solved += not outcome.failed
-            failed += outcome.failed
-            if on_outcome:
-                on_outcome(outcome)
-        store.finish_run(run_id, _now())
+        run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,
+                                  "suite_path": str(suite.path), "suite_text": suite.text,
+                                  "executor": executor.name, "jobs": executor.jobs,
+                                  "cases_total": len(suite.cases), "cases_skipped": len(present),
+                                  "started_at": _now(), "provenance": provenance()})
+        finished_at = None
+        try:
+            store.clean_leftovers(run_id)
+            if on_start:
+                on_start(len(pending), len(present))
+            solved = failed = 0
+            elsewhere: list[Case] = []
+
+            def left(case: Case) -> None:
+                elsewhere.append(case)
+                if on_elsewhere:
+                    on_elsewhere(case)
+
+            with store.heartbeat(run_id):
+                for outcome in executor.run(_claimed(store, run_id, pending, stored, left)):
+                    store.record_case(case_row(outcome, suite.name, run_id), outcome.files)
+                    solved += not outcome.failed
+                    failed += outcome.failed
+                    if on_outcome:
+                        on_outcome(outcome)
+            finished_at = _now()
+        finally:
+            store.finish_run(run_id, finished_at)  # a stopped run's claims go too; it stays unfinished
     return RunSummary(run_id, Path(store_dir), len(suite.cases), len(present), solved, failed,
-                      time.perf_counter() - started)
+                      time.perf_counter() - started, len(elsewhere))
+
+
+def _claimed(store, run_id: str, cases: Iterable[Case], stored: dict[str, str],
+             elsewhere: Callable[[Case], None]) -> Iterator[Case]:
+    """The cases this run gets to solve, claimed one at a time as the executor takes them (so runs sharing the
+    store split the work in largest-first order). A case a live run holds is looked at once more at the end, in
+    case that run has died since; a case finished by another run is left to it."""
+    held = []
+    for case in cases:
+        verdict = store.claim(case.key, run_id, stored.get(case.key))
+        if verdict == "claimed":
+            yield case
+        elif verdict == "running":
+            held.append(case)
+        else:
+            elsewhere(case)
+    for case in held:
+        if store.claim(case.key, run_id, stored.get(case.key)) == "claimed":
+            yield case
+        else:
+            elsewhere(case)
 
 
 def largest_first(cases: list[Case]) -> list[Case]:
@@ -274,12 +316,9 @@ def largest_first(cases: list[Case]) -> list[Case]:
     return sorted(cases, key=lambda case: -case.n_nodes)
 
 
-def _new_run_id(store: ResultStore, suite_name: str) -> str:
-    """``<UTC time to the second>-<suite>``, with ``-2``, ``-3``, ... when runs of the suite start within a second."""
-    stem = f"{datetime.now(timezone.utc):%Y%m%d-%H%M%S}-{suite_name}"
-    taken = {run["run_id"] for run in store.runs()}
-    return next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
-                if run_id not in taken)
+def _run_stem(suite_name: str) -> str:
+    """``<UTC time to the second>-<suite>``; the store adds ``-2``, ``-3``, ... for runs started within a second."""
+    return f"{datetime.now(timezone.utc):%Y%m%d-%H%M%S}-{suite_name}"
 
 
 class RunRefused(Exception):

@@ -5,9 +5,14 @@ Layout of a store directory::
     results.sqlite          runs (one row per `gaitbench run` session) and cases (one row per case key)
     cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked
 
-Only the process that runs the suite writes: workers return their results and the runner records each one as
-soon as it arrives. A case's files are written to a temporary directory and renamed into place before its row
-is committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
+Only the processes that run suites write: workers return their results and the runner records each one as soon
+as it arrives. A case's files are written to a temporary directory and renamed into place before its row is
+committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
+
+Several runs may share a store: each claims a case (table ``claims``, under SQLite's write lock) right before it
+starts it, so no case is solved twice, and a claim dies with its run (same host: the process is gone; any host:
+no heartbeat for :data:`LEASE_S`). Readers open the store read-only and never change it; a file that is not a
+gaitbench store is refused before anything is written to it.
 """
 
 from __future__ import annotations
@@ -15,14 +20,35 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
+import socket
 import sqlite3
 import tempfile
+import threading
+import time
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 DATABASE = "results.sqlite"
 CASES_DIR = "cases"
+
+APPLICATION_ID = int.from_bytes(b"gbch", "big")
+"""``PRAGMA application_id`` of a gaitbench store: how a store is told from another SQLite file before anything is
+written (stores written before it existed are recognized by their tables, and stamped when next written)."""
+
+HEARTBEAT_S = 20.0
+"""How often a running suite refreshes its run's ``heartbeat_at``."""
+
+LEASE_S = 120.0
+"""A run whose heartbeat is older than this is dead, and its claims free: the only test for a run on another host
+(on the same host a run is also dead as soon as its process is)."""
+
+STORE_TABLES = {"runs", "cases", "claims"}
+_STAGING = re.compile(r"^\.[0-9a-f]{16}-")
 
 FINISHED_STATUSES = ("solved", "incomplete", "error", "timeout", "crashed")
 """``solved``: every step solved and verified. ``incomplete``: the method failed at a step (a result, not a
@@ -103,7 +129,20 @@ RUN_COLUMNS: dict[str, str] = {
     "started_at": "TEXT",
     "finished_at": "TEXT",
     "provenance": "TEXT",
+    "host": "TEXT",
+    "pid": "INTEGER",
+    "heartbeat_at": "TEXT",
 }
+
+CLAIM_COLUMNS: dict[str, str] = {
+    "case_key": "TEXT PRIMARY KEY",
+    "run_id": "TEXT NOT NULL",
+    "claimed_at": "TEXT",
+}
+"""A case being solved and by which run; the row goes when the case's row is written or its run ends."""
+
+_OPEN_RUNS: set[str] = set()
+"""Runs this process is running: a claim whose pid is this process's is alive only if its run is one of them."""
 
 
 class StoreError(Exception):
@@ -117,40 +156,89 @@ class ResultStore:
         self.directory = directory
         self._db = connection
 
+    @property
+    def database(self) -> Path:
+        return self.directory / DATABASE
+
     @classmethod
     def create(cls, directory: str | Path) -> ResultStore:
-        """Open the store at ``directory`` for writing, creating it (and its tables) if needed."""
+        """Open the store at ``directory`` for writing, creating it (and its tables) if needed.
+
+        :class:`StoreError` (one line naming the path) if the directory cannot be written or ``results.sqlite`` is
+        not a gaitbench store; such a file is left exactly as it was.
+        """
         directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        store = cls(directory, _connect(directory / DATABASE))
-        with store._db:
-            store._db.execute(_create_table("runs", RUN_COLUMNS))
-            store._db.execute(_create_table("cases", CASE_COLUMNS))
-            _add_missing_columns(store._db)
+        database = directory / DATABASE
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise StoreError(f"{directory}: cannot create the results store here ({_reason(error)})") from None
+        _check_file(database)
+        try:
+            connection = sqlite3.connect(database, timeout=30, isolation_level=None)
+        except sqlite3.Error as error:
+            raise StoreError(f"{database}: cannot open the results store for writing ({error})") from None
+        store = cls(directory, connection)
+        try:
+            connection.row_factory = sqlite3.Row
+            with store._write():  # checked again under the write lock: what the WAL holds, and a file made meanwhile
+                _check_schema(connection, database)
+            # readers (`runs show` during a run) never block the writer, and several runs can share the store
+            connection.execute("PRAGMA journal_mode=WAL")
+            connection.execute("PRAGMA synchronous=FULL")
+            with store._write():
+                for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS), ("claims", CLAIM_COLUMNS)):
+                    connection.execute(_create_table(table, columns))
+                _add_missing_columns(connection)
+                connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        except sqlite3.Error as error:
+            connection.close()
+            raise StoreError(f"{database}: cannot write the results store ({error})") from None
+        except StoreError:
+            connection.close()
+            raise
         return store
 
     @classmethod
     def open(cls, directory: str | Path) -> ResultStore:
-        """Open an existing store; :class:`StoreError` if there is none at ``directory``."""
+        """Open an existing store for reading; :class:`StoreError` if there is none at ``directory``.
+
+        The connection is read-only (``immutable`` too where the directory cannot be written, which a WAL database
+        needs for its lock files), so a store in a read-only place can be read and reading never changes one. A
+        store written before some columns existed gains them here when it can be written (see
+        :func:`_add_missing_columns`); otherwise it is read without them.
+        """
         directory = Path(directory)
         database = directory / DATABASE if directory.is_dir() else directory
         if not database.is_file():
             raise StoreError(f"{directory}: no results store here (expected {DATABASE}); "
                              "pass the directory given to `gaitbench run --store`, or the suite's output directory")
+        _check_file(database)
+        writable = os.access(database.parent, os.W_OK) and os.access(database, os.W_OK)
+        if writable:
+            _migrate(database)
         try:
-            connection = _connect(database)
+            connection = _connect_read_only(database, immutable=not writable)
+            _check_schema(connection, database)
             connection.execute("SELECT case_key FROM cases LIMIT 1")
         except sqlite3.DatabaseError as error:
-            raise StoreError(f"{database}: not a gaitbench results store ({error})") from error
-        try:
-            with connection:
-                _add_missing_columns(connection)
-        except sqlite3.OperationalError:  # a read-only store is still read: its rows lack the new columns
-            pass
+            raise StoreError(f"{database}: not a gaitbench results store ({error})") from None
         return cls(database.parent, connection)
 
     def close(self) -> None:
         self._db.close()
+
+    @contextmanager
+    def _write(self) -> Iterator[None]:
+        """A write transaction that takes SQLite's write lock at once (``BEGIN IMMEDIATE``): what is read inside it
+        stays true until the commit, which is what makes claims and run ids race-free between processes."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
 
     def __enter__(self) -> ResultStore:
         return self
@@ -160,13 +248,99 @@ class ResultStore:
 
     # --- runs -----------------------------------------------------------------------------------------------
 
-    def start_run(self, run: dict[str, Any]) -> None:
-        with self._db:
-            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(run, RUN_COLUMNS))
+    def start_run(self, run: dict[str, Any]) -> str:
+        """Record a run starting in this process and return its id: ``run["run_id"]``, or with ``-2``, ``-3``, ...
+        when that is taken (runs of one suite started within a second), chosen under the write lock so that
+        concurrent runs never collide."""
+        stem = run["run_id"]
+        with self._write():
+            taken = {row[0] for row in self._db.execute(
+                "SELECT run_id FROM runs WHERE run_id = ? OR run_id LIKE ?", (stem, f"{stem}-%"))}
+            run_id = next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
+                          if run_id not in taken)
+            values = run | {"run_id": run_id, "host": socket.gethostname(), "pid": os.getpid(),
+                            "heartbeat_at": _now()}
+            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(values, RUN_COLUMNS))
+        _OPEN_RUNS.add(run_id)
+        return run_id
 
-    def finish_run(self, run_id: str, finished_at: str) -> None:
-        with self._db:
-            self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+    def finish_run(self, run_id: str, finished_at: str | None) -> None:
+        """End a run: its claims go, and ``finished_at`` is set (left null for a run that was stopped)."""
+        _OPEN_RUNS.discard(run_id)
+        with self._write():
+            self._db.execute("DELETE FROM claims WHERE run_id = ?", (run_id,))
+            if finished_at is not None:
+                self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+
+    @contextmanager
+    def heartbeat(self, run_id: str) -> Iterator[None]:
+        """Keep ``run_id`` alive for other runs (its ``heartbeat_at``, every :data:`HEARTBEAT_S`) while inside."""
+        stop = threading.Event()
+
+        def beat() -> None:
+            connection = sqlite3.connect(self.database, timeout=30, isolation_level=None)
+            try:
+                while not stop.wait(HEARTBEAT_S):
+                    try:
+                        connection.execute("UPDATE runs SET heartbeat_at = ? WHERE run_id = ?", (_now(), run_id))
+                    except sqlite3.Error:  # busy or failing: the lease outlasts a few missed beats
+                        pass
+            finally:
+                connection.close()
+
+        thread = threading.Thread(target=beat, name=f"heartbeat {run_id}", daemon=True)
+        thread.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            thread.join()
+
+    def live_runs(self, exclude: str | None = None) -> list[dict[str, Any]]:
+        """The runs working on this store now (unfinished, process alive, heartbeat fresh), but ``exclude``."""
+        rows = self._db.execute("SELECT * FROM runs WHERE finished_at IS NULL").fetchall()
+        return [dict(row) for row in rows if row["run_id"] != exclude and run_alive(row)]
+
+    def claim(self, case_key: str, run_id: str, expected: str | None) -> str:
+        """Claim a case for ``run_id`` before starting it: ``"claimed"``, ``"running"`` (a live run holds it) or
+        ``"done"`` (its row changed since the run read it: another run finished it).
+
+        ``expected`` is the run id of the case's row when this run planned it (``""`` for a row without one, None
+        for no row). A claim whose run is dead is taken over.
+        """
+        with self._write():
+            holder = self._db.execute(
+                "SELECT runs.* FROM claims LEFT JOIN runs ON runs.run_id = claims.run_id WHERE claims.case_key = ?",
+                (case_key,)).fetchone()
+            if holder is not None and holder["run_id"] not in (None, run_id) and run_alive(holder):
+                return "running"
+            stored = self._db.execute("SELECT run_id FROM cases WHERE case_key = ?", (case_key,)).fetchone()
+            if (None if stored is None else stored[0] or "") != expected:
+                return "done"
+            self._db.execute(_insert("claims", CLAIM_COLUMNS, replace=True),
+                             _row({"case_key": case_key, "run_id": run_id, "claimed_at": _now()}, CLAIM_COLUMNS))
+        return "claimed"
+
+    def clean_leftovers(self, run_id: str) -> list[str]:
+        """Remove what a killed run can leave (staging directories ``.KEY-xxxx``, case directories that no row
+        names) unless another run is live, whose files these might be; the paths removed, relative to the store.
+
+        Under the write lock, so that no run can start (and begin writing files) between the check and the removal.
+        """
+        removed = []
+        with self._write():
+            if self.live_runs(exclude=run_id):
+                return removed
+            named = {row[0] for row in self._db.execute(
+                "SELECT case_key FROM cases WHERE walk_path IS NOT NULL OR tracking_path IS NOT NULL")}
+            staging = [path for path in self.directory.iterdir() if path.is_dir() and _STAGING.match(path.name)]
+            cases_dir = self.directory / CASES_DIR
+            unnamed = [path for path in cases_dir.iterdir() if path.is_dir() and path.name not in named] \
+                if cases_dir.is_dir() else []
+            for path in (*staging, *unnamed):
+                shutil.rmtree(path, ignore_errors=True)
+                removed.append(path.relative_to(self.directory).as_posix())
+        return removed
 
     def runs(self) -> list[dict[str, Any]]:
         """Every run, oldest first, with how many of the stored cases it computed and how many failed."""
@@ -187,26 +361,37 @@ class ResultStore:
             return {key for (key,) in self._db.execute(query, RETRYABLE_STATUSES)}
         return {key for (key,) in self._db.execute(query)}
 
+    def case_runs(self) -> dict[str, str]:
+        """The run id of every stored case (``""`` where a row has none): what :meth:`claim` expects."""
+        return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
+
     def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> None:
-        """Write one finished case: its files first (renamed into place as one directory), then its row.
+        """Write one finished case: its files first (renamed into place as one directory), then its row, which
+        releases the case's claim.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
-        :func:`case_file`.
+        :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``.
         """
-        if files:
-            target = self.directory / case_file(row["case_key"])
-            staging = Path(tempfile.mkdtemp(prefix=f".{row['case_key']}-", dir=self.directory))
-            try:
-                for name, content in files.items():
-                    (staging / name).write_bytes(content)
-                if target.exists():  # a retried case replaces its earlier files
-                    shutil.rmtree(target)
-                target.parent.mkdir(exist_ok=True)
-                os.replace(staging, target)
-            finally:
-                shutil.rmtree(staging, ignore_errors=True)
-        with self._db:
-            self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+        try:
+            if files:
+                target = self.directory / case_file(row["case_key"])
+                staging = Path(tempfile.mkdtemp(prefix=f".{row['case_key']}-", dir=self.directory))
+                try:
+                    for name, content in files.items():
+                        (staging / name).write_bytes(content)
+                    staging.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would hide the results from other users
+                    if target.exists():  # a retried case replaces its earlier files
+                        shutil.rmtree(target)
+                    target.parent.mkdir(exist_ok=True)
+                    os.replace(staging, target)
+                finally:
+                    shutil.rmtree(staging, ignore_errors=True)
+            with self._write():
+                self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+                self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?",
+                                 (row["case_key"], row.get("run_id")))
+        except (OSError, sqlite3.Error) as error:
+            raise StoreError(f"{self.directory}: cannot record case {row['case_key']} ({_reason(error)})") from None
 
     def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
         """Stored case rows (JSON columns decoded, every column of :data:`CASE_COLUMNS` present, null where a
@@ -245,12 +430,89 @@ def load_results(path: str | Path):
     return pd.DataFrame(rows, columns=list(CASE_COLUMNS))
 
 
-def _connect(database: Path) -> sqlite3.Connection:
-    connection = sqlite3.connect(database, timeout=30)
+def _connect_read_only(database: Path, immutable: bool) -> sqlite3.Connection:
+    uri = database.resolve().as_uri() + "?mode=ro" + ("&immutable=1" if immutable else "")
+    connection = sqlite3.connect(uri, uri=True, timeout=30, isolation_level=None)
     connection.row_factory = sqlite3.Row
-    connection.execute("PRAGMA journal_mode=WAL")  # readers (`runs show` during a run) never block the writer
-    connection.execute("PRAGMA synchronous=FULL")
     return connection
+
+
+def _check_file(database: Path) -> None:
+    """Refuse, before anything is written, a ``results.sqlite`` that is not a gaitbench store (StoreError).
+
+    Reads the SQLite header (magic, application id) and, for a file without gaitbench's application id, its tables,
+    through an immutable read-only connection that touches nothing, not even lock files.
+    """
+    try:
+        with open(database, "rb") as file:
+            header = file.read(100)
+    except FileNotFoundError:
+        return
+    except OSError as error:
+        raise StoreError(f"{database}: cannot read the results store ({_reason(error)})") from None
+    if not header:
+        return  # an empty file is an empty database: a new store
+    if not header.startswith(b"SQLite format 3\0"):
+        raise StoreError(f"{database}: not a gaitbench results store (not an SQLite database); nothing was changed")
+    application_id = int.from_bytes(header[68:72], "big") if len(header) >= 72 else 0
+    if application_id == APPLICATION_ID:
+        return
+    if application_id:
+        raise StoreError(f"{database}: not a gaitbench results store (an SQLite file of another application, "
+                         f"application_id {application_id:#x}); nothing was changed")
+    try:
+        connection = _connect_read_only(database, immutable=True)
+        try:
+            _check_schema(connection, database)
+        finally:
+            connection.close()
+    except sqlite3.DatabaseError as error:
+        raise StoreError(f"{database}: not a gaitbench results store ({error}); nothing was changed") from None
+
+
+def _check_schema(connection: sqlite3.Connection, database: Path) -> None:
+    """StoreError unless the database is empty, has gaitbench's application id, or holds only gaitbench's tables
+    with a ``cases.case_key`` column (a store from before the application id)."""
+    if connection.execute("PRAGMA application_id").fetchone()[0] == APPLICATION_ID:
+        return
+    tables = {row[0] for row in connection.execute(
+        "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite\\_%' ESCAPE '\\'")}
+    if not tables:
+        return
+    columns = {row[1] for row in connection.execute("PRAGMA table_info(cases)")}
+    if tables <= STORE_TABLES and "case_key" in columns:
+        return
+    foreign = ", ".join(sorted(tables - STORE_TABLES) or sorted(tables))
+    raise StoreError(f"{database}: not a gaitbench results store (it holds tables {foreign}); nothing was changed")
+
+
+def _migrate(database: Path) -> None:
+    """Add the columns an older gaitbench's store lacks, if any, when it can be written (else it is read as is)."""
+    try:
+        connection = _connect_read_only(database, immutable=False)
+        try:
+            missing = _missing_columns(connection)
+        finally:
+            connection.close()
+        if not missing:
+            return
+        connection = sqlite3.connect(database, timeout=5, isolation_level=None)
+        try:
+            connection.execute("BEGIN IMMEDIATE")
+            _add_missing_columns(connection)
+            connection.execute("COMMIT")
+        finally:
+            connection.close()
+    except sqlite3.Error:  # read-only after all, locked, or not a store (which open() reports): read as it is
+        pass
+
+
+def _missing_columns(connection: sqlite3.Connection) -> list[tuple[str, str, str]]:
+    missing = []
+    for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
+        present = {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
+        missing += [(table, column, kind) for column, kind in columns.items() if present and column not in present]
+    return missing
 
 
 def _create_table(name: str, columns: dict[str, str]) -> str:
@@ -262,11 +524,8 @@ def _add_missing_columns(connection: sqlite3.Connection) -> None:
 
     Only additions are migrated; SQLite's ``ALTER TABLE ADD COLUMN`` keeps the existing rows and is cheap.
     """
-    for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
-        present = {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
-        for column, kind in columns.items():
-            if present and column not in present:
-                connection.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
+    for table, column, kind in _missing_columns(connection):
+        connection.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
 
 
 def _insert(table: str, columns: dict[str, str], replace: bool) -> str:
@@ -304,3 +563,60 @@ def _json_default(value: Any) -> Any:
     if hasattr(value, "tolist"):
         return value.tolist()
     return str(value)
+
+
+def run_alive(run: Mapping[str, Any]) -> bool:
+    """Whether a ``runs`` row is a run still working: not finished, its process alive when it is on this host, and
+    its heartbeat younger than :data:`LEASE_S` (which also ends a run whose pid was reused or that hangs)."""
+    if run["finished_at"]:
+        return False
+    keys = run.keys()
+    host = run["host"] if "host" in keys else None
+    pid = run["pid"] if "pid" in keys else None
+    if host == socket.gethostname() and pid:
+        if pid == os.getpid():
+            return run["run_id"] in _OPEN_RUNS
+        if not _process_alive(pid):
+            return False
+    beat = (run["heartbeat_at"] if "heartbeat_at" in keys else None) or run["started_at"]
+    try:
+        age = time.time() - datetime.fromisoformat(beat).timestamp()
+    except (TypeError, ValueError):
+        return False
+    return age < LEASE_S
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    try:  # a zombie (killed, not yet reaped by its parent) is dead
+        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def _umask() -> int:
+    """This process's umask, read without changing it where Linux tells it (changing it races other threads)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _reason(error: Exception) -> str:
+    if isinstance(error, OSError) and error.strerror:
+        return error.strerror
+    return str(error)
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")

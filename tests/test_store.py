@@ -1,0 +1,445 @@
+"""The store's reliability: runs sharing a store, clear errors on files that are not stores, reading a store in a
+read-only place, and what a killed run leaves behind."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import socket
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from click.testing import CliRunner
+
+import gaitbench
+from gaitbench.case import Case, PluginChoice
+from gaitbench.cli import main
+from gaitbench.runner import CaseOutcome, case_row, run_suite
+from gaitbench.store import DATABASE, ResultStore, StoreError
+
+GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "COLUMNS": "200"}
+
+
+def fake_case(n_nodes: int, tag: str = "") -> Case:
+    return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice("ipopt", {"tag": tag}),
+                PluginChoice("one-phase"), steps=1, method="OP-DC")
+
+
+def suite_of(cases: list[Case], name: str = "test") -> SimpleNamespace:
+    return SimpleNamespace(name=name, path=Path(f"{name}.toml"), text="# test suite", cases=cases)
+
+
+class Instant:
+    """An executor that solves nothing: each case it takes comes back at once as solved, with a walk file."""
+
+    name, jobs = "instant", 1
+
+    def __init__(self, during=None) -> None:
+        self.taken: list[str] = []
+        self.during = during  # called as the executor takes its third case
+
+    def run(self, cases):
+        for case in cases:
+            self.taken.append(case.key)
+            if len(self.taken) == 3 and self.during is not None:
+                self.during()
+            yield CaseOutcome(case, "solved", "", 0.0, files={"walk.json": b"{}"})
+
+
+def tiny_suite(path: Path, name: str, n_values: list[int], transcriptions: list[str],
+               experiment: str = "forward") -> Path:
+    path.write_text(textwrap.dedent(f"""
+        [suite]
+        name = "{name}"
+        steps = 1
+        time_limit_s = 60
+        [sweep]
+        experiments = ["{experiment}"]
+        N = {n_values}
+        transcriptions = {transcriptions}
+        solvers = ["ipopt"]
+        strategies = ["one-phase"]
+    """))
+    return path
+
+
+def dead_pid() -> int:
+    process = subprocess.Popen(["true"])
+    process.wait()
+    return process.pid
+
+
+def other_run(store: Path, run_id: str, claims: tuple[str, ...] = (), **values) -> None:
+    """A run of another process (by default on this host, pid 1, heartbeat now), holding claims on ``claims``."""
+    from gaitbench.store import _now
+
+    ResultStore.create(store).close()
+    row = {"run_id": run_id, "suite": "test", "started_at": _now(), "heartbeat_at": _now(),
+           "host": socket.gethostname(), "pid": 1} | values
+    with sqlite3.connect(store / DATABASE) as db:
+        db.execute(f"INSERT INTO runs ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
+        db.executemany("INSERT INTO claims (case_key, run_id) VALUES (?, ?)", [(key, run_id) for key in claims])
+    db.close()
+
+
+def listing(directory: Path) -> dict[str, bytes]:
+    return {path.relative_to(directory).as_posix(): path.read_bytes() if path.is_file() else b""
+            for path in sorted(directory.rglob("*"))}
+
+
+# --- 1. one store, several runs ---------------------------------------------------------------------------------
+
+def test_two_processes_on_one_store_solve_each_case_once(tmp_path: Path) -> None:
+    """Two `gaitbench run` processes on one store of 10 real cases (one without --resume and a local pool, one with
+    --resume in-process) solve 10 cases between them: each process counts the outcomes it recorded."""
+    suite = tiny_suite(tmp_path / "shared.toml", "shared", [6, 7, 8, 9, 10], ["hermite-simpson", "trapezoidal"])
+    store = tmp_path / "store"
+    command = [GAITBENCH, "run", str(suite), "--store", str(store), "--no-report"]
+    first = subprocess.Popen([*command, "--executor", "local", "--jobs", "1"], env=ENV, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    second = subprocess.Popen([*command, "--executor", "inprocess", "--resume"], env=ENV, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    outputs = [process.communicate(timeout=600) for process in (first, second)]
+    summaries = {}
+    for process, (_, stderr) in zip((first, second), outputs, strict=True):
+        assert process.returncode == 0, stderr
+        assert "Traceback" not in stderr
+        found = re.search(r"run (\S+): (\d+) solved, (\d+) failed", stderr)
+        assert found, stderr
+        summaries[found[1]] = int(found[2]) + int(found[3])
+    assert len(summaries) == 2  # distinct run ids
+    assert sum(summaries.values()) == 10, summaries  # every case solved once: none twice, none lost
+    rows = gaitbench.load_results(store)
+    assert len(rows) == 10 and set(rows.status) == {"solved"}
+    assert rows.run_id.value_counts().to_dict() == {run: count for run, count in summaries.items() if count}
+    with ResultStore.open(store) as opened:
+        assert all(run["finished_at"] for run in opened.runs())
+
+
+def test_a_run_started_during_another_shares_its_cases(tmp_path: Path) -> None:
+    """A run started (without --resume) while another runs on the store, after that one has recorded two cases,
+    takes the cases nobody holds; the first leaves it those and keeps the one it had claimed."""
+    cases = [fake_case(6 + n) for n in range(10)]
+    inner = Instant()
+    later = []
+    outer = Instant(during=lambda: later.append(run_suite(suite_of(cases), tmp_path, inner)))
+    first = run_suite(suite_of(cases), tmp_path, outer)
+    second = later[0]
+    assert len(outer.taken) == 3 and len(inner.taken) == 7
+    assert not set(outer.taken) & set(inner.taken)
+    assert (first.solved, first.elsewhere, second.solved, second.elsewhere, second.skipped) == (3, 7, 7, 1, 2)
+    rows = gaitbench.load_results(tmp_path)
+    assert sorted(rows.run_id.value_counts()) == [3, 7] and len(rows) == 10
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        assert db.execute("SELECT COUNT(*) FROM claims").fetchone()[0] == 0  # every claim released
+
+
+def test_run_ids_are_unique_when_runs_start_at_once(tmp_path: Path) -> None:
+    ResultStore.create(tmp_path).close()
+    start = threading.Barrier(6)
+    ids, errors = [], []
+
+    def begin() -> None:
+        try:
+            with ResultStore.create(tmp_path) as store:
+                start.wait()
+                ids.append(store.start_run({"run_id": "20261201-210000-test", "suite": "test"}))
+                store.finish_run(ids[-1], None)
+        except Exception as error:  # noqa: BLE001 - any failure of a starting run is what this test looks for
+            errors.append(error)
+
+    threads = [threading.Thread(target=begin) for _ in range(6)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert not errors
+    assert sorted(ids) == ["20261201-210000-test", *(f"20261201-210000-test-{n}" for n in range(2, 7))]
+
+
+def test_claims_of_dead_runs_expire_and_live_ones_are_left(tmp_path: Path) -> None:
+    """--resume takes back the cases claimed by a run whose process is gone (this host) or whose heartbeat is stale
+    (another host), and leaves a case claimed by a live run on another host."""
+    dead, stale, live, free = (fake_case(n) for n in (6, 7, 8, 9))
+    other_run(tmp_path, "dead", (dead.key,), pid=dead_pid())
+    other_run(tmp_path, "stale", (stale.key,), host="elsewhere.example", heartbeat_at="2026-01-01T00:00:00+00:00")
+    other_run(tmp_path, "live", (live.key,), host="elsewhere.example")
+    executor = Instant()
+    summary = run_suite(suite_of([dead, stale, live, free]), tmp_path, executor, resume=True)
+    assert set(executor.taken) == {dead.key, stale.key, free.key}
+    assert summary.elsewhere == 1
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        assert db.execute("SELECT case_key, run_id FROM claims").fetchall() == [(live.key, "live")]
+
+
+def test_a_second_run_after_a_finished_one_is_still_refused_without_resume(tmp_path: Path) -> None:
+    from gaitbench.runner import RunRefused
+
+    cases = [fake_case(6), fake_case(7)]
+    run_suite(suite_of(cases), tmp_path, Instant())
+    with pytest.raises(RunRefused, match="pass --resume"):
+        run_suite(suite_of(cases), tmp_path, Instant())
+
+
+def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
+    from gaitbench.store import run_alive
+
+    here = socket.gethostname()
+    now = "2999-01-01T00:00:00+00:00"  # a heartbeat from the future is fresh
+    row = {"run_id": "not-a-run-of-this-process", "finished_at": None, "started_at": now, "heartbeat_at": now,
+           "host": here}
+    assert run_alive(row | {"pid": os.getppid()})
+    assert not run_alive(row | {"pid": dead_pid()})
+    assert not run_alive(row | {"pid": os.getppid(), "finished_at": now})
+    assert not run_alive(row | {"pid": os.getppid(), "heartbeat_at": "2000-01-01T00:00:00+00:00"})
+    assert run_alive(row | {"pid": 1, "host": "elsewhere.example"})
+    assert not run_alive(row | {"pid": os.getpid()})  # this process, but not one of its runs
+
+
+# --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------
+
+@pytest.fixture
+def suite_file(tmp_path: Path) -> Path:
+    return tiny_suite(tmp_path / "tiny.toml", "tiny", [6], ["hermite-simpson"])
+
+
+def run_cli(*args: str) -> SimpleNamespace:
+    result = CliRunner().invoke(main, list(args))
+    lines = [line for line in result.output.splitlines() if line.strip() and "━" not in line]
+    return SimpleNamespace(code=result.exit_code, lines=lines, exception=result.exception, output=result.output)
+
+
+def assert_one_line_error(result: SimpleNamespace, *fragments: str) -> None:
+    assert result.code == 1, result.output
+    assert isinstance(result.exception, SystemExit), repr(result.exception)  # a ClickException, not a crash
+    errors = [line for line in result.lines if line.startswith("Error:")]
+    assert len(errors) == 1, result.output
+    for fragment in fragments:
+        assert fragment in errors[0], errors[0]
+
+
+def test_a_store_that_cannot_be_created_is_one_line(tmp_path: Path, suite_file: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("a regular file, so nothing can be made under it, even by root")
+    store = blocker / "store"
+    result = run_cli("run", str(suite_file), "--store", str(store), "--executor", "inprocess", "--no-report")
+    assert_one_line_error(result, str(store), "cannot create the results store")
+    database = tmp_path / "dir-db"
+    (database / DATABASE).mkdir(parents=True)  # results.sqlite that SQLite cannot open
+    result = run_cli("run", str(suite_file), "--store", str(database), "--executor", "inprocess", "--no-report")
+    assert_one_line_error(result, str(database / DATABASE))
+
+
+def test_a_file_that_is_not_sqlite_is_one_line_and_unchanged(tmp_path: Path, suite_file: Path) -> None:
+    (tmp_path / "store").mkdir()
+    database = tmp_path / "store" / DATABASE
+    database.write_bytes(b"these are my notes, not a database\n" * 20)
+    before = listing(tmp_path / "store")
+    result = run_cli("run", str(suite_file), "--store", str(tmp_path / "store"), "--executor", "inprocess",
+                     "--no-report")
+    assert_one_line_error(result, str(database), "not an SQLite database")
+    assert_one_line_error(run_cli("runs", "show", str(tmp_path / "store")), str(database))
+    assert listing(tmp_path / "store") == before
+
+
+def test_a_foreign_sqlite_file_is_refused_and_never_modified(tmp_path: Path, suite_file: Path) -> None:
+    store = tmp_path / "store"
+    store.mkdir()
+    with sqlite3.connect(store / DATABASE) as db:
+        db.execute("CREATE TABLE people (name TEXT)")
+        db.execute("INSERT INTO people VALUES ('Ada')")
+    db.close()
+    before = listing(store)
+    result = run_cli("run", str(suite_file), "--store", str(store), "--executor", "inprocess", "--no-report")
+    assert_one_line_error(result, str(store / DATABASE), "not a gaitbench results store", "people")
+    assert_one_line_error(run_cli("runs", "show", str(store)), str(store / DATABASE), "not a gaitbench")
+    assert_one_line_error(run_cli("report", str(store), "--out", str(tmp_path / "report")), "not a gaitbench")
+    with pytest.raises(StoreError, match="not a gaitbench results store"):
+        gaitbench.load_results(store)
+    assert listing(store) == before  # same bytes (no `runs` table, still a rollback journal), no -wal or -shm
+    with sqlite3.connect(f"file:{store / DATABASE}?mode=ro", uri=True) as db:
+        assert db.execute("PRAGMA journal_mode").fetchone()[0] == "delete"
+
+
+def test_another_application_s_file_is_told_by_its_application_id(tmp_path: Path) -> None:
+    with sqlite3.connect(tmp_path / DATABASE) as db:
+        db.execute("PRAGMA application_id = 1234")
+        db.execute("CREATE TABLE cases (case_key TEXT)")  # even with a table of the same name
+    db.close()
+    with pytest.raises(StoreError, match="another application"):
+        ResultStore.create(tmp_path)
+
+
+def test_an_empty_or_older_store_is_accepted_and_stamped(tmp_path: Path) -> None:
+    empty, older = tmp_path / "empty", tmp_path / "older"
+    empty.mkdir()
+    (empty / DATABASE).touch()
+    older.mkdir()
+    with sqlite3.connect(older / DATABASE) as db:  # before the application id, and analyzed (sqlite_stat1)
+        db.execute("CREATE TABLE runs (run_id TEXT PRIMARY KEY, suite TEXT, started_at TEXT, finished_at TEXT)")
+        db.execute("CREATE TABLE cases (case_key TEXT PRIMARY KEY, run_id TEXT, status TEXT)")
+        db.execute("INSERT INTO cases VALUES ('old', 'r0', 'solved')")
+        db.execute("ANALYZE")
+    db.close()
+    for store in (empty, older):
+        ResultStore.create(store).close()
+        with sqlite3.connect(store / DATABASE) as db:
+            assert db.execute("PRAGMA application_id").fetchone()[0] == int.from_bytes(b"gbch", "big")
+        db.close()
+    assert list(gaitbench.load_results(older).case_key) == ["old"]
+
+
+# --- 3. a store in a read-only place ----------------------------------------------------------------------------
+
+def test_a_store_in_a_read_only_place_is_read_without_a_write(tmp_path: Path, monkeypatch) -> None:
+    """runs show, report and load_results on a store copied into a read-only directory.
+
+    The tests run as root, whom permissions do not stop, so the directory is made read-only (0555, files 0444) and
+    os.access is made to say so: what this checks is that reading takes the read-only path (mode=ro, immutable)
+    and writes nothing at all, no byte of the database and no -wal/-shm lock file, which is what a really
+    read-only place needs. A store missing a newer column is read without it.
+    """
+    cases = [fake_case(6), fake_case(7)]
+    source = tmp_path / "source"
+    run_suite(suite_of(cases), source, Instant())
+    place = tmp_path / "readonly" / "store"
+    shutil.copytree(source, place, ignore=shutil.ignore_patterns("*-wal", "*-shm"))
+    with sqlite3.connect(place / DATABASE) as db:
+        db.execute("ALTER TABLE cases DROP COLUMN retries")  # as a store written before the column existed
+    db.close()
+    for path in place.rglob("*"):
+        path.chmod(0o555 if path.is_dir() else 0o444)
+    place.chmod(0o555)
+    real_access = os.access
+
+    def access(path, mode, *args, **kwargs) -> bool:
+        if mode & os.W_OK and isinstance(path, (str, Path)) and Path(path).resolve().is_relative_to(place.resolve()):
+            return False
+        return real_access(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setenv("COLUMNS", "200")
+    before = listing(place)
+    try:
+        frame = gaitbench.load_results(place)
+        assert len(frame) == 2 and frame.retries.isna().all()
+        shown = run_cli("runs", "show", str(place))
+        assert shown.code == 0, shown.output
+        assert "solved" in shown.output
+        listed = run_cli("runs", "list", str(place))
+        assert listed.code == 0 and "test" in listed.output, listed.output
+        exported = run_cli("runs", "export", str(place), "--out", str(tmp_path / "cases.csv"))
+        assert exported.code == 0 and (tmp_path / "cases.csv").exists(), exported.output
+        report = run_cli("report", str(place), "--out", str(tmp_path / "report"))
+        assert report.code == 0, report.output
+        assert (tmp_path / "report" / "index.html").exists()
+        assert listing(place) == before
+    finally:
+        for path in [place, *place.rglob("*")]:
+            path.chmod(0o755 if path.is_dir() else 0o644)
+
+
+def test_an_export_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
+    run_suite(suite_of([fake_case(6)]), tmp_path / "store", Instant())
+    out = tmp_path / "file" / "cases.csv"
+    (tmp_path / "file").write_text("a regular file, so nothing can be written under it")
+    assert_one_line_error(run_cli("runs", "export", str(tmp_path / "store"), "--out", str(out)), str(out))
+
+
+# --- 7. kill-safety at the edges --------------------------------------------------------------------------------
+
+def test_resume_removes_what_a_killed_run_left(tmp_path: Path) -> None:
+    kept = fake_case(6)
+    run_suite(suite_of([kept]), tmp_path, Instant())
+    staging = tmp_path / f".{fake_case(7).key}-k1lled00"
+    staging.mkdir()
+    (staging / "walk.json").write_text("{}")
+    rowless = tmp_path / "cases" / fake_case(8).key
+    rowless.mkdir()
+    (rowless / "walk.json").write_text("{}")
+    other = tmp_path / ".not-gaitbench"
+    other.mkdir()
+
+    run_suite(suite_of([kept, fake_case(9)]), tmp_path, Instant(), resume=True)
+    assert not staging.exists() and not rowless.exists()
+    assert other.exists() and (tmp_path / "cases" / kept.key / "walk.json").exists()
+
+
+def test_leftovers_are_kept_while_another_run_is_live(tmp_path: Path) -> None:
+    other_run(tmp_path, "other", pid=os.getppid())  # a live process on this host, heartbeat fresh
+    staging = tmp_path / f".{fake_case(7).key}-inflight"
+    staging.mkdir()
+    run_suite(suite_of([fake_case(6)]), tmp_path, Instant(), resume=True)
+    assert staging.exists()  # it may be the other run's case being written
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o002])
+def test_case_directories_follow_the_umask(tmp_path: Path, umask: int) -> None:
+    old = os.umask(umask)
+    try:
+        with ResultStore.create(tmp_path) as store:
+            store.start_run({"run_id": "r", "suite": "test"})
+            outcome = CaseOutcome(fake_case(6), "solved", "", 0.0)
+            store.record_case(case_row(outcome, "test", "r"), {"walk.json": b"{}"})
+            store.finish_run("r", None)
+    finally:
+        os.umask(old)
+    directory = tmp_path / "cases" / fake_case(6).key
+    assert directory.stat().st_mode & 0o777 == 0o777 & ~umask
+    assert (directory / "walk.json").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+SLOW_EXIT_PLUGIN = '''
+"""Makes the race of a pool's shutdown certain: a semaphore registered with the resource tracker, as pyomo makes on
+import, and a worker exit that takes a while, so that Pebble's SIGTERM lands in the middle of it."""
+import inspect
+import multiprocessing
+import multiprocessing.util
+import time
+
+from gaitbench import Registration, hookimpl
+
+LOCK = multiprocessing.get_context("spawn").Lock()
+
+
+def slow_exit():
+    killed = any(frame.function == "process_exit" for frame in inspect.stack())
+    time.sleep(0.3 if killed else 1.5)  # both well within Pebble's 3 s before SIGKILL
+
+
+multiprocessing.util.Finalize(None, slow_exit, exitpriority=10)  # runs before the lock's own finalizer (0)
+
+
+def slow_forward():
+    from plugins.thesis_experiments import forward
+
+    time.sleep(1.0)  # each of the two workers takes one case
+    return forward()
+
+
+@hookimpl
+def register_experiments():
+    return [Registration("slow-forward", "forward, slowly", slow_forward)]
+'''
+
+
+def test_a_local_pool_run_leaks_no_semaphore(tmp_path: Path) -> None:
+    plugins = tmp_path / "plugins"
+    plugins.mkdir()
+    (plugins / "slow_exit.py").write_text(SLOW_EXIT_PLUGIN)
+    suite = tiny_suite(tmp_path / "pool.toml", "pool", [6, 7], ["hermite-simpson"], experiment="slow-forward")
+    result = subprocess.run([GAITBENCH, "--plugins-dir", str(plugins), "run", str(suite), "--store",
+                             str(tmp_path / "store"), "--jobs", "2", "--no-report"],
+                            capture_output=True, text=True, env=ENV, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "2 solved" in result.stderr
+    assert "leaked semaphore" not in result.stderr, result.stderr
+
