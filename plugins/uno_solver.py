@@ -15,6 +15,9 @@ curvature reversed: HS071 then takes 59 iterations instead of 5.
 
 from __future__ import annotations
 
+import re
+import sys
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -49,7 +52,38 @@ BQPD and HiGHS for QPs and LPs, MUMPS and SSIDS as sparse indefinite solvers, no
 here when the solver is built."""
 
 _LOGGERS = ("SILENT", "DISCRETE", "WARNING", "INFO", "DEBUG", "DEBUG2", "DEBUG3")
-"""Uno's logger levels; ``print_level`` k > 0 picks INFO and more detail for k > 1."""
+"""Uno's logger levels; ``print_level`` 0 and 1 log at INFO (kept, and printed at 1), k > 1 in more detail."""
+
+_FAILURE_REASONS = (re.compile(r"An error occurred at the initial iterate: (.+)"),
+                    re.compile(r"^\s*-\s.*\ds\s+(\S.*?)\s*$"))
+"""Where Uno's log states why it failed: a line of its own at the initial point, or in a row of the iteration
+table with no iterate (``-`` in every column but the time and the status) when an exception ended the solve."""
+
+
+class _Log:
+    """Uno's log, written through unopy's logger stream: printed at ``print_level`` 1 and more, and its end kept
+    to name the reason of an algorithmic or evaluation error, which Uno's statuses alone do not."""
+
+    def __init__(self, echo: bool) -> None:
+        self.echo = echo
+        self._tail: deque[str] = deque(maxlen=500)
+
+    def write(self, text: str) -> None:
+        self._tail.append(text)
+        if self.echo:
+            sys.stdout.write(text)
+
+    def flush(self) -> None:
+        if self.echo:
+            sys.stdout.flush()
+
+    def failure_reason(self) -> str | None:
+        for line in reversed("".join(self._tail).splitlines()):
+            for pattern in _FAILURE_REASONS:
+                match = pattern.search(line)
+                if match:
+                    return match.group(1)
+        return None
 
 
 def gaitbench_status(optimization: unopy.OptimizationStatus, solution: unopy.SolutionStatus) -> SolverStatus:
@@ -172,8 +206,7 @@ class Uno:
         self.scaling = scaling
         options: dict = {"max_iterations": int(max_iterations), "primal_tolerance": float(tolerance),
                          "dual_tolerance": float(tolerance),
-                         "logger": _LOGGERS[min(int(print_level) + 2, len(_LOGGERS) - 1)] if print_level > 0
-                         else "SILENT"}
+                         "logger": _LOGGERS[min(max(int(print_level), 1) + 2, len(_LOGGERS) - 1)]}
         if time_limit_s is not None:
             options["time_limit"] = float(time_limit_s)
         for option, value in uno_options.items():
@@ -182,6 +215,7 @@ class Uno:
         options.update(uno_options)
         self.preset = preset
         self.time_limit_s = time_limit_s
+        self.print_level = print_level
         self.options = options
         """The Uno options every solve is built with, set after the preset."""
         _configured_solver(preset, options)  # rejects unknown options and wrong types now
@@ -209,6 +243,8 @@ class Uno:
                 model.set_constraints_lower_bounds((nlp.lbg / c).tolist())
                 model.set_constraints_upper_bounds((nlp.ubg / c).tolist())
             model.set_initial_primal_iterate((x0 / d).tolist())
+            log = _Log(echo=self.print_level > 0)
+            built.solver.set_logger_stream(log)  # Uno's logger is global: set for every solve
             result = built.solver.optimize(model)
             if built.callbacks.error is not None:
                 raise built.callbacks.error
@@ -220,6 +256,9 @@ class Uno:
         if optimization == unopy.OptimizationStatus.USER_TERMINATION and built.callbacks.timed_out:
             status = SolverStatus.TIME_LIMIT
         message = f"Uno: {optimization.name}, {solution.name}"
+        if optimization in (unopy.OptimizationStatus.ALGORITHMIC_ERROR, unopy.OptimizationStatus.EVALUATION_ERROR):
+            reason = log.failure_reason()
+            message += f" ({reason})" if reason else ""
         return solver_result(status, message, d * np.asarray(result.primal_solution, dtype=float), evaluator,
                              int(result.number_iterations), deadline,
                              multipliers=np.asarray(result.constraint_dual_solution, dtype=float) / c)

@@ -114,7 +114,17 @@ def test_infeasible_problem_is_reported_as_infeasible(preset: str):
 def test_nan_at_the_starting_point_is_an_error():
     result = _solve(undefined_at_start())
     assert result.status is SolverStatus.ERROR
-    assert result.message == "Uno: EVALUATION_ERROR, NOT_OPTIMAL"
+    assert result.message == ("Uno: EVALUATION_ERROR, NOT_OPTIMAL (A numerical error was encountered while "
+                              "evaluating a gradient)")
+
+
+def test_an_algorithmic_error_names_uno_s_reason():
+    """HiGHS solves only convex QPs; HS071's Lagrangian Hessian is indefinite. The reason is taken from Uno's log,
+    which is kept (not printed) at print_level 0."""
+    result = _solve(hs071(), preset="filtersqp", QP_solver="HiGHS")
+    assert result.status is SolverStatus.ERROR
+    assert result.message == ("Uno: ALGORITHMIC_ERROR, NOT_OPTIMAL (HiGHS encountered negative curvature, which it "
+                              "cannot handle. Terminating.)")
 
 
 def test_bad_input_is_an_error_not_an_exception():
