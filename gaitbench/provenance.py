@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 PACKAGES = ("casadi", "numpy", "scipy", "pluggy", "qpsolvers", "osqp", "proxsuite", "clarabel", "daqp", "piqp",
-            "highspy", "quadprog", "cyipopt-wheels", "pyomo", "pyomo-ripopt", "pandas", "dask", "distributed")
+            "highspy", "quadprog", "cyipopt-wheels", "unopy", "pyomo", "pyomo-ripopt", "pandas", "dask", "distributed")
 """The packages whose versions can change a result: the solvers and what they are built on."""
 
 
