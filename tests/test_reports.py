@@ -235,6 +235,32 @@ def test_report_command(store, tmp_path):
     assert result.exit_code != 0 and "no results store" in result.output
 
 
+def test_writing_a_report_tells_its_progress(store, tmp_path):
+    """Each part as it starts (the store, each experiment's figures, each gait, each reporter), then the end."""
+    calls = []
+    write_report(store, tmp_path / "out", progress=lambda what, done, total: calls.append((what, done, total)))
+    parts = [what for what, _, _ in calls]
+    assert parts[0] == "reading the store" and parts[-1] == "done"
+    assert "figures of forward" in parts and any(part.startswith("gait of forward") for part in parts)
+    assert parts.index("writing csv") < parts.index("writing html")
+    assert [done for _, done, _ in calls] == list(range(len(calls)))
+    assert all(done <= total for _, done, total in calls) and calls[-1][1] == calls[-1][2]
+
+
+def test_the_report_command_shows_a_progress_bar(store, tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from gaitbench.report_command import write_with_progress
+
+    screen = io.StringIO()
+    index = write_with_progress(store, tmp_path / "out", Console(file=screen, force_terminal=True, width=100))
+    assert index == tmp_path / "out" / "index.html" and index.is_file()
+    shown = screen.getvalue()
+    assert "report" in shown and "writing html" in shown and "/" in shown  # the part, and parts done of all
+
+
 # --- headless Chromium -------------------------------------------------------------------------------------------
 
 class DevTools:
