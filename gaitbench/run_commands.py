@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import click
+from rich import box
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
@@ -77,12 +78,45 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
+    Console().print(_suite_results(suite, store_dir))
     if write_report:
-        from gaitbench.reports import write_report as write
+        from gaitbench.report_command import default_report_dir, write_with_progress
 
-        console.print(f"report: {write(store_dir, Path('reports') / Path(store_dir).resolve().name)}")
+        index = write_with_progress(store_dir, default_report_dir(store_dir), console)
+        console.print(Text(f"report: {Path(index).resolve()}", style="bold"), soft_wrap=True)
     if summary.failed:
         raise SystemExit(1)
+
+
+def _suite_results(suite, store_dir: Path) -> Table:
+    """What the suite's walks came to, from the store (cases of earlier runs too, so a resumed run shows them all):
+    per experiment and method, how many walks are complete, the lowest verified ACOT over those and its N, and why
+    the others stopped."""
+    from gaitbench.store import ResultStore
+
+    keys = {case.key for case in suite.cases}
+    with ResultStore.open(store_dir) as store:
+        rows = [row for row in store.cases() if row["case_key"] in keys]
+    order = {case.key: i for i, case in enumerate(suite.cases)}
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for row in sorted(rows, key=lambda row: order[row["case_key"]]):
+        groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
+    table = Table(title=f"{suite.name}: lowest verified ACOT of each method over its complete walks",
+                  box=box.SIMPLE_HEAD, title_justify="left")
+    for column in ("experiment", "method", "complete", "ACOT", "at N", "why others stopped"):
+        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left")
+    for (experiment, method), group in groups.items():
+        complete = [row for row in group if row["status"] == "solved"]
+        best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
+        causes: dict[str, int] = {}
+        for row in group:
+            if row not in complete:
+                cause = row["stop_cause"] or row["status"]
+                causes[cause] = causes.get(cause, 0) + 1
+        table.add_row(experiment, method, f"{len(complete)} of {len(group)}",
+                      _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
+                      ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
+    return table
 
 
 def _executor(name: str, jobs: int, scheduler: str | None):
