@@ -426,6 +426,8 @@ def _print_tracking(console: Console, tracked) -> None:
     console.print(table)
     console.print(f"position error ≤ {data['max_position_error']:.2e} rad, velocity-estimation error ≤ "
                   f"{data['max_velocity_error']:.2e} rad/s")
+    if data["walk"].get("trajectory") == "polished":
+        console.print("reference: the verified trajectory, each step polished from the chosen patchwork")
     if data["acot_tracked"] is not None:
         console.print(f"ACOT tracked {data['acot_tracked']:.4f} against the reference's {data['acot_reference']:.4f} "
                       f"({data['acot_increase_percent']:+.2f} %) over {data['steps_tracked']} step(s); perfect "
