@@ -337,8 +337,7 @@ def solve(
     total = steps or experiment.n_steps
     with console.status(f"solving step 1 of {total}") as status:
         problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options)
-        walk = strategy.solve(problem, on_step=lambda outcome: status.update(f"solving step {outcome.index + 1} "
-                                                                             f"of {total}"))
+        walk = strategy.solve(problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
     _print_walk(console, walk)
     if out is not None:
         path = walk.save(out)
@@ -407,6 +406,15 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
         console.print(f"wrote {tracked.save(out)}")
     if tracked.fell:
         ctx.exit(1)
+
+
+def step_status(outcome, total: int) -> str:
+    """What the spinner of `solve` says once a step is done: the next step, or how the walk ended."""
+    if not outcome.solved:
+        return f"step {outcome.index} of {total} not solved: the walk stops"
+    if outcome.index >= total:
+        return f"all {total} steps solved"
+    return f"solving step {outcome.index + 1} of {total}"
 
 
 def _print_tracking(console: Console, tracked) -> None:

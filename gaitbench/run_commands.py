@@ -101,10 +101,13 @@ def _suite_results(suite, store_dir: Path) -> Table:
     groups: dict[tuple[str, str], list[dict]] = {}
     for row in sorted(rows, key=lambda row: order[row["case_key"]]):
         groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
-    table = Table(title=f"{suite.name}: lowest verified ACOT of each method over its complete walks",
-                  box=box.SIMPLE_HEAD, title_justify="left")
-    for column in ("experiment", "method", "complete", "ACOT", "at N", "why others stopped"):
-        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left")
+    table = Table(title=f"{suite.name}: lowest verified ACOT of each method over its complete walks; the incomplete "
+                        "ones by why they stopped",
+                  box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+    for column in ("experiment", "method", "complete", "ACOT", "at N", "incomplete"):
+        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left",
+                         overflow="fold", no_wrap=column in ("complete", "ACOT", "at N"),
+                         min_width=22 if column == "method" else None)  # "decrease-and-conquer" on one line
     for (experiment, method), group in groups.items():
         complete = [row for row in group if row["status"] == "solved"]
         best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
@@ -201,11 +204,39 @@ def runs_list(stores: tuple[Path, ...]) -> None:
     Console().print(table)
 
 
+SHOW_COLUMNS = ("experiment", "N", "method", "status", "stop cause", "ACOT")
+"""What `runs show` prints by default: readable at 80 columns. `--wide` adds :data:`WIDE_COLUMNS`."""
+
+WIDE_COLUMNS = ("case", "experiment", "N", "method", "status", "stop cause", "stop step", "stop status", "ACOT",
+                "claimed", "COT min", "COT max", "retries", "time (s)", "iterations", "message")
+TEXT_COLUMNS = ("case", "experiment", "method", "status", "stop cause", "stop status", "message")
+
+
+def _show_cells(row: dict) -> dict[str, str]:
+    """One store row as the cells of every `runs show` column."""
+    cells = {"case": row["case_key"], "experiment": row["experiment"], "N": str(row["N"]),
+             "method": row["method"] or row["strategy"], "status": row["status"],
+             "stop cause": row["stop_cause"] or "—", "stop step": _number(row["stop_step"], "d"),
+             "stop status": row["stop_status"] or "", "retries": _number(row["retries"], "d"),
+             "time (s)": _number(row["wall_time_s"], ".1f"), "iterations": _number(row["iterations"], "d"),
+             "message": row["message"] or ""}
+    for column, key in (("ACOT", "acot"), ("claimed", "claimed_acot"), ("COT min", "cot_min"), ("COT max", "cot_max")):
+        cells[column] = _number(row[key], ".4f")
+    return cells
+
+
 @runs.command("show")
 @click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
 @click.argument("run_id", metavar="[RUN]", required=False)
-def runs_show(store_dir: Path, run_id: str | None) -> None:
-    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed."""
+@click.option("--wide", is_flag=True, help="Every column: case key, where and why each walk stopped, the claimed "
+              "ACOT, per-step COT bounds, retries, time, iterations and the message (lines longer than 80 columns).")
+def runs_show(store_dir: Path, run_id: str | None, wide: bool) -> None:
+    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed.
+
+    By default the table fits 80 columns: experiment, N, method, status, why the walk stopped (stop cause:
+    complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
+    everything else.
+    """
     from gaitbench.store import ResultStore, StoreError
 
     try:
@@ -213,16 +244,20 @@ def runs_show(store_dir: Path, run_id: str | None) -> None:
             rows = store.cases(store.resolve_run(run_id) if run_id else None)
     except StoreError as error:
         raise click.ClickException(str(error)) from None
-    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""))
-    for column in ("experiment", "N", "method", "status", "ACOT", "claimed", "COT min", "COT max", "time (s)",
-                   "iterations", "message"):
-        table.add_column(column, justify="left" if column in ("experiment", "method", "status", "message")
-                         else "right")
+    columns = WIDE_COLUMNS if wide else SHOW_COLUMNS
+    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""), box=box.SIMPLE_HEAD,
+                  title_justify="left", show_edge=False, pad_edge=False)
+    widths = {"method": 20, "ACOT": 6, "N": 3}  # "decrease-and-conquer" on one line, numbers whole
+    for column in columns:
+        table.add_column(column, justify="left" if column in TEXT_COLUMNS else "right", overflow="fold",
+                         no_wrap=column in ("case", "N", "ACOT"), min_width=None if wide else widths.get(column))
     for row in rows:
-        table.add_row(row["experiment"], str(row["N"]), row["method"] or row["strategy"], row["status"],
-                      *(_number(row[key], ".4f") for key in ("acot", "claimed_acot", "cot_min", "cot_max")),
-                      _number(row["wall_time_s"], ".1f"), str(row["iterations"] or ""), row["message"] or "")
-    Console().print(table)
+        cells = _show_cells(row)
+        table.add_row(*(cells[column] for column in columns))
+    console = Console()
+    if wide:  # every column at its natural width: long lines rather than squeezed cells
+        console = Console(width=max(console.width, 240))
+    console.print(table)
 
 
 @runs.command("export")
