@@ -17,18 +17,19 @@ def default_report_dir(store: str | Path) -> Path:
 
 
 def write_with_progress(store: str | Path, out_dir: Path, console: Console, **options) -> Path:
-    """:func:`gaitbench.reports.write_report` with a progress bar on ``console`` (the part being written, the parts
-    done, the time taken); returns what it returns."""
+    """:func:`gaitbench.reports.write_report` with a progress bar on ``console`` when it is a terminal (the part
+    being written, the parts done, the time taken); returns what it returns."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from gaitbench.reports import write_report
 
     with Progress(TextColumn("report"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  TextColumn("{task.description}"), console=console, transient=True) as progress:
+                  TextColumn("{task.description}"), console=console, transient=True,
+                  disable=not console.is_terminal) as progress:  # a log gets no bar, nor its blank line
         task = progress.add_task("reading the store", total=None)
 
         def show(what: str, done: int, total: int) -> None:
-            progress.update(task, description=what, completed=done, total=total)
+            progress.update(task, description=what, completed=done, total=total, refresh=True)  # each part seen
 
         return write_report(store, out_dir, progress=show, **options)
 
@@ -48,14 +49,18 @@ def report(store: Path, out_dir: Path | None, gait: str | None, reporters: tuple
     figures regenerated, a CSV file per table (columns in docs/reports.md) and the figures as SVG."""
     import time
 
-    from gaitbench.plugins import UnknownPluginError
-    from gaitbench.reports import DEFAULT_REPORTERS, ReportError
+    from gaitbench.plugins import PluginConflictError, UnknownPluginError
+    from gaitbench.reports import DEFAULT_REPORTERS, GaitNotFound, ReportError
 
     out_dir = out_dir if out_dir is not None else default_report_dir(store)
     started = time.perf_counter()
     try:
         written = write_with_progress(store, out_dir, Console(stderr=True), gait=gait,
                                       reporters=reporters or DEFAULT_REPORTERS)
-    except (ReportError, UnknownPluginError) as error:
+    except (UnknownPluginError, PluginConflictError) as error:
+        raise click.BadParameter(str(error), param_hint="'--reporter'") from None
+    except GaitNotFound as error:
+        raise click.BadParameter(str(error), param_hint="'--gait'") from None
+    except ReportError as error:
         raise click.ClickException(str(error)) from None
     click.echo(f"report written to {written} ({time.perf_counter() - started:.1f} s)")

@@ -55,10 +55,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             [*map(str, state.plugin_dirs), *filter(None, [os.environ.get(PLUGINS_DIR_ENV)])])
     try:
         suite = load_suite(suite_file)
-    except SuiteError as error:
-        invalid = click.ClickException(str(error))
-        invalid.exit_code = 2
-        raise invalid from None
+    except SuiteError as error:  # the file names itself, the key and what was expected
+        raise click.UsageError(str(error)) from None
     if methods:
         try:
             suite = suite.with_methods(methods)

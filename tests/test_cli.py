@@ -296,3 +296,47 @@ def test_runs_show_fits_80_columns_with_the_stop_cause(invoke, long_labelled_sto
                    "message"):
         assert column in header, column
     assert "0000000000000001" in wide.stdout and "dynamics residual 3.2e-01" in wide.stdout
+
+
+# errors: one style, documented exit codes
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "fragment"),
+    [
+        (["experiments", "show", "nope"], 2, "unknown experiment 'nope'; available:"),
+        (["solve", "-e", "nope"], 2, "unknown experiment 'nope'"),
+        (["solve", "-e", "forward", "-t", "hermite"], 2, "unknown transcription 'hermite'"),
+        (["solve", "-e", "forward", "--steps", "99"], 2, "forward has 11 steps"),
+        (["solve", "-e", "forward", "-S", "decrease-and-conquer", "-x", "workers=0"], 2, "workers = 0"),
+        (["track", "{tmp}/missing.json"], 2, "no such result file"),
+        (["track", "{tmp}/walk.json", "--observer", "nope"], 2, None),  # the file is checked first
+        (["run", "{tmp}/bad.toml"], 2, "[sweep]: missing required key"),
+        (["report", "{tmp}/nowhere", "--reporter", "nope"], 2, "unknown reporter 'nope'"),
+        (["nocommand"], 2, "No such command"),
+        (["runs", "show", "{tmp}/nowhere"], 1, "no results store here"),
+        (["report", "{tmp}/nowhere"], 1, "no results store here"),
+    ],
+)
+def test_errors_share_one_style_and_the_documented_exit_codes(invoke, tmp_path, args, code, fragment):
+    """Usage errors (2): the usage line, then one "Error: ..." line. Failed work (1): the "Error: ..." line alone.
+    Never a traceback, nothing on stdout."""
+    (tmp_path / "bad.toml").write_text('[suite]\nname = "bad"\n[sweep]\nexperiments = ["forward"]\nN = [8]\n')
+    (tmp_path / "walk.json").write_text("{}")
+    result = invoke(*(arg.format(tmp=tmp_path) for arg in args))
+    assert result.exit_code == code, result.output
+    assert result.stdout == "" and "Traceback" not in result.output
+    lines = result.stderr.splitlines()
+    errors = [line for line in lines if line.startswith("Error: ")]
+    assert len(errors) == 1 and not any(line.lower().startswith("error:") for line in lines if line not in errors)
+    assert (lines[0].startswith("Usage: ")) == (code == 2), result.stderr
+    if fragment:
+        assert fragment in errors[0], errors[0]
+
+
+def test_help_documents_the_exit_codes(invoke):
+    result = invoke("--help")
+    assert result.exit_code == 0
+    text = " ".join(result.stdout.split())
+    assert "Exit status:" in text and "0 success" in text
+    assert "1 the work failed" in text and "2 usage error" in text

@@ -53,6 +53,10 @@ class ReportError(Exception):
     """A report that cannot be built (no store, an unknown ``--gait`` case); the message says why."""
 
 
+class GaitNotFound(ReportError):
+    """``gait`` names no case of the store, or several."""
+
+
 @dataclass
 class GaitSection:
     gait: Any  # gaitbench.reports.gait.Gait
@@ -143,7 +147,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
         matches = [key for key in df["case_key"] if key.startswith(gait)] if not df.empty else []
         if len(matches) != 1:
             problem = "matches several cases" if matches else "is not a case of this store"
-            raise ReportError(f"--gait {gait!r} {problem} ({store_dir})")
+            raise GaitNotFound(f"--gait {gait!r} {problem} ({store_dir})")
         chosen = {None: matches[0]}
     else:
         chosen = tb.chosen_gaits(df)
