@@ -99,13 +99,13 @@ def _suite_results(suite, store_dir: Path) -> Table:
     groups: dict[tuple[str, str], list[dict]] = {}
     for row in sorted(rows, key=lambda row: order[row["case_key"]]):
         groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
-    table = Table(title=f"{suite.name}: lowest verified ACOT of each method over its complete walks; the incomplete "
-                        "ones by why they stopped",
+    table = Table(title=f"{suite.name}: lowest verified ACOT over complete walks",
                   box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+    longest = max((len(method) for _, method in groups), default=0)
     for column in ("experiment", "method", "complete", "ACOT", "at N", "incomplete"):
         table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left",
                          overflow="fold", no_wrap=column in ("complete", "ACOT", "at N"),
-                         min_width=22 if column == "method" else None)  # "decrease-and-conquer" on one line
+                         min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
     for (experiment, method), group in groups.items():
         complete = [row for row in group if row["status"] == "solved"]
         best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
