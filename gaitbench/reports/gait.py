@@ -124,7 +124,8 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
         notes.append("Decrease & Conquer: the stored trajectory is the chosen synthesized (node-wise patchwork) "
                      "trajectory whose COT is the claim; it need not satisfy the dynamics (see its max defect). "
                      "The verified ACOT is that of the polished trajectories, re-solved from it, which this walk "
-                     "did not store (solved with polish = false, or before gaitbench stored them).")
+                     "does not hold for every step (solved with polish = false, a polish that failed, or stored "
+                     "before gaitbench kept them).")
     return Gait(case_key=case["case_key"], experiment=case["experiment"], method=case["method"],
                 strategy=case["strategy"], transcription=case["transcription"], N=int(case["N"]), phase=phase,
                 acot=_float(case["acot"]), claimed_acot=_float(case["claimed_acot"]), steps=steps,
