@@ -218,6 +218,22 @@ def test_a_dc_gait_shows_its_verified_trajectory_with_the_patchwork_over_it(stor
     assert "claimed COT (patchwork)" in page and "shown: the verified (polished) trajectory" in page
 
 
+def test_a_dc_walk_stored_without_its_polished_trajectory_shows_the_patchwork(store, tmp_path):
+    """A store written before the polished trajectories were kept (or with polish = false): the patchwork, said so."""
+    copy = tmp_path / "older"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        key, walk_path = db.execute("SELECT case_key, walk_path FROM cases WHERE method = 'D&C-DC'").fetchone()
+    npz = (copy / walk_path).with_suffix(".npz")
+    with np.load(npz) as arrays:
+        kept = {name: arrays[name] for name in arrays.files if "_polished_" not in name}
+    np.savez_compressed(npz, **kept)
+    (section,) = build_report(copy, gait=key).gaits
+    assert section.gait.trajectory == "walk" and section.gait.overlay == []
+    assert section.gait.steps[0].max_defect > 1e-6  # the patchwork
+    assert any("does not hold for every step" in note for note in section.gait.notes)
+
+
 def test_tracking_section_from_track_files(store, tmp_path):
     """A synthetic track.json/npz in the format of gaitbench.tracking.TrackingResult.save."""
     copy = tmp_path / "tracked"
