@@ -52,7 +52,19 @@ def _print(console: Console, message: str, style: str) -> None:
     console.print(Text(message, style=style), soft_wrap=True)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+EXIT_STATUS = """\b
+Exit status:
+  0  success
+  1  the work failed or could not be done: a walk that did not
+     complete, a robot that fell, a suite case that failed, a results
+     store that cannot be used, a report that cannot be written
+  2  usage error: an unknown command, option or plugin, a bad option
+     value, an invalid suite file or walk file
+Every error is one message on stderr, "Error: ...", after the
+command's usage line for a usage error."""
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]}, epilog=EXIT_STATUS)
 @click.option(
     "--plugins-dir",
     "plugin_dirs",
@@ -132,17 +144,14 @@ def experiments_list(state: _State) -> None:
 def experiments_show(ctx: click.Context, name: str) -> None:
     """Build experiment NAME and print its parameters, footholds and per-step feasibility."""
     state: _State = ctx.obj
-    stderr = Console(stderr=True)
     try:
         plugin = state.registry.get("experiment", name)
     except (UnknownPluginError, PluginConflictError) as exc:
-        _print(stderr, f"error: {exc}", "red")
-        ctx.exit(2)
+        raise click.BadParameter(str(exc), param_hint="NAME") from None
     try:
         experiment = plugin.factory()
     except ValueError as exc:  # includes InvalidParameterError: a bad experiment definition, not a crash
-        _print(stderr, f"error: experiment {name!r} is invalid: {exc}", "red")
-        ctx.exit(1)
+        raise click.ClickException(f"experiment {name!r} is invalid: {exc}") from None
     from gaitbench.experiment import render_experiment  # pulls in the numerics; only this command needs it
 
     render_experiment(experiment, Console())
@@ -168,17 +177,21 @@ def _parse_options(pairs: tuple[str, ...], option: str) -> dict[str, object]:
     return options
 
 
+OPTION_OF_KIND = {"experiment": "'--experiment' / '-e'", "transcription": "'--transcription' / '-t'",
+                  "solver": "'--solver' / '-s'", "strategy": "'--strategy' / '-S'", "controller": "'--controller'",
+                  "observer": "'--observer'", "disturbance": "'--disturbance'"}
+"""The option that names a plugin of each kind, for usage errors."""
+
+
 def _create(ctx: click.Context, kind: str, name: str, **options):
-    """Build a plugin or exit with a message that names what is available or what was wrong."""
-    stderr = Console(stderr=True)
+    """Build a plugin, or stop with a usage error that names what is available or what was wrong."""
     try:
         return ctx.obj.registry.create(kind, name, **options)
     except (UnknownPluginError, PluginConflictError) as exc:
-        _print(stderr, f"error: {exc}", "red")
-        ctx.exit(2)
+        raise click.BadParameter(str(exc), param_hint=OPTION_OF_KIND.get(kind)) from None
     except (TypeError, ValueError) as exc:
-        _print(stderr, f"error: cannot build {kind} {name!r} with options {options}: {exc}", "red")
-        ctx.exit(2)
+        raise click.BadParameter(f"cannot build {kind} {name!r} with options {options}: {exc}",
+                                 param_hint=OPTION_OF_KIND.get(kind)) from None
 
 
 PROBLEM_OPTION_HINT = "'-p' / '--problem-option'"
@@ -337,8 +350,7 @@ def solve(
     total = steps or experiment.n_steps
     with console.status(f"solving step 1 of {total}") as status:
         problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options)
-        walk = strategy.solve(problem, on_step=lambda outcome: status.update(f"solving step {outcome.index + 1} "
-                                                                             f"of {total}"))
+        walk = strategy.solve(problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
     _print_walk(console, walk)
     if out is not None:
         path = walk.save(out)
@@ -379,12 +391,10 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
     from gaitbench.tracking import TrackingInputError, load_reference
     from gaitbench.tracking import track as run_tracking
 
-    stderr = Console(stderr=True)
     try:
         reference = load_reference(result, ctx.obj.registry)
     except (TrackingInputError, UnknownPluginError, PluginConflictError) as exc:
-        _print(stderr, f"error: {exc}", "red")
-        ctx.exit(2)
+        raise click.BadParameter(str(exc), param_hint="RESULT") from None
     options = {"controller": _parse_options(controller_options, "--controller-option"),
                "observer": _parse_options(observer_options, "--observer-option"),
                "disturbance": _parse_options(disturbance_options, "--disturbance-option")}
@@ -409,6 +419,15 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
         ctx.exit(1)
 
 
+def step_status(outcome, total: int) -> str:
+    """What the spinner of `solve` says once a step is done: the next step, or how the walk ended."""
+    if not outcome.solved:
+        return f"step {outcome.index} of {total} not solved: the walk stops"
+    if outcome.index >= total:
+        return f"all {total} steps solved"
+    return f"solving step {outcome.index + 1} of {total}"
+
+
 def _print_tracking(console: Console, tracked) -> None:
     data = tracked.as_dict()
     config = data["configuration"]
@@ -426,6 +445,8 @@ def _print_tracking(console: Console, tracked) -> None:
     console.print(table)
     console.print(f"position error ≤ {data['max_position_error']:.2e} rad, velocity-estimation error ≤ "
                   f"{data['max_velocity_error']:.2e} rad/s")
+    if data["walk"].get("trajectory") == "polished":
+        console.print("reference: the verified trajectory, each step polished from the chosen patchwork")
     if data["acot_tracked"] is not None:
         console.print(f"ACOT tracked {data['acot_tracked']:.4f} against the reference's {data['acot_reference']:.4f} "
                       f"({data['acot_increase_percent']:+.2f} %) over {data['steps_tracked']} step(s); perfect "

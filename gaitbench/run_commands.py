@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import click
+from rich import box
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
@@ -54,10 +55,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             [*map(str, state.plugin_dirs), *filter(None, [os.environ.get(PLUGINS_DIR_ENV)])])
     try:
         suite = load_suite(suite_file)
-    except SuiteError as error:
-        invalid = click.ClickException(str(error))
-        invalid.exit_code = 2
-        raise invalid from None
+    except SuiteError as error:  # the file names itself, the key and what was expected
+        raise click.UsageError(str(error)) from None
     if methods:
         try:
             suite = suite.with_methods(methods)
@@ -77,12 +76,48 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
+    Console().print(_suite_results(suite, store_dir))
     if write_report:
-        from gaitbench.reports import write_report as write
+        from gaitbench.report_command import default_report_dir, write_with_progress
 
-        console.print(f"report: {write(store_dir, Path('reports') / Path(store_dir).resolve().name)}")
+        index = write_with_progress(store_dir, default_report_dir(store_dir), console)
+        console.print(Text(f"report: {Path(index).resolve()}", style="bold"), soft_wrap=True)
     if summary.failed:
         raise SystemExit(1)
+
+
+def _suite_results(suite, store_dir: Path) -> Table:
+    """What the suite's walks came to, from the store (cases of earlier runs too, so a resumed run shows them all):
+    per experiment and method, how many walks are complete, the lowest verified ACOT over those and its N, and why
+    the others stopped."""
+    from gaitbench.store import ResultStore
+
+    keys = {case.key for case in suite.cases}
+    with ResultStore.open(store_dir) as store:
+        rows = [row for row in store.cases() if row["case_key"] in keys]
+    order = {case.key: i for i, case in enumerate(suite.cases)}
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for row in sorted(rows, key=lambda row: order[row["case_key"]]):
+        groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
+    table = Table(title=f"{suite.name}: lowest verified ACOT over complete walks",
+                  box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+    longest = max((len(method) for _, method in groups), default=0)
+    for column in ("experiment", "method", "complete", "ACOT", "at N", "incomplete"):
+        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left",
+                         overflow="fold", no_wrap=column in ("complete", "ACOT", "at N"),
+                         min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
+    for (experiment, method), group in groups.items():
+        complete = [row for row in group if row["status"] == "solved"]
+        best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
+        causes: dict[str, int] = {}
+        for row in group:
+            if row not in complete:
+                cause = row["stop_cause"] or row["status"]
+                causes[cause] = causes.get(cause, 0) + 1
+        table.add_row(experiment, method, f"{len(complete)} of {len(group)}",
+                      _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
+                      ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
+    return table
 
 
 def _executor(name: str, jobs: int, scheduler: str | None):
@@ -167,11 +202,39 @@ def runs_list(stores: tuple[Path, ...]) -> None:
     Console().print(table)
 
 
+SHOW_COLUMNS = ("experiment", "N", "method", "status", "stop cause", "ACOT")
+"""What `runs show` prints by default: readable at 80 columns. `--wide` adds :data:`WIDE_COLUMNS`."""
+
+WIDE_COLUMNS = ("case", "experiment", "N", "method", "status", "stop cause", "stop step", "stop status", "ACOT",
+                "claimed", "COT min", "COT max", "retries", "time (s)", "iterations", "message")
+TEXT_COLUMNS = ("case", "experiment", "method", "status", "stop cause", "stop status", "message")
+
+
+def _show_cells(row: dict) -> dict[str, str]:
+    """One store row as the cells of every `runs show` column."""
+    cells = {"case": row["case_key"], "experiment": row["experiment"], "N": str(row["N"]),
+             "method": row["method"] or row["strategy"], "status": row["status"],
+             "stop cause": row["stop_cause"] or "—", "stop step": _number(row["stop_step"], "d"),
+             "stop status": row["stop_status"] or "", "retries": _number(row["retries"], "d"),
+             "time (s)": _number(row["wall_time_s"], ".1f"), "iterations": _number(row["iterations"], "d"),
+             "message": row["message"] or ""}
+    for column, key in (("ACOT", "acot"), ("claimed", "claimed_acot"), ("COT min", "cot_min"), ("COT max", "cot_max")):
+        cells[column] = _number(row[key], ".4f")
+    return cells
+
+
 @runs.command("show")
 @click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
 @click.argument("run_id", metavar="[RUN]", required=False)
-def runs_show(store_dir: Path, run_id: str | None) -> None:
-    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed."""
+@click.option("--wide", is_flag=True, help="Every column: case key, where and why each walk stopped, the claimed "
+              "ACOT, per-step COT bounds, retries, time, iterations and the message (lines longer than 80 columns).")
+def runs_show(store_dir: Path, run_id: str | None, wide: bool) -> None:
+    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed.
+
+    By default the table fits 80 columns: experiment, N, method, status, why the walk stopped (stop cause:
+    complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
+    everything else.
+    """
     from gaitbench.store import ResultStore, StoreError
 
     try:
@@ -179,16 +242,20 @@ def runs_show(store_dir: Path, run_id: str | None) -> None:
             rows = store.cases(store.resolve_run(run_id) if run_id else None)
     except StoreError as error:
         raise click.ClickException(str(error)) from None
-    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""))
-    for column in ("experiment", "N", "method", "status", "ACOT", "claimed", "COT min", "COT max", "time (s)",
-                   "iterations", "message"):
-        table.add_column(column, justify="left" if column in ("experiment", "method", "status", "message")
-                         else "right")
+    columns = WIDE_COLUMNS if wide else SHOW_COLUMNS
+    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""), box=box.SIMPLE_HEAD,
+                  title_justify="left", show_edge=False, pad_edge=False)
+    widths = {"method": 20, "ACOT": 6, "N": 3}  # "decrease-and-conquer" on one line, numbers whole
+    for column in columns:
+        table.add_column(column, justify="left" if column in TEXT_COLUMNS else "right", overflow="fold",
+                         no_wrap=column in ("case", "N", "ACOT"), min_width=None if wide else widths.get(column))
     for row in rows:
-        table.add_row(row["experiment"], str(row["N"]), row["method"] or row["strategy"], row["status"],
-                      *(_number(row[key], ".4f") for key in ("acot", "claimed_acot", "cot_min", "cot_max")),
-                      _number(row["wall_time_s"], ".1f"), str(row["iterations"] or ""), row["message"] or "")
-    Console().print(table)
+        cells = _show_cells(row)
+        table.add_row(*(cells[column] for column in columns))
+    console = Console()
+    if wide:  # every column at its natural width: long lines rather than squeezed cells
+        console = Console(width=max(console.width, 240))
+    console.print(table)
 
 
 @runs.command("export")

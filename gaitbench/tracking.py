@@ -42,9 +42,9 @@ from gaitbench.mechanics import BipedModel, other_leg
 from gaitbench.numeric import NumericFunction
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.terrain import clearance
-from gaitbench.transcription import Seed, StepTrajectory
+from gaitbench.transcription import Seed, StepTrajectory, nodal_trajectory
 from gaitbench.verify import StepVerification
-from gaitbench.walk import StepOutcome, WalkResult, next_step_state
+from gaitbench.walk import POLISHED, StepOutcome, WalkResult, next_step_state
 
 DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-10
@@ -186,16 +186,41 @@ def load_walk(path: str | Path, registry: PluginRegistry | None = None) -> tuple
             break
         arrays = {key[len(prefix) + 1:]: value for key, value in stored.items() if key.startswith(prefix)}
         try:
-            trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, arrays)
+            if "chosen" in (step.get("details") or {}):  # decrease and conquer's patchwork: no interpolant of its own
+                nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
+                trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
+                                              int(step["stance"]))
+            else:
+                trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, arrays)
         except KeyError as exc:
             raise TrackingInputError(f"{npz_path}: step {step['index']} lacks {exc.args[0]!r}; {rerun}") from None
-        verification = StepVerification(**{key: float(step[key]) for key in (
-            "max_defect", "resim_error", "resim_max_error", "hip_energy", "push_off_energy", "cot")})
-        walk.steps.append(StepOutcome(int(step["index"]), int(step["stance"]), step["status"], step["message"],
-                                      None, trajectory, verification, next_state=next_step_state(model, trajectory)))
+        verification = _verification(step)
+        outcome = StepOutcome(int(step["index"]), int(step["stance"]), step["status"], step["message"], None,
+                              trajectory, verification, next_state=next_step_state(model, trajectory),
+                              details=step.get("details") or {})
+        polished = outcome.details.get(POLISHED)
+        if f"{POLISHED}_q" in arrays and isinstance(polished, dict) and polished.get("cot") is not None:
+            own = {key[len(POLISHED) + 1:]: value for key, value in arrays.items()
+                   if key.startswith(f"{POLISHED}_")}
+            try:
+                polished_trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, own)
+            except KeyError as exc:
+                raise TrackingInputError(f"{npz_path}: step {step['index']} lacks {POLISHED}_{exc.args[0]}; "
+                                         f"{rerun}") from None
+            outcome.polished = StepOutcome(outcome.index, outcome.stance, polished["status"], "polished", None,
+                                           polished_trajectory, _verification(polished),
+                                           next_state=next_step_state(model, polished_trajectory))
+        walk.steps.append(outcome)
     if not walk.steps:
         raise TrackingInputError(f"{path}: no solved step to track ({data.get('failure')}); solve the walk again")
     return walk, experiment
+
+
+def _verification(step: dict) -> StepVerification:
+    """A step's stored verification (a step of the walk JSON, or its ``details["polished"]``); figures a file
+    written before they were recorded lacks are NaN."""
+    return StepVerification(**{key: float(step[key]) if step.get(key) is not None else math.nan for key in (
+        "max_defect", "resim_error", "resim_max_error", "hip_energy", "push_off_energy", "cot")})
 
 
 def _rebuild_trajectory(built, transcription: str, experiment: Experiment, step: dict,
@@ -299,15 +324,28 @@ class Reference:
     experiment: Experiment
     model: BipedModel
     steps: list[ReferenceStep]
+    trajectory: str = "walk"
+    """Which trajectories are tracked: ``walk`` (each step's own) or ``polished`` (the verified ones, re-solved from
+    decrease and conquer's chosen patchworks)."""
 
     @classmethod
     def from_walk(cls, walk: WalkResult, experiment: Experiment) -> Reference:
-        """The solved prefix of ``walk``, each step through its trajectory's own interpolant."""
+        """The solved prefix of ``walk``, each step through its trajectory's own interpolant.
+
+        A walk whose steps were polished (decrease and conquer) is tracked along its verified trajectories, the
+        polished ones, and compared with their COT, the verified one; a step's own (chosen, patchwork) trajectory
+        is tracked only when the walk has no polished trajectory for every solved step (``polish = false``).
+        """
         model = BipedModel(experiment.robot, 4 if walk.phase == "second" else 2)
-        steps, start = [], 0.0
+        solved = []
         for outcome in walk.steps:
             if not outcome.solved:
                 break
+            solved.append(outcome)
+        polished = bool(solved) and all(outcome.verified is not outcome for outcome in solved)
+        steps, start = [], 0.0
+        for outcome in solved:
+            outcome = outcome.verified if polished else outcome
             trajectory = outcome.trajectory
             geometry = experiment.terrain.steps[outcome.index - 1]
             info = StepInfo(outcome.index, outcome.stance, geometry.theta, geometry.D,
@@ -316,7 +354,7 @@ class Reference:
             start += trajectory.duration
         if not steps:
             raise TrackingInputError(f"the {walk.experiment} walk has no solved step to track ({walk.failure})")
-        return cls(walk, experiment, model, steps)
+        return cls(walk, experiment, model, steps, "polished" if polished else "walk")
 
     def step(self, info: StepInfo | int) -> ReferenceStep:
         return self.steps[(info.index if isinstance(info, StepInfo) else info) - 1]
@@ -428,7 +466,7 @@ SERIES_KEYS = ("t", "step", "q_desired", "q", "dq_desired", "dq", "dq_estimated"
 
 @dataclass
 class TrackingResult:
-    walk: dict  # experiment, transcription, solver, strategy, N, phase, and the source file if any
+    walk: dict  # experiment, transcription, solver, strategy, N, phase, trajectory (walk | polished), source file
     configuration: dict  # plugin names and options, sample rate, tolerances
     steps: list[StepTracking]
     series: dict[str, np.ndarray]
@@ -534,7 +572,7 @@ def track(reference: Reference, controller: Controller, observer: Observer, dist
     walk = reference.walk
     return TrackingResult(
         walk={"experiment": walk.experiment, "transcription": walk.transcription, "solver": walk.solver,
-              "strategy": walk.strategy, "N": walk.N, "phase": walk.phase},
+              "strategy": walk.strategy, "N": walk.N, "phase": walk.phase, "trajectory": reference.trajectory},
         configuration=dict(configuration or {}) | {"sample_rate": sample_rate, "rtol": rtol, "atol": atol,
                                                    "fall": {"hip_fraction": fall.hip_fraction,
                                                             "ground_tolerance": fall.ground_tolerance}},

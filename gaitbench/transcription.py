@@ -17,7 +17,14 @@ import casadi as ca
 import numpy as np
 
 from gaitbench.energetics import smooth_abs
-from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, StepStructure, roles_to_legs
+from gaitbench.gait_problem import (
+    N_STEP_PARAMETERS,
+    PARAMETER_LAYOUT,
+    StepData,
+    StepStructure,
+    legs_to_roles,
+    roles_to_legs,
+)
 from gaitbench.mechanics import BipedFunctions, biped_functions
 from gaitbench.nlp import NLP, NLPBuilder
 from gaitbench.terrain import clearance, heel_strike_configuration, terrain_clearance
@@ -377,6 +384,28 @@ def cubic_hermite(y0: np.ndarray, y1: np.ndarray, m0: np.ndarray, m1: np.ndarray
     c2 = -3 * y0 - 2 * m0 + 3 * y1 - m1
     c3 = 2 * y0 + m0 - 2 * y1 + m1
     return y0 + m0 * s + c2 * s**2 + c3 * s**3, m0 + 2 * c2 * s + 3 * c3 * s**2
+
+
+def nodal_trajectory(times: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float,
+                     stance: int) -> StepTrajectory:
+    """Values at the nodes of a uniform grid (leg order, one torque per node) read as a step trajectory: cubic Hermite
+    angles through the nodal (q, q̇), linear rates and torques. The smoothest reading of node values that carry no
+    interpolant of their own, such as decrease and conquer's node-wise patchworks."""
+    n, h = len(times), float(times[1] - times[0])
+    q_roles, dq_roles, tau_roles = (legs_to_roles(np.asarray(a, dtype=float), stance) for a in (q, dq, tau))
+
+    def state(t: float) -> tuple[np.ndarray, np.ndarray]:
+        k, s = locate_interval(t, h, n)
+        angles, _ = cubic_hermite(q_roles[k], q_roles[k + 1], h * dq_roles[k], h * dq_roles[k + 1], s)
+        return angles, (1 - s) * dq_roles[k] + s * dq_roles[k + 1]
+
+    def control(t: float) -> np.ndarray:
+        k, s = locate_interval(t, h, n)
+        return (1 - s) * tau_roles[k] + s * tau_roles[k + 1]
+
+    return StepTrajectory(times=np.asarray(times, dtype=float), q=np.asarray(q), dq=np.asarray(dq),
+                          tau=np.asarray(tau), control_times=np.asarray(times, dtype=float), push_off=push_off,
+                          stance=stance, _interpolant=Interpolant(state, control))
 
 
 PHYSICAL_ANGLE_BOX = (-np.pi, np.pi)

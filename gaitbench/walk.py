@@ -39,10 +39,20 @@ class StepOutcome:
     """(q1, q2, q̇1, q̇2) after this step's push-off and heel strike: where the next step starts."""
     details: dict = field(default_factory=dict)
     """What the strategy did to produce this step (candidates, choices, polish), JSON-ready."""
+    polished: StepOutcome | None = field(default=None, repr=False)
+    """The step's problem re-solved from this outcome's trajectory and verified, when the strategy polishes (decrease
+    and conquer, whose own trajectory is a patchwork that need not satisfy the dynamics): the verified trajectory.
+    Saved beside the step's own (``stepNN_polished_*`` arrays)."""
 
     @property
     def solved(self) -> bool:
         return self.verification is not None and self.next_state is not None
+
+    @property
+    def verified(self) -> StepOutcome:
+        """The outcome whose trajectory is the verified one: the polished step when there is one that solved, else
+        this step."""
+        return self.polished if self.polished is not None and self.polished.solved else self
 
     def summary(self) -> dict:
         """Status, verified COT, iterations and time: how a strategy records a sub-solve in its details."""
@@ -129,16 +139,11 @@ class WalkResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {}
         for step in self.steps:
+            prefix = f"step{step.index:02d}"
             if step.trajectory is not None:
-                prefix = f"step{step.index:02d}"
-                arrays |= {
-                    f"{prefix}_t": step.trajectory.times,
-                    f"{prefix}_q": step.trajectory.q,
-                    f"{prefix}_dq": step.trajectory.dq,
-                    f"{prefix}_tau": step.trajectory.tau,
-                    f"{prefix}_tau_t": step.trajectory.control_times,
-                    f"{prefix}_push_off": np.array([step.trajectory.push_off]),
-                }
+                arrays |= trajectory_arrays(step.trajectory, prefix)
+            if step.polished is not None and step.polished.trajectory is not None:
+                arrays |= trajectory_arrays(step.polished.trajectory, f"{prefix}_{POLISHED}")
         data = self.as_dict()
         if arrays:
             npz = path.with_suffix(".npz")
@@ -146,6 +151,22 @@ class WalkResult:
             data["trajectories"] = npz.name
         path.write_text(json.dumps(data, indent=2, default=_json_default))
         return path
+
+
+POLISHED = "polished"
+"""The middle of the NPZ names of a polished step's arrays: ``step01_polished_q`` beside ``step01_q``."""
+
+
+def trajectory_arrays(trajectory: StepTrajectory, prefix: str) -> dict[str, np.ndarray]:
+    """The NPZ arrays of one step trajectory: ``<prefix>_t``, ``_q``, ``_dq``, ``_tau``, ``_tau_t``, ``_push_off``."""
+    return {
+        f"{prefix}_t": trajectory.times,
+        f"{prefix}_q": trajectory.q,
+        f"{prefix}_dq": trajectory.dq,
+        f"{prefix}_tau": trajectory.tau,
+        f"{prefix}_tau_t": trajectory.control_times,
+        f"{prefix}_push_off": np.array([trajectory.push_off]),
+    }
 
 
 @dataclass(frozen=True)

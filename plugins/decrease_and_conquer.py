@@ -31,16 +31,9 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.energetics import candidate_cot, point_costs
-from gaitbench.gait_problem import StepData, StepStructure, legs_to_roles, sectional_structure
+from gaitbench.gait_problem import StepData, StepStructure, sectional_structure
 from gaitbench.solver import SolverResult, prepare
-from gaitbench.transcription import (
-    Interpolant,
-    StepTrajectory,
-    TranscribedStep,
-    Transcription,
-    cubic_hermite,
-    locate_interval,
-)
+from gaitbench.transcription import StepTrajectory, TranscribedStep, Transcription, nodal_trajectory
 from gaitbench.verify import verify_step
 from gaitbench.walk import (
     StepOutcome,
@@ -141,13 +134,17 @@ class DecreaseAndConquer:
             "claimed_cot": verification.cot,
             "verified": verification.max_defect <= DYNAMICS_TOLERANCE,
         }
+        polished = None
         if self.polish:
             polished = solve_and_verify(problem, index, complete_built, data, seed=trajectory.seed())
-            details["polished"] = polished.summary()
+            details["polished"] = polished.summary() | (
+                {key: value for key, value in polished.verification.as_dict().items() if key != "cot"}
+                if polished.verification else {})
         message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
                                           f"fails verification: dynamics residual {verification.max_defect:.2e}")
         return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
-                           verification, next_state=next_step_state(model, trajectory), details=details)
+                           verification, next_state=next_step_state(model, trajectory), details=details,
+                           polished=polished)
 
 
 class SectionalSolves:
@@ -293,22 +290,8 @@ class Patch:
 
     def trajectory(self, stance: int, h: float) -> StepTrajectory:
         """The patch as a step trajectory: cubic Hermite angles through the nodal (q, q̇), linear rates and
-        torques — the smoothest reading of node values that carry no interpolant of their own."""
-        n = len(self.q)
-        q, dq, tau = (legs_to_roles(a, stance) for a in (self.q, self.dq, self.tau))
-
-        def state(t: float) -> tuple[np.ndarray, np.ndarray]:
-            k, s = locate_interval(t, h, n)
-            angles, _ = cubic_hermite(q[k], q[k + 1], h * dq[k], h * dq[k + 1], s)
-            return angles, (1 - s) * dq[k] + s * dq[k + 1]
-
-        def control(t: float) -> np.ndarray:
-            k, s = locate_interval(t, h, n)
-            return (1 - s) * tau[k] + s * tau[k + 1]
-
-        times = np.arange(n) * h
-        return StepTrajectory(times=times, q=self.q, dq=self.dq, tau=self.tau, control_times=times,
-                              push_off=self.push_off, stance=stance, _interpolant=Interpolant(state, control))
+        torques (:func:`~gaitbench.transcription.nodal_trajectory`), the reading a saved walk's patchwork gets back."""
+        return nodal_trajectory(np.arange(len(self.q)) * h, self.q, self.dq, self.tau, self.push_off, stance)
 
 
 def walk_summary(walk: WalkResult) -> dict:

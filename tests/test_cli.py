@@ -219,3 +219,124 @@ def test_compass_gait_optimum_with_scuffing_allowed_is_the_passive_gait(invoke, 
     data = json.loads(out.read_text())
     assert data["complete"] and data["acot"] < 1e-3
     assert all(step["push_off_impulse"] < 0.01 for step in data["steps"])
+
+
+# the spinner of solve
+
+
+def test_the_solve_spinner_counts_the_steps_and_ends_on_the_walk(invoke, monkeypatch):
+    """It used to end on "solving step 4 of 3": the step after the last."""
+    from contextlib import contextmanager
+
+    from gaitbench import cli
+
+    shown = []
+
+    class Status:
+        def update(self, message):
+            shown.append(message)
+
+    @contextmanager
+    def status(self, message, **kwargs):
+        shown.append(message)
+        yield Status()
+
+    monkeypatch.setattr(cli.Console, "status", status)
+    result = invoke("solve", "-e", "forward", "--N", "8", "--steps", "2")
+    assert result.exit_code == 0, result.output
+    assert shown == ["solving step 1 of 2", "solving step 2 of 2", "all 2 steps solved"]
+    failed = types.SimpleNamespace(solved=False, index=2)
+    assert cli.step_status(failed, 3) == "step 2 of 3 not solved: the walk stops"
+
+
+# runs show at 80 columns
+
+
+@pytest.fixture
+def long_labelled_store(tmp_path):
+    """Cases with the long default method labels, every kind of ending and a long message."""
+    from gaitbench.store import ResultStore
+
+    base = {"suite": "s", "run_id": "r1", "experiment_options": {}, "steps": 11, "transcription": "hermite-simpson",
+            "solver": "ipopt", "strategy": "decrease-and-conquer", "repetition": 0, "wall_time_s": 123.4,
+            "iterations": 4321, "retries": 2, "message": ""}
+    rows = [
+        {"experiment": "downward-slope", "method": "decrease-and-conquer hermite-simpson ipopt", "N": 200,
+         "status": "solved", "stop_cause": "complete", "acot": 0.123456, "claimed_acot": 0.1},
+        {"experiment": "upward-slope", "method": "one-phase hermite-simpson ipopt", "N": 110, "status": "incomplete",
+         "stop_cause": "verification", "stop_step": 7, "stop_status": "converged",
+         "message": "step 7: dynamics residual 3.2e-01 above the tolerance after 3 retries " * 2},
+        {"experiment": "stairs", "method": "one-phase dmoc reference solver", "N": 20, "status": "timeout",
+         "stop_cause": "time_limit", "message": "ran past 1.25 × its time limit"},
+    ]
+    with ResultStore.create(tmp_path / "store") as store:
+        store.start_run({"run_id": "r1", "suite": "s", "started_at": "2026-01-01T00:00:00+00:00"})
+        for i, row in enumerate(rows):
+            store.record_case(base | row | {"case_key": f"{i:016x}"})
+    return tmp_path / "store"
+
+
+def test_runs_show_fits_80_columns_with_the_stop_cause(invoke, long_labelled_store, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "80")
+    result = invoke("runs", "show", str(long_labelled_store))
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert max(len(line.rstrip()) for line in lines) <= 80, result.stdout
+    assert "…" not in result.stdout  # nothing cut short
+    text = " ".join(result.stdout.split())
+    for expected in ("stop cause", "verification", "time_limit", "complete", "0.1235", "downward-slope",
+                     "upward-slope", "decrease-and-conquer", "reference solver"):
+        assert expected in text, expected
+    assert "claimed" not in text and "message" not in text  # those are --wide's
+
+    wide = invoke("runs", "show", str(long_labelled_store), "--wide")
+    assert wide.exit_code == 0, wide.output
+    header = next(line for line in wide.stdout.splitlines() if "experiment" in line)
+    for column in ("case", "stop step", "stop status", "claimed", "COT min", "retries", "time (s)", "iterations",
+                   "message"):
+        assert column in header, column
+    assert "0000000000000001" in wide.stdout and "dynamics residual 3.2e-01" in wide.stdout
+
+
+# errors: one style, documented exit codes
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "fragment"),
+    [
+        (["experiments", "show", "nope"], 2, "unknown experiment 'nope'; available:"),
+        (["solve", "-e", "nope"], 2, "unknown experiment 'nope'"),
+        (["solve", "-e", "forward", "-t", "hermite"], 2, "unknown transcription 'hermite'"),
+        (["solve", "-e", "forward", "--steps", "99"], 2, "forward has 11 steps"),
+        (["solve", "-e", "forward", "-S", "decrease-and-conquer", "-x", "workers=0"], 2, "workers = 0"),
+        (["track", "{tmp}/missing.json"], 2, "no such result file"),
+        (["track", "{tmp}/walk.json", "--observer", "nope"], 2, None),  # the file is checked first
+        (["run", "{tmp}/bad.toml"], 2, "[sweep]: missing required key"),
+        (["report", "{tmp}/nowhere", "--reporter", "nope"], 2, "unknown reporter 'nope'"),
+        (["nocommand"], 2, "No such command"),
+        (["runs", "show", "{tmp}/nowhere"], 1, "no results store here"),
+        (["report", "{tmp}/nowhere"], 1, "no results store here"),
+    ],
+)
+def test_errors_share_one_style_and_the_documented_exit_codes(invoke, tmp_path, args, code, fragment):
+    """Usage errors (2): the usage line, then one "Error: ..." line. Failed work (1): the "Error: ..." line alone.
+    Never a traceback, nothing on stdout."""
+    (tmp_path / "bad.toml").write_text('[suite]\nname = "bad"\n[sweep]\nexperiments = ["forward"]\nN = [8]\n')
+    (tmp_path / "walk.json").write_text("{}")
+    result = invoke(*(arg.format(tmp=tmp_path) for arg in args))
+    assert result.exit_code == code, result.output
+    assert result.stdout == "" and "Traceback" not in result.output
+    lines = result.stderr.splitlines()
+    errors = [line for line in lines if line.startswith("Error: ")]
+    assert len(errors) == 1 and not any(line.lower().startswith("error:") for line in lines if line not in errors)
+    assert (lines[0].startswith("Usage: ")) == (code == 2), result.stderr
+    if fragment:
+        assert fragment in errors[0], errors[0]
+
+
+def test_help_documents_the_exit_codes(invoke):
+    result = invoke("--help")
+    assert result.exit_code == 0
+    text = " ".join(result.stdout.split())
+    assert "Exit status:" in text and "0 success" in text
+    assert "1 the work failed" in text and "2 usage error" in text

@@ -195,6 +195,45 @@ def test_gait_choice_and_dc_claims(store):
         build_report(store, gait="zzzz")
 
 
+def test_a_dc_gait_shows_its_verified_trajectory_with_the_patchwork_over_it(store):
+    """The store's D&C walks keep their polished trajectories: the gait figures draw those (with a dynamics residual
+    of a solution), the chosen patchwork dashed over them, and the step table gives both."""
+    report = build_report(store)
+    df = report.cases
+    key = df[df["is_dc"]]["case_key"].iloc[0]
+    (section,) = build_report(store, gait=key).gaits
+    gait = section.gait
+    assert gait.trajectory == "polished" and len(gait.overlay) == len(gait.steps) == 1
+    assert gait.steps[0].max_defect < 1e-6 < gait.overlay[0].max_defect  # a solution, and the patchwork
+    walk = json.loads((store / df.set_index("case_key").loc[key, "walk_path"]).read_text())
+    assert gait.steps[0].cot == pytest.approx(walk["steps"][0]["details"]["polished"]["cot"])
+    assert gait.overlay[0].cot == pytest.approx(walk["steps"][0]["cot"])  # the claim
+    assert gait.acot == pytest.approx(walk["strategy_details"]["verified_acot"])
+    assert any("verified trajectory" in note and "dashed" in note for note in gait.notes)
+    angles = next(figure for figure in section.figures if figure.id.startswith("fig-gait-angles-"))
+    assert "chosen patchwork (claimed)" in angles.svg and "Solid: the verified trajectory" in angles.caption
+    from gaitbench.reports.html import HtmlReporter
+
+    page = HtmlReporter().write(build_report(store, gait=key), store.parent / "dc-page")[-1].read_text()
+    assert "claimed COT (patchwork)" in page and "shown: the verified (polished) trajectory" in page
+
+
+def test_a_dc_walk_stored_without_its_polished_trajectory_shows_the_patchwork(store, tmp_path):
+    """A store written before the polished trajectories were kept (or with polish = false): the patchwork, said so."""
+    copy = tmp_path / "older"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        key, walk_path = db.execute("SELECT case_key, walk_path FROM cases WHERE method = 'D&C-DC'").fetchone()
+    npz = (copy / walk_path).with_suffix(".npz")
+    with np.load(npz) as arrays:
+        kept = {name: arrays[name] for name in arrays.files if "_polished_" not in name}
+    np.savez_compressed(npz, **kept)
+    (section,) = build_report(copy, gait=key).gaits
+    assert section.gait.trajectory == "walk" and section.gait.overlay == []
+    assert section.gait.steps[0].max_defect > 1e-6  # the patchwork
+    assert any("does not hold for every step" in note for note in section.gait.notes)
+
+
 def test_tracking_section_from_track_files(store, tmp_path):
     """A synthetic track.json/npz in the format of gaitbench.tracking.TrackingResult.save."""
     copy = tmp_path / "tracked"
@@ -233,6 +272,32 @@ def test_report_command(store, tmp_path):
     assert (tmp_path / "r" / "acot.csv").is_file() and not (tmp_path / "r" / "index.html").exists()
     result = CliRunner().invoke(main, ["report", str(tmp_path / "nowhere"), "--out", str(tmp_path / "x")])
     assert result.exit_code != 0 and "no results store" in result.output
+
+
+def test_writing_a_report_tells_its_progress(store, tmp_path):
+    """Each part as it starts (the store, each experiment's figures, each gait, each reporter), then the end."""
+    calls = []
+    write_report(store, tmp_path / "out", progress=lambda what, done, total: calls.append((what, done, total)))
+    parts = [what for what, _, _ in calls]
+    assert parts[0] == "reading the store" and parts[-1] == "done"
+    assert "figures of forward" in parts and any(part.startswith("gait of forward") for part in parts)
+    assert parts.index("writing csv") < parts.index("writing html")
+    assert [done for _, done, _ in calls] == list(range(len(calls)))
+    assert all(done <= total for _, done, total in calls) and calls[-1][1] == calls[-1][2]
+
+
+def test_the_report_command_shows_a_progress_bar(store, tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from gaitbench.report_command import write_with_progress
+
+    screen = io.StringIO()
+    index = write_with_progress(store, tmp_path / "out", Console(file=screen, force_terminal=True, width=100))
+    assert index == tmp_path / "out" / "index.html" and index.is_file()
+    shown = screen.getvalue()
+    assert "report" in shown and "writing html" in shown and "/" in shown  # the part, and parts done of all
 
 
 # --- headless Chromium -------------------------------------------------------------------------------------------
@@ -346,6 +411,92 @@ def open_in_chromium(page: Path, tmp_path: Path) -> tuple[list[str], bytes]:
     finally:
         tools.close()
     return console_errors(tools.events), png
+
+
+OVERFLOWING_TABLES = """Array.from(document.querySelectorAll("table")).filter(function (table) {
+  return table.scrollWidth > table.clientWidth + 1
+    || table.getBoundingClientRect().right > document.documentElement.clientWidth + 1;
+}).map(function (table) { return table.id || table.className; })"""
+"""The tables of a page that overflow it or scroll inside themselves."""
+
+
+def evaluate_in_chromium(page: Path, tmp_path: Path, width: int, expression: str):
+    """The value of a JavaScript expression on ``page`` loaded in headless Chromium ``width`` pixels wide."""
+    browser = shutil.which("chromium")
+    if browser is None:
+        pytest.skip(CHROMIUM_MISSING)
+    tools = DevTools(browser, tmp_path / f"chromium-profile-{width}")
+    try:
+        target = tools.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+        session = tools.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        tools.send("Page.enable", session=session)
+        tools.send("Emulation.setDeviceMetricsOverride",
+                   {"width": width, "height": 1000, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        tools.send("Page.navigate", {"url": page.resolve().as_uri()}, session=session)
+        tools.wait_for("Page.loadEventFired")
+        return tools.send("Runtime.evaluate", {"expression": expression, "returnByValue": True},
+                          session=session)["result"]["value"]
+    finally:
+        tools.close()
+
+
+@pytest.mark.parametrize("width", [1280, 900])
+def test_wide_tables_wrap_within_the_page(report_dir, tmp_path, width):
+    """Every table fits the page, at a laptop's width and a narrow window's: cells wrap, nothing scrolls sideways."""
+    assert evaluate_in_chromium(report_dir / "index.html", tmp_path, width, OVERFLOWING_TABLES) == []
+    assert evaluate_in_chromium(report_dir / "index.html", tmp_path, width,
+                                "document.documentElement.scrollWidth <= document.documentElement.clientWidth")
+
+
+def test_empty_cells_show_a_dash(report_dir):
+    from gaitbench.reports.html import format_value
+
+    assert {format_value(value) for value in (None, math.nan, pd.NA, pd.NaT, np.nan)} == {"—"}
+    html = (report_dir / "index.html").read_text()
+    assert "&lt;NA&gt;" not in html and "<NA>" not in html and ">nan<" not in html
+    published = pd.read_csv(report_dir / "published_savings.csv")
+    assert published["min_N"].isna().any()  # the reference's rows have none: the page shows them as "—"
+
+
+def test_legends_stay_off_the_data_and_the_labels(store, monkeypatch):
+    """Every figure of a report, drawn: no legend overlaps an axes' data area, its tick labels, axis labels or
+    title (the savings figure's legend used to hide its y label)."""
+    from matplotlib.transforms import Bbox
+
+    from gaitbench.reports import figures, gait
+
+    checked, problems = [], []
+    render = figures.render
+
+    def check(fig):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        legends = list(fig.legends) + [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+        for ax in fig.axes:
+            parts = {"data": ax.get_window_extent(renderer), "x label": ax.xaxis.label.get_window_extent(renderer),
+                     "y label": ax.yaxis.label.get_window_extent(renderer),
+                     "title": ax.title.get_window_extent(renderer)}
+            for number, label in enumerate(ax.get_xticklabels() + ax.get_yticklabels()):
+                if label.get_visible() and label.get_text():
+                    parts[f"tick label {number}"] = label.get_window_extent(renderer)
+            for legend in legends:
+                box = legend.get_window_extent(renderer)
+                for name, part in parts.items():
+                    overlap = Bbox.intersection(box, part)
+                    if overlap is not None and overlap.width * overlap.height > 1:
+                        problems.append(f"{ax.get_title() or fig.axes.index(ax)}: legend over the {name}")
+        checked.append(fig)
+        return render(fig)
+
+    monkeypatch.setattr(figures, "render", check)
+    monkeypatch.setattr(gait, "render", check)
+    build_report(store, gait=build_report(store).cases.query("is_dc")["case_key"].iloc[0])
+    t = np.linspace(0, 0.7, 30)
+    q = np.c_[0.2 - 0.5 * t, -0.2 + 0.6 * t]
+    figures.tracking_figures("k", "forward", {"t": t, "q": q, "q_desired": q + 1e-4, "dq": q, "dq_estimated": q},
+                             {"acot_reference": 0.1, "acot_tracked": 0.2, "acot_increase_percent": 100.0})
+    assert len(checked) >= 10 and any(len(fig.axes) > 1 or fig.legends for fig in checked)
+    assert problems == []
 
 
 def test_console_errors_are_caught(tmp_path):

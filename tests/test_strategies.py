@@ -132,7 +132,7 @@ def forward():
 
 
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
-def test_decrease_and_conquer_walks_and_records_everything(forward, transcription):
+def test_decrease_and_conquer_walks_and_records_everything(forward, transcription, tmp_path):
     n = 8
     problem = WalkProblem(forward, REGISTRY.create("transcription", transcription), REGISTRY.create("solver", "ipopt"),
                           n, steps=2)
@@ -152,6 +152,31 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
     assert summary["claimed_acot"] == pytest.approx(walk.acot)
     assert summary["verified_acot"] == pytest.approx(np.mean([s.details["polished"]["cot"] for s in walk.steps]))
     assert summary["candidates"] == sum(s.details["candidates"] for s in walk.steps)
+    _the_polished_trajectory_is_kept_and_stored(walk, tmp_path)
+
+
+def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):
+    """The verified trajectory, each step re-solved from the chosen patchwork, is in the outcome and in the walk's
+    NPZ beside the patchwork, and comes back from it (what the report draws and tracking follows)."""
+    from gaitbench.tracking import load_walk
+
+    for step in walk.steps:
+        assert step.polished is not None and step.polished.solved and step.verified is step.polished
+        assert step.polished.verification.cot == step.details["polished"]["cot"]
+        assert step.polished.verification.max_defect <= DYNAMICS_TOLERANCE
+        assert step.details["polished"]["max_defect"] == step.polished.verification.max_defect
+    path = walk.save(tmp_path / "walk.json")
+    with np.load(path.with_suffix(".npz")) as arrays:
+        for step in walk.steps:
+            prefix = f"step{step.index:02d}"
+            np.testing.assert_array_equal(arrays[f"{prefix}_polished_q"], step.polished.trajectory.q)
+            np.testing.assert_array_equal(arrays[f"{prefix}_polished_tau"], step.polished.trajectory.tau)
+            np.testing.assert_array_equal(arrays[f"{prefix}_q"], step.trajectory.q)  # the patchwork stays
+    loaded, _ = load_walk(path, REGISTRY)
+    for original, copy in zip(walk.steps, loaded.steps, strict=True):
+        assert copy.polished is not None and copy.verified is copy.polished
+        np.testing.assert_array_equal(copy.polished.trajectory.dq, original.polished.trajectory.dq)
+        assert copy.polished.verification.cot == pytest.approx(original.polished.verification.cot)
 
 
 def test_parallel_sectional_solves_give_the_sequential_walk(forward):

@@ -217,3 +217,28 @@ def test_track_command(saved, tmp_path):
     assert missing.exit_code == 2 and "no such result file" in missing.output
     unknown = runner.invoke(main, ["track", str(saved), "--observer", "nope"])
     assert unknown.exit_code == 2 and "unknown observer 'nope'" in unknown.output
+
+
+def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tmp_path):
+    """Tracking follows the polished trajectory and compares with the verified ACOT, in memory and from the saved
+    walk; without polish there is no verified trajectory, and the chosen one is tracked."""
+    from plugins.decrease_and_conquer import DecreaseAndConquer
+
+    experiment = REGISTRY.create("experiment", "forward")
+    problem = WalkProblem(experiment, HermiteSimpson(), Ipopt(), 8, steps=1)
+    walk = DecreaseAndConquer().solve(problem)
+    assert walk.complete, walk.failure
+    verified, claimed = walk.strategy_details["verified_acot"], walk.strategy_details["claimed_acot"]
+    assert abs(verified - claimed) > 1e-4  # measured: the patchwork claims less than its polished trajectory costs
+    saved = walk.save(tmp_path / "dc.json")
+    for source in (walk, saved):
+        result = track_walk(source, "thesis", "ideal", "none", registry=REGISTRY, experiment=experiment)
+        assert result.walk["trajectory"] == "polished"
+        assert result.acot_reference == pytest.approx(verified, rel=1e-9)
+    reference = Reference.from_walk(walk, experiment)
+    np.testing.assert_array_equal(reference.steps[0].q_nodes, walk.steps[0].polished.trajectory.q)
+
+    unpolished = DecreaseAndConquer(polish=False).solve(problem)
+    result = track_walk(unpolished, "thesis", "ideal", "none", registry=REGISTRY, experiment=experiment)
+    assert result.walk["trajectory"] == "walk"
+    assert result.acot_reference == pytest.approx(unpolished.strategy_details["claimed_acot"], rel=1e-9)

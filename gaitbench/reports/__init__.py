@@ -9,16 +9,52 @@ every file, column and figure.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 DEFAULT_REPORTERS = ("csv", "html")
 
+ProgressCallback = Callable[[str, int, int], None]
+"""``progress(what, done, total)``: called as each part of a report starts (``what``, with ``done`` parts finished)
+and once at the end; ``total`` grows as reading the store makes the parts known."""
+
+
+class _Steps:
+    """Counts the parts of a report and tells a :data:`ProgressCallback` which one is being worked on."""
+
+    def __init__(self, callback: ProgressCallback | None, total: int = 0) -> None:
+        self.callback, self.done, self.total = callback, 0, total
+        self.current: str | None = None
+
+    def add(self, parts: int) -> None:
+        self.total += parts
+
+    def start(self, what: str) -> None:
+        """``what`` is being worked on now; the part before it is done."""
+        if self.current is not None:
+            self.done += 1
+        self.current = what
+        self._tell(what)
+
+    def finish(self, what: str = "done") -> None:
+        if self.current is not None:
+            self.done += 1
+        self.current = None
+        self._tell(what)
+
+    def _tell(self, what: str) -> None:
+        if self.callback is not None:
+            self.callback(what, self.done, max(self.total, self.done))
+
 
 class ReportError(Exception):
     """A report that cannot be built (no store, an unknown ``--gait`` case); the message says why."""
+
+
+class GaitNotFound(ReportError):
+    """``gait`` names no case of the store, or several."""
 
 
 @dataclass
@@ -55,11 +91,12 @@ class ReportData:
     tracking: list[TrackingSection] = field(default_factory=list)
 
 
-def build_report(store_dir: str | Path, gait: str | None = None, registry=None) -> ReportData:
+def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
+                 progress: ProgressCallback | _Steps | None = None) -> ReportData:
     """Read the store and compute every table and figure of its report.
 
     ``gait`` is a case key (or a unique prefix) whose gait is shown; by default each sweep experiment's solved case
-    with the lowest verified ACOT.
+    with the lowest verified ACOT. ``progress(what, done, total)`` is told about each part as it is done.
     """
     import numpy as np
 
@@ -68,6 +105,10 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
     from gaitbench.store import ResultStore, StoreError, load_results
 
+    own = not isinstance(progress, _Steps)
+    steps = _Steps(progress) if own else progress
+    steps.add(1)
+    steps.start("reading the store")
     store_dir = Path(store_dir)
     try:
         raw = load_results(store_dir)
@@ -93,17 +134,20 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
     suites = sorted({run.get("suite") or "?" for run in runs})
     report = ReportData(store_dir=store_dir, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",
                         cases=df, runs=runs, tables=tables, experiments=tb.experiments(df))
+    steps.add(len(report.experiments) + 1)
     for experiment in report.experiments:
+        steps.start(f"figures of {experiment}")
         made = [fig.acot_figure(acot, experiment), fig.completion_figure(acot, experiment),
                 fig.cot_bounds_figure(acot, experiment), fig.savings_figure(savings, experiment)]
         report.experiment_figures[experiment] = [figure for figure in made if figure is not None]
+    steps.start("energetics figures")
     report.energetics_figures = fig.energetics_figures(energetics)
 
     if gait is not None:
         matches = [key for key in df["case_key"] if key.startswith(gait)] if not df.empty else []
         if len(matches) != 1:
             problem = "matches several cases" if matches else "is not a case of this store"
-            raise ReportError(f"--gait {gait!r} {problem} ({store_dir})")
+            raise GaitNotFound(f"--gait {gait!r} {problem} ({store_dir})")
         chosen = {None: matches[0]}
     else:
         chosen = tb.chosen_gaits(df)
@@ -111,8 +155,10 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
         from gaitbench.plugins import load_registry
 
         registry = registry or load_registry()
+    steps.add(len(chosen) + len(summaries))
     for key in chosen.values():
         case = df[df["case_key"] == key].iloc[0]
+        steps.start(f"gait of {case['experiment']}, {case['method']}, N = {int(case['N'])}")
         if not isinstance(case["walk_path"], str):
             report.gait_problems.append(f"case {key}: no stored walk ({case['status']}: {case['message']})")
             continue
@@ -133,6 +179,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
 
     for key, summary in summaries.items():
         case = df[df["case_key"] == key].iloc[0]
+        steps.start(f"tracking of {case['experiment']}, {case['method']}, N = {int(case['N'])}")
         label = f"{case['experiment']}, {case['method']}, N = {int(case['N'])} (case {key})"
         series = {}
         name = summary.get("series")
@@ -141,6 +188,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None) 
             with np.load(npz_path) as npz:
                 series = {k: npz[k] for k in npz.files}
         report.tracking.append(TrackingSection(key, label, summary, fig.tracking_figures(key, label, series, summary)))
+    if own:
+        steps.finish()
     return report
 
 
@@ -176,20 +225,26 @@ def _track_summaries(store_dir: Path, df) -> dict[str, dict]:
 
 
 def write_report(store_dir: str | Path, out_dir: str | Path, gait: str | None = None,
-                 reporters: Sequence[str] = DEFAULT_REPORTERS, registry=None) -> Path:
+                 reporters: Sequence[str] = DEFAULT_REPORTERS, registry=None,
+                 progress: ProgressCallback | None = None) -> Path:
     """Write the report of the store at ``store_dir`` into ``out_dir`` with the named reporter plugins.
 
     Returns the HTML page (``out_dir/index.html``) when the ``html`` reporter ran, else ``out_dir``.
-    Raises :class:`ReportError` for a missing store or an unknown ``gait`` case key.
+    Raises :class:`ReportError` for a missing store or an unknown ``gait`` case key. ``progress(what, done, total)``
+    is told about each part (tables, each experiment's figures, each gait and tracked case, each reporter) as it is
+    done.
     """
     from gaitbench.plugins import load_registry
 
     registry = registry or load_registry()
     built = [registry.create("reporter", name) for name in reporters]
-    report = build_report(store_dir, gait=gait, registry=registry)
+    steps = _Steps(progress, total=len(built))
+    report = build_report(store_dir, gait=gait, registry=registry, progress=steps)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    for reporter in built:
+    for name, reporter in zip(reporters, built, strict=True):
+        steps.start(f"writing {name}")
         reporter.write(report, out_dir)
+    steps.finish()
     index = out_dir / "index.html"
     return index if "html" in reporters else out_dir

@@ -37,6 +37,28 @@ class Figure:
         return f"{self.id}.svg"
 
 
+def subplots(*args, **kwargs):
+    """``plt.subplots`` with the constrained layout, which makes room for a legend outside the axes."""
+    return plt.subplots(*args, layout="constrained", **kwargs)
+
+
+def legend_below(fig, ncol: int | None = None) -> None:
+    """One legend for the whole figure, below its axes, their tick labels and axis labels: never on the data or a
+    label. Entries of every axes, each label once, in order of appearance."""
+    entries: dict[str, object] = {}
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            if not label.startswith("_"):
+                entries.setdefault(label, handle)
+    if not entries:
+        return
+    longest = max(len(label) for label in entries)
+    width = fig.get_figwidth()
+    columns = ncol or max(1, min(len(entries), int(width * 12 // max(longest + 4, 1))))
+    fig.legend(list(entries.values()), list(entries), loc="outside lower center", ncol=columns, fontsize=7,
+               frameon=False)
+
+
 def render(fig) -> str:
     """The figure as SVG text (text kept as text, so files stay small); closes the figure."""
     buffer = io.StringIO()
@@ -71,7 +93,7 @@ def _by_method(data: pd.DataFrame) -> list[tuple[str, pd.DataFrame, str]]:
     return [(method, data[data["method"] == method], colors[method]) for method in methods]
 
 
-def _colors(methods: list[str]) -> dict[str, str]:
+def _colors(methods: list) -> dict:
     cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     return {method: cycle[i % len(cycle)] for i, method in enumerate(methods)}
 
@@ -81,7 +103,7 @@ def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     data = acot[acot["experiment"] == experiment]
     if data["acot"].notna().sum() == 0 and data["claimed_acot"].notna().sum() == 0:
         return None
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = subplots(figsize=(7, 4))
     for method, rows, color in _by_method(data):
         ax.plot(rows["N"], rows["acot"], "o-", color=color, label=f"{method} (verified)", ms=4)
         if rows["claimed_acot"].notna().any():
@@ -98,7 +120,7 @@ def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     _integer_n(ax)
     ax.set_ylabel("ACOT")
     ax.set_title(f"{experiment}: ACOT against N")
-    ax.legend(fontsize=7, loc="best")
+    legend_below(fig)
     return Figure(f"fig-acot-{slug(experiment)}", f"ACOT against N: {experiment}",
                   "Average cost of transport of each method at each N, over its complete walks only (verified; "
                   "dashed: the claimed ACOT of Decrease & Conquer's synthesized trajectory). A gap: no complete walk "
@@ -111,7 +133,7 @@ def completion_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     data = acot[acot["experiment"] == experiment]
     if data.empty:
         return None
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = subplots(figsize=(7, 4))
     for method, rows, color in _by_method(data):
         ax.plot(rows["N"], 100 * rows["completion_rate"], "o-", color=color, ms=4,
                 label=f"{method} ({int(rows['solved'].sum())} of {int(rows['cases'].sum())})")
@@ -120,7 +142,7 @@ def completion_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     _integer_n(ax)
     ax.set_ylabel("complete walks (%)")
     ax.set_title(f"{experiment}: completion rate against N")
-    ax.legend(fontsize=7, loc="best")
+    legend_below(fig)
     return Figure(f"fig-completion-{slug(experiment)}", f"Completion rate against N: {experiment}",
                   "Share of each method's walks at each N that walked every requested step, solved and verified "
                   "(the legend counts them over all N). Only these complete walks enter the ACOT beside it; why the "
@@ -132,7 +154,7 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     data = acot[acot["experiment"] == experiment]
     if data["cot_min"].notna().sum() == 0:
         return None
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = subplots(figsize=(7, 4))
     for method, rows, color in _by_method(data):
         ax.plot(rows["N"], rows["cot_min"], "v-", color=color, ms=4, label=f"{method} min")
         ax.plot(rows["N"], rows["cot_max"], "^--", color=color, ms=4, label=f"{method} max")
@@ -140,7 +162,7 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     _integer_n(ax)
     ax.set_ylabel("per-step COT")
     ax.set_title(f"{experiment}: minimum and maximum per-step COT")
-    ax.legend(fontsize=7, ncol=2)
+    legend_below(fig, ncol=2)
     return Figure(f"fig-cot-bounds-{slug(experiment)}", f"Per-step COT bounds: {experiment}",
                   "Lowest and highest COT of a single step of the walk, per method and N, over complete walks "
                   "(store columns cot_min, cot_max; for D&C the chosen, synthesized trajectory)."
@@ -156,23 +178,22 @@ def savings_figure(savings: pd.DataFrame, experiment: str) -> Figure | None:
     kinds = [kind for kind in ("one-phase", "reference") if (data["baseline_kind"] == kind).any()]
     if not kinds:
         return None
-    fig, axes = plt.subplots(1, len(kinds), figsize=(5 * len(kinds), 3.6), squeeze=False)
+    fig, axes = subplots(1, len(kinds), figsize=(5 * len(kinds), 3.6), squeeze=False)
+    colors = _colors(list(dict.fromkeys(zip(data["method"], data["baseline"], strict=True))))
     for ax, kind in zip(axes[0], kinds, strict=True):
         rows = data[data["baseline_kind"] == kind]
-        pairs = list(dict.fromkeys(zip(rows["method"], rows["baseline"], strict=True)))
-        colors = _colors([f"{m} vs {b}" for m, b in pairs])
-        for method, baseline in pairs:
+        for method, baseline in dict.fromkeys(zip(rows["method"], rows["baseline"], strict=True)):
             pair = rows[(rows["method"] == method) & (rows["baseline"] == baseline)]
-            label = f"{method} vs {baseline}"
-            ax.plot(pair["N"], pair["savings_percent"], "o-", color=colors[label], ms=4, label=f"{label} (verified)")
-            ax.plot(pair["N"], pair["claimed_savings_percent"], "s--", color=colors[label], ms=3, alpha=0.7,
+            label, color = f"{method} vs {baseline}", colors[(method, baseline)]
+            ax.plot(pair["N"], pair["savings_percent"], "o-", color=color, ms=4, label=f"{label} (verified)")
+            ax.plot(pair["N"], pair["claimed_savings_percent"], "s--", color=color, ms=3, alpha=0.7,
                     label=f"{label} (claimed)")
         ax.axhline(0, color="black", lw=0.8)
         ax.set_xlabel("N (nodes per step)")
         _integer_n(ax)
         ax.set_ylabel("energy savings (%)")
         ax.set_title("against One Phase" if kind == "one-phase" else "against the reference solver")
-        ax.legend(fontsize=7)
+    legend_below(fig, ncol=2)
     roles = " and ".join(thesis_values.figure(experiment, role) or "" for role in ("savings_op", "savings_reference"))
     return Figure(f"fig-savings-{slug(experiment)}", f"Energy savings of Decrease & Conquer: {experiment}",
                   "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N both methods solved "
@@ -195,7 +216,7 @@ def energetics_figures(table: pd.DataFrame) -> list[Figure]:
         keys = list(dict.fromkeys(zip(panels[fixed], panels["speed"], strict=True)))
         if not keys:
             continue
-        fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.4), squeeze=False)
+        fig, axes = subplots(1, len(keys), figsize=(4.2 * len(keys), 3.4), squeeze=False)
         for ax, (fixed_value, speed) in zip(axes[0], keys, strict=True):
             panel = panels[(panels[fixed] == fixed_value) & (panels["speed"] == speed)]
             for value, curve in panel.groupby(varied):
@@ -204,7 +225,7 @@ def energetics_figures(table: pd.DataFrame) -> list[Figure]:
             ax.set_xlabel("step length D (leg lengths)")
             ax.set_ylabel("COT")
             ax.set_title(f"{fixed_symbol}={fixed_value:g}, V={speed:g}, flat")
-            ax.legend(fontsize=7)
+        legend_below(fig)
         figures.append(Figure(f"fig-energetics-{slug(varied_symbol)}", f"COT against step length for {varied_symbol}",
                               f"Average COT of the energetics bipeds against step length, one curve per "
                               f"{varied_symbol}, with {fixed_symbol} and V fixed per panel (flat ground). Thesis "
@@ -213,7 +234,7 @@ def energetics_figures(table: pd.DataFrame) -> list[Figure]:
     sloped = solved.groupby(["mass_ratio", "length_ratio", "speed"]).filter(lambda g: g["slope"].nunique() > 1)
     if not sloped.empty:
         keys = list(dict.fromkeys(zip(sloped["mass_ratio"], sloped["length_ratio"], sloped["speed"], strict=True)))[:4]
-        fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.4), squeeze=False)
+        fig, axes = subplots(1, len(keys), figsize=(4.2 * len(keys), 3.4), squeeze=False)
         for ax, (rm, rl, speed) in zip(axes[0], keys, strict=True):
             panel = sloped[(sloped["mass_ratio"] == rm) & (sloped["length_ratio"] == rl) & (sloped["speed"] == speed)]
             for step_length, curve in panel.groupby("step_length"):
@@ -222,7 +243,7 @@ def energetics_figures(table: pd.DataFrame) -> list[Figure]:
             ax.set_xlabel("slope θ (deg)")
             ax.set_ylabel("COT")
             ax.set_title(f"Rm={rm:g}, Rl={rl:g}, V={speed:g}")
-            ax.legend(fontsize=7)
+        legend_below(fig)
         figures.append(Figure("fig-energetics-slope", "Effect of the slope angle on COT",
                               "COT against slope angle for the first (Rm, Rl, V) combinations that vary it. Thesis "
                               "counterparts: Figs 5.57, 5.60, …, 5.78.", render(fig)))
@@ -236,17 +257,17 @@ def tracking_figures(case_key: str, label: str, series: dict[str, np.ndarray], s
     t = series.get("t")
     if t is not None and len(t):
         q, q_d = series["q"], series["q_desired"]
-        fig, ax = plt.subplots(figsize=(7, 3.4))
+        fig, ax = subplots(figsize=(7, 3.4))
         for leg in (0, 1):
             ax.plot(t, q_d[:, leg], "--", label=f"q{leg + 1} desired")
             ax.plot(t, q[:, leg], "-", lw=0.8, label=f"q{leg + 1} actual")
         ax.set_xlabel("t (s)")
         ax.set_ylabel("angle (rad)")
-        ax.legend(fontsize=7)
+        legend_below(fig, ncol=4)
         figures.append(Figure(f"fig-track-angles-{key}", f"Desired and actual angles: {label}",
                               "Leg angles of the reference and of the closed-loop robot (thesis Figs 5.6, 5.19, "
                               "5.32, 5.45).", render(fig)))
-        fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+        fig, axes = subplots(1, 2, figsize=(9, 3.2))
         position = np.abs(q - q_d)
         velocity = np.abs(series["dq"] - series["dq_estimated"])
         for ax, values, what in ((axes[0], position, "|q − q_d| (rad)"), (axes[1], velocity, "|q̇ − q̂̇| (rad/s)")):
@@ -254,7 +275,7 @@ def tracking_figures(case_key: str, label: str, series: dict[str, np.ndarray], s
                 ax.semilogy(t, np.maximum(values[:, leg], 1e-16), lw=0.8, label=f"leg {leg + 1}")
             ax.set_xlabel("t (s)")
             ax.set_ylabel(what)
-            ax.legend(fontsize=7)
+        legend_below(fig)
         axes[0].set_title("position error")
         axes[1].set_title("velocity-estimation error")
         figures.append(Figure(f"fig-track-errors-{key}", f"Tracking errors: {label}",
@@ -262,13 +283,17 @@ def tracking_figures(case_key: str, label: str, series: dict[str, np.ndarray], s
                               "their analogues).", render(fig)))
     reference, tracked = summary.get("acot_reference"), summary.get("acot_tracked")
     if reference is not None and tracked is not None:
-        fig, ax = plt.subplots(figsize=(4, 3))
-        ax.bar(["reference", "under control"], [reference, tracked], color=["tab:gray", "tab:blue"])
+        polished = (summary.get("walk") or {}).get("trajectory") == "polished"
+        fig, ax = subplots(figsize=(4, 3))
+        ax.bar(["reference (polished)" if polished else "reference", "under control"], [reference, tracked],
+               color=["tab:gray", "tab:blue"])
         ax.set_ylabel("ACOT")
         increase = summary.get("acot_increase_percent")
         if increase is not None:
             ax.set_title(f"increase {increase:+.2f} %")
         figures.append(Figure(f"fig-track-acot-{key}", f"ACOT under control: {label}",
                               "ACOT of the reference against the ACOT of the tracked walk (thesis: +0.5 % to +1.2 %, "
-                              "ch5 §2.4).", render(fig)))
+                              "ch5 §2.4)." + (" The reference is decrease and conquer's verified trajectory, each "
+                                              "step polished, and its ACOT the verified one." if polished else ""),
+                              render(fig)))
     return figures

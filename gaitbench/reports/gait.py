@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from gaitbench.reports.figures import Figure, plt, render, slug
+from gaitbench.reports.figures import Figure, legend_below, render, slug, subplots
 
 FRAME_RATE = 30.0
 """Frames per second of the stick-figure animation (nodal values linearly interpolated)."""
@@ -55,6 +55,14 @@ class Gait:
     notes: list[str] = field(default_factory=list)
     partial: bool = False
     """The walk stopped early (a ``--gait`` choice can be one): its label, and so every figure's title, says so."""
+    overlay: list[GaitStep] = field(default_factory=list)
+    """Decrease and conquer's chosen (patchwork) trajectory when :attr:`steps` are the polished ones: drawn dashed."""
+    trajectory: str = "walk"
+    """``walk`` (each step's own trajectory) or ``polished`` (the verified trajectory of decrease and conquer)."""
+
+    @property
+    def overlay_by_index(self) -> dict[int, GaitStep]:
+        return {step.index: step for step in self.overlay}
 
     @property
     def label(self) -> str:
@@ -63,9 +71,14 @@ class Gait:
 
 
 def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
-    """The gait of one stored case (a row of :func:`gaitbench.reports.tables.prepare`)."""
+    """The gait of one stored case (a row of :func:`gaitbench.reports.tables.prepare`).
+
+    For decrease and conquer, the gait is the verified trajectory, each step polished (re-solved from the chosen
+    patchwork), when the walk stored it for every step; the chosen patchwork is kept as :attr:`Gait.overlay`.
+    """
     from gaitbench.mechanics import BipedModel
     from gaitbench.plugins import load_registry
+    from gaitbench.walk import POLISHED
 
     store_dir = Path(store_dir)
     path = store_dir / case["walk_path"]
@@ -84,39 +97,74 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
         notes.append("Ground reactions: not shown. This walk uses the 2-DOF First-Phase model, whose stance foot is "
                      "pinned; gaitbench's model defines no ground reaction for it (the 4-DOF model does).")
     footholds = experiment.terrain.footholds()
+    own = _steps(data["steps"], arrays, lambda step: step)
+    polished = _steps(data["steps"][:len(own)], arrays, lambda step: (step.get("details") or {}).get(POLISHED),
+                      POLISHED)
+    overlay: list[GaitStep] = []
+    trajectory = "walk"
+    if own and len(polished) == len(own):
+        steps, overlay, trajectory = polished, own, POLISHED
+    else:
+        steps = own
+    if model is not None:
+        for gait_step in steps:
+            gait_step.reaction = _reactions(model, footholds[gait_step.index - 1], gait_step)
+    if case["is_dc"] and trajectory == POLISHED:
+        worst = max((step.max_defect for step in overlay if step.max_defect is not None), default=None)
+        notes.append("Decrease & Conquer: the gait shown is the verified trajectory: each step's complete problem "
+                     "re-solved (polished) from the chosen synthesized trajectory, and verified like any step; its "
+                     "ACOT is the verified one. The chosen trajectory itself, a node-wise patchwork of NLP solutions "
+                     "whose COT is the thesis's claim, is drawn dashed"
+                     + (f"; it need not satisfy the dynamics (largest dynamics residual {worst:.3g})" if worst
+                        is not None else "")
+                     + ". Each polished step starts where the walk's previous step ended, after the patchwork's "
+                     "push-off and heel strike (the walk chains the chosen trajectories), so polished steps need not "
+                     "join exactly at a heel strike (docs/deviations.md).")
+    elif case["is_dc"]:
+        notes.append("Decrease & Conquer: the stored trajectory is the chosen synthesized (node-wise patchwork) "
+                     "trajectory whose COT is the claim; it need not satisfy the dynamics (see its max defect). "
+                     "The verified ACOT is that of the polished trajectories, re-solved from it, which this walk "
+                     "does not hold for every step (solved with polish = false, a polish that failed, or stored "
+                     "before gaitbench kept them).")
+    return Gait(case_key=case["case_key"], experiment=case["experiment"], method=case["method"],
+                strategy=case["strategy"], transcription=case["transcription"], N=int(case["N"]), phase=phase,
+                acot=_float(case["acot"]), claimed_acot=_float(case["claimed_acot"]), steps=steps,
+                footholds=footholds, leg_length=experiment.robot.l, notes=notes,
+                partial=not bool(case.get("complete", case["status"] == "solved")), overlay=overlay,
+                trajectory=trajectory)
+
+
+def _steps(stored: list[dict], arrays: dict[str, np.ndarray], figures, name: str = "") -> list[GaitStep]:
+    """The walk's steps with arrays under ``stepNN[_name]_*``, on global times (each step starts where the one before
+    ended), up to the first without; ``figures(step)`` is the dict holding the step's COT, push-off impulse, max
+    defect and resim error."""
     steps, start = [], 0.0
-    for step in data["steps"]:
-        prefix = f"step{int(step['index']):02d}"
-        if f"{prefix}_q" not in arrays:
+    for step in stored:
+        prefix = f"step{int(step['index']):02d}" + (f"_{name}" if name else "")
+        numbers = figures(step)
+        if f"{prefix}_q" not in arrays or not isinstance(numbers, dict):
             break
         t = np.asarray(arrays[f"{prefix}_t"], dtype=float)
         tau_t = np.asarray(arrays[f"{prefix}_tau_t"], dtype=float)
         q, dq = np.asarray(arrays[f"{prefix}_q"], dtype=float), np.asarray(arrays[f"{prefix}_dq"], dtype=float)
         tau = np.asarray(arrays[f"{prefix}_tau"], dtype=float).reshape(len(tau_t), -1)
-        gait_step = GaitStep(int(step["index"]), int(step["stance"]), start + t, q, dq, start + tau_t, tau,
-                             step.get("push_off_impulse"), step.get("cot"), step.get("max_defect"),
-                             step.get("resim_error"))
-        if model is not None:
-            foot = footholds[gait_step.index - 1]
-            reactions = []
-            for k in range(len(t)):
-                torque = [np.interp(t[k], tau_t, tau[:, j]) for j in range(tau.shape[1])]
-                _, reaction = model.forward_dynamics(np.r_[q[k], foot], np.r_[dq[k], 0.0, 0.0], torque,
-                                                     gait_step.stance)
-                reactions.append(np.asarray(reaction, dtype=float).reshape(-1)[:2])
-            gait_step.reaction = np.array(reactions)
-        steps.append(gait_step)
-        start = float(gait_step.t[-1])
-    if case["is_dc"]:
-        notes.append("Decrease & Conquer: the stored trajectory is the chosen synthesized (node-wise patchwork) "
-                     "trajectory whose COT is the claim; it need not satisfy the dynamics (see its max defect). "
-                     "The verified ACOT is that of the polished trajectories, re-solved from it, which the store "
-                     "does not keep (docs/deviations.md).")
-    return Gait(case_key=case["case_key"], experiment=case["experiment"], method=case["method"],
-                strategy=case["strategy"], transcription=case["transcription"], N=int(case["N"]), phase=phase,
-                acot=_float(case["acot"]), claimed_acot=_float(case["claimed_acot"]), steps=steps,
-                footholds=footholds, leg_length=experiment.robot.l, notes=notes,
-                partial=not bool(case.get("complete", case["status"] == "solved")))
+        push_off = float(np.asarray(arrays[f"{prefix}_push_off"]).ravel()[0]) if f"{prefix}_push_off" in arrays \
+            else numbers.get("push_off_impulse")
+        steps.append(GaitStep(int(step["index"]), int(step["stance"]), start + t, q, dq, start + tau_t, tau, push_off,
+                              numbers.get("cot"), numbers.get("max_defect"), numbers.get("resim_error")))
+        start = float(steps[-1].t[-1])
+    return steps
+
+
+def _reactions(model, foot: np.ndarray, step: GaitStep) -> np.ndarray:
+    """The stance foot's ground reaction (f_t, f_n) at each node, torques interpolated to the node times."""
+    local, local_tau = step.t - step.t[0], step.tau_t - step.t[0]
+    reactions = []
+    for k in range(len(local)):
+        torque = [np.interp(local[k], local_tau, step.tau[:, j]) for j in range(step.tau.shape[1])]
+        _, reaction = model.forward_dynamics(np.r_[step.q[k], foot], np.r_[step.dq[k], 0.0, 0.0], torque, step.stance)
+        reactions.append(np.asarray(reaction, dtype=float).reshape(-1)[:2])
+    return np.array(reactions)
 
 
 def _float(value: Any) -> float | None:
@@ -132,41 +180,63 @@ def _boundaries(ax, gait: Gait) -> None:
         ax.axvline(step.t[-1], color="gray", lw=0.6, ls=":")
 
 
+PATCHWORK = "chosen patchwork (claimed)"
+"""How the overlay of decrease and conquer's chosen trajectory is labelled in the gait figures."""
+
+
+def _series(ax, gait: Gait, attribute: str, times: str, names: tuple[str, str]) -> None:
+    """Both legs' values over the walk; the overlay (D&C's patchwork) dashed and lighter, in the same colours."""
+    colors = ("tab:blue", "tab:orange")
+    for leg in (0, 1):
+        t = np.concatenate([getattr(s, times) for s in gait.steps])
+        values = np.concatenate([getattr(s, attribute)[:, leg] for s in gait.steps])
+        ax.plot(t, values, ".-", ms=3, color=colors[leg], label=names[leg])
+    for leg in (0, 1):
+        if gait.overlay:
+            t = np.concatenate([getattr(s, times) for s in gait.overlay])
+            values = np.concatenate([getattr(s, attribute)[:, leg] for s in gait.overlay])
+            ax.plot(t, values, "--", lw=0.9, color=colors[leg], alpha=0.55, label=f"{names[leg]}, {PATCHWORK}")
+
+
+def _shown(gait: Gait) -> str:
+    """What the figures draw, said in their captions."""
+    if gait.trajectory == "polished":
+        return (" Solid: the verified trajectory (each step polished: re-solved from the chosen trajectory); dashed: "
+                "the chosen synthesized patchwork, whose COT is the claim.")
+    return ""
+
+
 def gait_figures(gait: Gait) -> list[Figure]:
-    """Angles, velocities, hip torques, ground reactions (butterfly diagram) and push-off impulses."""
+    """Angles, velocities, hip torques, ground reactions (butterfly diagram) and push-off impulses; for decrease
+    and conquer with its polished trajectory stored, that trajectory, with the chosen patchwork dashed over it."""
     if not gait.steps:
         return []
     key = slug(gait.case_key)
+    shown = _shown(gait)
     figures = []
     for attribute, ylabel, title, role, fig_id in (
             ("q", "angle (rad)", "Leg angles", "angles", "angles"),
             ("dq", "angular velocity (rad/s)", "Leg angular velocities", "velocities", "velocities")):
-        fig, ax = plt.subplots(figsize=(7, 3.2))
-        for leg in (0, 1):
-            t = np.concatenate([s.t for s in gait.steps])
-            values = np.concatenate([getattr(s, attribute)[:, leg] for s in gait.steps])
-            ax.plot(t, values, ".-", ms=3, label=f"leg {leg + 1}")
+        fig, ax = subplots(figsize=(7, 3.2))
+        _series(ax, gait, attribute, "t", ("leg 1", "leg 2"))
         _boundaries(ax, gait)
         ax.set_xlabel("t (s)")
         ax.set_ylabel(ylabel)
-        ax.legend(fontsize=7)
+        legend_below(fig)
         figures.append(Figure(f"fig-gait-{fig_id}-{key}", f"{title}: {gait.label}",
-                              f"{title} at the nodes of every step (dotted lines: heel strikes)." + _thesis(gait, role),
-                              render(fig)))
-    fig, ax = plt.subplots(figsize=(7, 3.2))
-    for leg in (0, 1):
-        t = np.concatenate([s.tau_t for s in gait.steps])
-        values = np.concatenate([s.tau[:, leg] for s in gait.steps])
-        ax.plot(t, values, ".-", ms=3, label=f"τ{leg + 1}")
+                              f"{title} at the nodes of every step (dotted lines: heel strikes)." + shown
+                              + _thesis(gait, role), render(fig)))
+    fig, ax = subplots(figsize=(7, 3.2))
+    _series(ax, gait, "tau", "tau_t", ("τ1", "τ2"))
     _boundaries(ax, gait)
     ax.set_xlabel("t (s)")
     ax.set_ylabel("hip torque (N·m)")
-    ax.legend(fontsize=7)
+    legend_below(fig)
     figures.append(Figure(f"fig-gait-torques-{key}", f"Hip torques: {gait.label}",
-                          "Hip torques τ1, τ2 at the control times of each step." + _thesis(gait, "torques"),
+                          "Hip torques τ1, τ2 at the control times of each step." + shown + _thesis(gait, "torques"),
                           render(fig)))
     if all(step.reaction is not None for step in gait.steps):
-        fig, ax = plt.subplots(figsize=(7, 3.2))
+        fig, ax = subplots(figsize=(7, 3.2))
         t = np.concatenate([s.t for s in gait.steps])
         reaction = np.vstack([s.reaction for s in gait.steps])
         ax.plot(t, reaction[:, 1], ".-", ms=3, label="normal f_n")
@@ -175,20 +245,29 @@ def gait_figures(gait: Gait) -> list[Figure]:
         _boundaries(ax, gait)
         ax.set_xlabel("t (s)")
         ax.set_ylabel("ground reaction (N)")
-        ax.legend(fontsize=7)
+        legend_below(fig)
         figures.append(Figure(f"fig-gait-grf-{key}", f"Ground reactions (butterfly diagram): {gait.label}",
                               "Stance-foot ground reaction, friction and normal components, computed at each node "
-                              "as the exact constraint force of the 4-DOF model (DECISIONS §2)."
+                              "as the exact constraint force of the 4-DOF model (DECISIONS §2)"
+                              + (", of the verified trajectory." if gait.trajectory == "polished" else ".")
                               + _thesis(gait, "ground_reaction"), render(fig)))
     impulses = [(s.index, s.push_off) for s in gait.steps if s.push_off is not None]
     if impulses:
-        fig, ax = plt.subplots(figsize=(5, 3))
-        ax.bar([i for i, _ in impulses], [value for _, value in impulses], color="tab:orange")
+        fig, ax = subplots(figsize=(5, 3))
+        claimed = {s.index: s.push_off for s in gait.overlay if s.push_off is not None}
+        width = 0.4 if claimed else 0.8
+        ax.bar([i - (width / 2 if claimed else 0) for i, _ in impulses], [value for _, value in impulses], width,
+               color="tab:orange", label="verified" if claimed else None)
+        if claimed:
+            ax.bar([i + width / 2 for i in claimed], list(claimed.values()), width, color="none",
+                   edgecolor="tab:orange", hatch="//", label=PATCHWORK)
+            legend_below(fig)
         ax.set_xlabel("step")
         ax.set_ylabel("push-off impulse (N·s)")
         ax.set_xticks([i for i, _ in impulses])
         figures.append(Figure(f"fig-gait-push-off-{key}", f"Push-off impulses: {gait.label}",
                               "The instantaneous push-off impulse along the stance leg at the end of each step."
+                              + (" Hatched: the chosen patchwork's." if claimed else "")
                               + _thesis(gait, "push_off"), render(fig)))
     return figures
 

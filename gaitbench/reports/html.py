@@ -9,6 +9,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from gaitbench.reports import thesis_values
@@ -19,8 +20,9 @@ FIGURES_DIR = "figures"
 
 
 def format_value(value: Any) -> str:
-    """Numbers to 4 significant digits (small ones in scientific notation), missing values as an em dash."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
+    """Numbers to 4 significant digits (small ones in scientific notation), missing values (None, NaN, pandas' NA
+    and NaT) as an em dash."""
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA or value is pd.NaT:
         return "—"
     if isinstance(value, bool):
         return "yes" if value else "no"
@@ -39,14 +41,26 @@ def table_html(table: pd.DataFrame, table_id: str, highlight: str | None = None)
 
     if table.empty:
         return f'<p class="empty" id="{table_id}">(no rows)</p>'
-    head = "".join(f"<th>{escape(str(column))}</th>" for column in table.columns)
+    # Long column names may break after an underscore, so a wide table wraps within the page instead of overflowing.
+    head = "".join(f"<th>{str(escape(str(column))).replace('_', '_<wbr>')}</th>" for column in table.columns)
     rows = []
     for _, row in table.iterrows():
         marked = highlight is not None and bool(row.get(highlight))
-        cells = "".join(f"<td>{escape(format_value(row[column]))}</td>" for column in table.columns)
+        cells = "".join(_cell(row[column]) for column in table.columns)
         rows.append(f'<tr class="minimum">{cells}</tr>' if marked else f"<tr>{cells}</tr>")
     return (f'<table id="{table_id}" class="data"><thead><tr>{head}</tr></thead>'
             f"<tbody>{''.join(rows)}</tbody></table>")
+
+
+def _cell(value: Any) -> str:
+    """A table cell. Numbers and short words (case keys, statuses) never break (class ``nobreak``); longer text
+    breaks between words, and inside one only where it must."""
+    from markupsafe import escape
+
+    text = format_value(value)
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    word = len(text) <= 24 and not any(character.isspace() for character in text)
+    return f'<td class="nobreak">{escape(text)}</td>' if number or word else f"<td>{escape(text)}</td>"
 
 
 def figure_src(svg: str) -> str:
