@@ -146,6 +146,29 @@ class TranscribedStep:
     structure: StepStructure
     nlp: NLP
     discretization: Discretization
+    cost_of_transport: ca.Function | None = None
+    """(x, p) -> the objective without its torque regularization: the transcription's hip-energy quadrature plus
+    the push-off energy, over M g D."""
+
+    def objective_cot(self, x: np.ndarray, data: StepData) -> float:
+        """The cost of transport the NLP's objective assigns to ``x``, without the torque regularization: what
+        verification's COT is compared with.
+
+        The |P| slack pairs of :func:`absolute_value` are first set to the positive and negative parts of the power
+        they stand for, so that any ``x`` (a patched trajectory too, whose slacks were never optimized) is valued
+        with exact |P| by the transcription's own quadrature; at an optimum this changes nothing.
+        """
+        p = data.parameter_vector()
+        x = np.array(x, dtype=float)
+        g = self.nlp.constraint_values(x, p)
+        variables = self.nlp.variable_blocks
+        for name, rows in self.nlp.constraint_blocks.items():
+            stem = name.removesuffix("_split")
+            if stem != name and f"{stem}_positive" in variables and f"{stem}_negative" in variables:
+                positive, negative = variables[f"{stem}_positive"], variables[f"{stem}_negative"]
+                power = g[rows] + x[positive] - x[negative]
+                x[positive], x[negative] = np.maximum(power, 0.0), np.maximum(-power, 0.0)
+        return float(self.cost_of_transport(x, p))
 
     def initial_guess(self, data: StepData, seed: Seed | None = None) -> np.ndarray:
         """The variables sampled from ``seed``; by default the blended guess of DECISIONS §7, the same for every
@@ -216,14 +239,13 @@ class Transcription(ABC):
         discretization = self.discretize(structure, builder, symbols, swing_model)
         push_off_energy = _add_step_constraints(structure, builder, symbols, discretization)
         energy = discretization.hip_energy + push_off_energy
+        weight = symbols.total_mass * symbols.gravity * symbols.chord
         rho = structure.options.torque_regularization
-        if rho:
-            torques = builder.variables("torques")
-            energy += rho * symbols.time_step * ca.sumsqr(torques)
-        cot = energy / (symbols.total_mass * symbols.gravity * symbols.chord)
-        return TranscribedStep(
-            structure=structure, nlp=builder.build(symbols.vector, cot), discretization=discretization
-        )
+        regularization = rho * symbols.time_step * ca.sumsqr(builder.variables("torques")) if rho else 0
+        nlp = builder.build(symbols.vector, (energy + regularization) / weight)
+        cost_of_transport = ca.Function("objective_cot", [nlp.x, symbols.vector], [energy / weight])
+        return TranscribedStep(structure=structure, nlp=nlp, discretization=discretization,
+                               cost_of_transport=cost_of_transport)
 
 
 def _configuration(transcription: Transcription) -> dict:
