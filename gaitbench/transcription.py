@@ -315,7 +315,12 @@ def absolute_power(builder: NLPBuilder, structure: StepStructure, name: str, tau
     smooth for the solver. ``smooth``: the thesis's √(P² + ε²) (DECISIONS §5), whose kink of curvature 1/ε
     makes interior-point solvers crawl; kept to reproduce the thesis.
     """
-    power = ca.sum1(tau * dq)
+    return absolute_value(builder, structure, name, ca.sum1(tau * dq))
+
+
+def absolute_value(builder: NLPBuilder, structure: StepStructure, name: str, power: ca.SX) -> ca.SX:
+    """|P| of a 1 × n row of powers as the objective sees it, by ``structure.options.absolute_value`` (see
+    :func:`absolute_power`)."""
     if structure.options.absolute_value == "smooth":
         return smooth_abs(power, structure.options.smoothing_eps)
     n = power.numel()

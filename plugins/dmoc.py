@@ -26,6 +26,7 @@ from gaitbench.transcription import (
     StepSymbols,
     Transcription,
     absolute_power,
+    absolute_value,
     cubic_hermite,
     locate_interval,
     sample_seed,
@@ -34,8 +35,17 @@ from gaitbench.transcription import (
 TIME_STEP = PARAMETER_LAYOUT["time_step"]
 
 
+QUADRATURES = ("simpson", "midpoint")
+
+
 class DiscreteMechanics(Transcription):
     name = "dmoc"
+
+    def __init__(self, quadrature: str = "simpson") -> None:
+        super().__init__()
+        if quadrature not in QUADRATURES:
+            raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(QUADRATURES)}")
+        self.quadrature = quadrature
 
     def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
                    model: BipedFunctions) -> Discretization:
@@ -63,7 +73,12 @@ class DiscreteMechanics(Transcription):
         # DMOC velocities live on the intervals (App. A §3.2); the thesis bounds these finite differences.
         v = (q[:, 1:] - q[:, :-1]) / h
         builder.constrain("velocity_bounds", v, -limits.dq_max, limits.dq_max)
-        hip_energy = h * ca.sum2(absolute_power(builder, structure, "power_intervals", tau, v))
+        if self.quadrature == "midpoint":
+            hip_energy = h * ca.sum2(absolute_power(builder, structure, "power_intervals", tau, v))
+        else:
+            hip_energy = h / 6 * ca.sum2(ca.mtimes(ca.DM([[1, 4, 1]]),
+                                                   _interval_absolute_powers(builder, structure, symbols, model,
+                                                                             q, tau)))
 
         # Node velocities M(q_k)⁻¹ p_k⁺ (App. A §2.4); the boundary velocities themselves at the two ends.
         interior = _velocity(model).map(n - 2)(q[:, 1:-1], arriving[:, 1:-1], ca.repmat(robot, 1, n - 2))
@@ -118,6 +133,46 @@ def momentum_balance(model: BipedFunctions) -> ca.Function:
     balance = (arriving + h / 2 * tau_before) - (-leaving - h / 2 * tau_after)
     return ca.Function("dmoc_momentum_balance", [ca.vertcat(q_before, q_node, q_after, tau_before, tau_after), p],
                        [balance])
+
+
+def interval_powers(model: BipedFunctions) -> ca.Function:
+    """The hip power τ_k·q̇ of one interval's interpolant at its start, midpoint and end, from (q_k, q_k+1, τ_k).
+
+    The end velocities are the interval's own forced discrete Legendre transforms, M(q_k)⁻¹ (−D1 L_d − (h/2) τ_k)
+    and M(q_k+1)⁻¹ (D2 L_d + (h/2) τ_k), which the discrete Euler–Lagrange equations make the node velocities;
+    the midpoint velocity is that of the cubic Hermite positions through them, (3/2) v_k − (q̇_k + q̇_k+1)/4.
+    The power is quadratic on the interval, so Simpson's rule on these three integrates it exactly: its signed
+    sum is the interval's work h τ_k·v_k, and |P| is integrated exactly wherever P keeps its sign.
+    """
+    q_a, q_b, tau = ca.SX.sym("q_a", 2), ca.SX.sym("q_b", 2), ca.SX.sym("tau", 2)
+    p = ca.SX.sym("p", N_STEP_PARAMETERS)
+    robot, h = p[PARAMETER_LAYOUT["robot"]], p[TIME_STEP]
+    d1, d2 = _discrete_lagrangian_slopes(model)(q_a, q_b, h, robot)
+    dq_start = ca.solve(model.mass(q_a, robot), -d1 - h / 2 * tau)
+    dq_end = ca.solve(model.mass(q_b, robot), d2 + h / 2 * tau)
+    dq_mid = 1.5 * (q_b - q_a) / h - (dq_start + dq_end) / 4
+    powers = ca.vertcat(ca.dot(tau, dq_start), ca.dot(tau, dq_mid), ca.dot(tau, dq_end))
+    return ca.Function("dmoc_interval_powers", [ca.vertcat(q_a, q_b, tau), p], [powers])
+
+
+def _interval_absolute_powers(builder: NLPBuilder, structure: StepStructure, symbols: StepSymbols,
+                              model: BipedFunctions, q: ca.SX, tau: ca.SX) -> ca.SX:
+    """|P| at each interval's start, midpoint and end (3 × (N − 1)), as ``absolute_power`` forms it."""
+    n_intervals = tau.shape[1]
+    powers = interval_powers(model)
+    z = [q[:, :-1], q[:, 1:], tau]
+    if structure.options.absolute_value != "slack":
+        values = powers.map(n_intervals)(ca.vertcat(*z), ca.repmat(symbols.vector, 1, n_intervals))
+        return ca.vertcat(*[absolute_value(builder, structure, f"power_intervals_{i}", values[i, :])
+                            for i in range(3)])
+    # The split of absolute_power, declared per interval so that the NLP gets its per-interval Hessian.
+    positive = builder.variable("power_intervals_positive", (3, n_intervals), 0.0, np.inf)
+    negative = builder.variable("power_intervals_negative", (3, n_intervals), 0.0, np.inf)
+    z_split, p = ca.SX.sym("z", 12), ca.SX.sym("p", N_STEP_PARAMETERS)
+    split = ca.Function("dmoc_interval_power_split", [z_split, p],
+                        [powers(z_split[:6], p) - z_split[6:9] + z_split[9:12]])
+    builder.constrain_intervals(["power_intervals_split"], split, [*z, positive, negative], symbols.vector)
+    return positive + negative
 
 
 def _momentum(model: BipedFunctions) -> ca.Function:
