@@ -5,12 +5,14 @@ applied to ẋ = f(x, u), second order. Controls are piecewise linear. The inter
 *Practical Methods for Optimal Control*): per interval the state is the quadratic whose slope is linear between
 f_k and f_{k+1}, so it passes through both nodes at a solution.
 
-The hip energy is Simpson's rule on each interval with the interpolant's own midpoint, q̇_mid = (q̇_k + q̇_k+1)/2
-+ (h/8)(q̈_k − q̈_k+1) and τ_mid = (τ_k + τ_k+1)/2 (the Hermite midpoint, which the quadratic passes through at a
-solution). The interpolant's power is cubic on an interval, so this integrates it exactly, and |P| exactly
-wherever P keeps its sign. The trapezoid rule on the nodes alone, which the defects suggest, sees nothing between
-them, and the net-power cost let the optimizer make P vanish at every node while the trajectory it describes
-costs hundreds of joules (forward, N = 20: objective 0, verified 690 J on step 1; docs/deviations.md).
+The hip energy integrates the interpolant's own power by Boole's rule on each interval: at the nodes and at ¼, ½
+and ¾ of the interval (the quadratic states there, the linear torques), weights 7, 32, 12, 32, 7 over 90. The power
+(quadratic velocities times linear torques) is a cubic on an interval, which the rule integrates exactly, so the
+objective is the energy verification measures wherever the power keeps its sign. ``quadrature="trapezoid"`` is the
+trapezoid rule on the nodes alone, the quadrature the defects suggest: it sees nothing between the nodes, and the
+net-power optimizer made the power vanish at every node while the trajectory cost hundreds of joules (forward,
+N = 20: objective 0, verified 690 J on step 1). ``quadrature="simpson"`` adds the interpolant's midpoint, which
+still leaves a cubic that vanishes at its three points unseen (docs/convergence.md).
 """
 
 from __future__ import annotations
@@ -19,27 +21,37 @@ import casadi as ca
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.gait_problem import PARAMETER_LAYOUT, StepStructure
+from gaitbench.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepStructure
 from gaitbench.mechanics import BipedFunctions
 from gaitbench.nlp import NLPBuilder
 from gaitbench.transcription import (
+    QUADRATURE_RULES,
     Discretization,
     Interpolant,
     StepSymbols,
     Transcription,
     absolute_power,
     collocation_variables,
+    interval_absolute_powers,
     locate_interval,
     sample_seed,
     state_derivative,
 )
-from plugins.hermite_simpson import midpoint_power_split
 
 ROBOT, TIME_STEP = PARAMETER_LAYOUT["robot"], PARAMETER_LAYOUT["time_step"]
 
 
+QUADRATURES = ("boole", "simpson", "trapezoid")
+
+
 class Trapezoidal(Transcription):
     name = "trapezoidal"
+
+    def __init__(self, quadrature: str = "boole") -> None:
+        super().__init__()
+        if quadrature not in QUADRATURES:
+            raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(QUADRATURES)}")
+        self.quadrature = quadrature
 
     def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
                    model: BipedFunctions) -> Discretization:
@@ -52,19 +64,13 @@ class Trapezoidal(Transcription):
         builder.constrain("initial_state", states[:, 0] - symbols.initial_state)
 
         power_nodes = absolute_power(builder, structure, "power_nodes", controls, states[2:4, :])
-        if structure.options.absolute_value == "slack":
-            # |P| at the interpolant's midpoints, split as in absolute_power and declared per interval.
-            positive = builder.variable("power_midpoints_positive", (1, n - 1), 0.0, np.inf)
-            negative = builder.variable("power_midpoints_negative", (1, n - 1), 0.0, np.inf)
+        rule = QUADRATURE_RULES[self.quadrature]
+        hip_energy = h * rule.end_weight * ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:])
+        if rule.points:
             interval = [states[:, :-1], states[:, 1:], controls[:, :-1], controls[:, 1:]]
-            builder.constrain_intervals(["power_midpoints_split"], midpoint_power_split(dynamics),
-                                        [*interval, positive, negative], symbols.vector)
-            power_mid = positive + negative
-        else:
-            mid_states = 0.5 * (states[:, :-1] + states[:, 1:]) + h / 8 * (slopes[:, :-1] - slopes[:, 1:])
-            mid_controls = 0.5 * (controls[:, :-1] + controls[:, 1:])
-            power_mid = absolute_power(builder, structure, "power_midpoints", mid_controls, mid_states[2:4, :])
-        hip_energy = h / 6 * (ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:]) + 4 * ca.sum2(power_mid))
+            interior = interval_absolute_powers(builder, structure, "power_interior",
+                                                interior_powers(dynamics, rule.points), interval, symbols.vector)
+            hip_energy += h * ca.sum2(ca.mtimes(ca.DM(rule.weights).T, interior))
 
         def unpack(blocks):
             return (np.reshape(blocks["states"], (4, n), order="F"),
@@ -86,6 +92,22 @@ class Trapezoidal(Transcription):
         return Discretization(positions=states[:2, :], velocities=states[2:4, :],
                               accelerations=[slopes[2:4, k] for k in range(n)], hip_energy=hip_energy,
                               decode=decode, interpolant=interpolant, guess=guess)
+
+
+def interior_powers(dynamics: ca.Function, points: tuple[float, ...]) -> ca.Function:
+    """The hip power of one interval's interpolant (below) at the fractions ``points`` of the interval, as a
+    function of (x_k, x_k+1, u_k, u_k+1) and p."""
+    left, right = ca.SX.sym("x_k", 4), ca.SX.sym("x_k1", 4)
+    u_left, u_right = ca.SX.sym("u_k", 2), ca.SX.sym("u_k1", 2)
+    p = ca.SX.sym("p", N_STEP_PARAMETERS)
+    robot, h = p[ROBOT], p[TIME_STEP]
+    f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
+    powers = []
+    for s in points:
+        dq = left[2:4] + f_left[2:4] * s * h + s**2 * h / 2 * (f_right[2:4] - f_left[2:4])
+        powers.append(ca.dot((1 - s) * u_left + s * u_right, dq))
+    return ca.Function("trapezoidal_interior_powers", [ca.vertcat(left, right, u_left, u_right), p],
+                       [ca.vertcat(*powers)])
 
 
 def trapezoidal_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:
