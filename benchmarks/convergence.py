@@ -39,10 +39,12 @@ HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "convergence.json"
 SUMMARY = HERE / "results" / "convergence.md"
 NODES = (10, 20, 40, 80, 160)
-TRANSCRIPTIONS = ("hermite-simpson", "trapezoidal", "dmoc", "hermite-simpson:quadrature=simpson",
-                  "trapezoidal:quadrature=trapezoid", "dmoc:quadrature=midpoint")
-"""The three transcriptions with their default cost quadrature (Boole's rule on each interval's interpolant power),
-then each with its former rule, the "before" of docs/convergence.md."""
+TRANSCRIPTIONS = ("hermite-simpson", "trapezoidal", "dmoc", "hermite-simpson:quadrature=boole",
+                  "trapezoidal:quadrature=simpson", "dmoc:quadrature=simpson", "trapezoidal:quadrature=trapezoid",
+                  "dmoc:quadrature=midpoint")
+"""The three transcriptions with their default cost quadrature, then the alternative rules of docs/convergence.md:
+Boole for Hermite–Simpson, Simpson for the other two, and the former rules of trapezoidal and DMOC (the
+"before")."""
 EXPERIMENT = "forward"
 STEPS = 3
 

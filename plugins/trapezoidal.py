@@ -12,7 +12,9 @@ objective is the energy verification measures wherever the power keeps its sign.
 trapezoid rule on the nodes alone, the quadrature the defects suggest: it sees nothing between the nodes, and the
 net-power optimizer made the power vanish at every node while the trajectory cost hundreds of joules (forward,
 N = 20: objective 0, verified 690 J on step 1). ``quadrature="simpson"`` adds the interpolant's midpoint, which
-still leaves a cubic that vanishes at its three points unseen (docs/convergence.md).
+still leaves a cubic that vanishes at its three points unseen: gaps of up to 5 % on the forward walk and 50 % on the
+upward slope, against 3 % and 12 % with Boole, with which IPOPT solves about as many steps (38 against 40 of 52 in
+eight forward and upward-slope walks, N = 20 … 160; docs/convergence.md).
 """
 
 from __future__ import annotations

@@ -23,8 +23,7 @@ def example_solver():
 
 
 def test_the_example_reaches_ipopts_optimum_on_a_gait_step(example_solver):
-    """On the thesis's Simpson rule: on the Boole step trust-constr exhausts its function evaluations."""
-    problem = gait_step("hermite-simpson", 20, quadrature="simpson")
+    problem = gait_step("hermite-simpson", 20)
     result = example_solver().solve(problem.nlp, problem.parameters, problem.x0)
     assert result.status is SolverStatus.CONVERGED, result.message
     assert result.objective == pytest.approx(problem.f_star, rel=1e-4)
