@@ -155,6 +155,34 @@ class TranscribedStep:
     structure: StepStructure
     nlp: NLP
     discretization: Discretization
+    cost_of_transport: ca.Function | None = None
+    """(x, p) -> the objective without its torque regularization: the transcription's hip-energy quadrature plus
+    the push-off energy, over M g D."""
+
+    def objective_cot(self, x: np.ndarray, data: StepData) -> float:
+        """The cost of transport the NLP's objective assigns to ``x``, without the torque regularization: what
+        verification's COT is compared with.
+
+        The |P| slacks are settled first (:meth:`settle_slacks`), so that any ``x`` (a patched trajectory too,
+        whose slacks were never optimized) is valued with exact |P| by the transcription's own quadrature; at an
+        optimum this changes nothing.
+        """
+        p = data.parameter_vector()
+        return float(self.cost_of_transport(self.settle_slacks(x, p), p))
+
+    def settle_slacks(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """``x`` with each |P| slack pair of :func:`absolute_value` (blocks ``name_positive``, ``name_negative``
+        with the constraint ``name_split``) set to the positive and negative parts of the power it stands for."""
+        x = np.array(x, dtype=float)
+        g = self.nlp.constraint_values(x, p)
+        variables = self.nlp.variable_blocks
+        for name, rows in self.nlp.constraint_blocks.items():
+            stem = name.removesuffix("_split")
+            if stem != name and f"{stem}_positive" in variables and f"{stem}_negative" in variables:
+                positive, negative = variables[f"{stem}_positive"], variables[f"{stem}_negative"]
+                power = g[rows] + x[positive] - x[negative]
+                x[positive], x[negative] = np.maximum(power, 0.0), np.maximum(-power, 0.0)
+        return x
 
     def initial_guess(self, data: StepData, seed: Seed | None = None) -> np.ndarray:
         """The variables sampled from ``seed``; by default the blended guess of DECISIONS §7, the same for every
@@ -225,14 +253,13 @@ class Transcription(ABC):
         discretization = self.discretize(structure, builder, symbols, swing_model)
         push_off_energy = _add_step_constraints(structure, builder, symbols, discretization)
         energy = discretization.hip_energy + push_off_energy
+        weight = symbols.total_mass * symbols.gravity * symbols.chord
         rho = structure.options.torque_regularization
-        if rho:
-            torques = builder.variables("torques")
-            energy += rho * symbols.time_step * ca.sumsqr(torques)
-        cot = energy / (symbols.total_mass * symbols.gravity * symbols.chord)
-        return TranscribedStep(
-            structure=structure, nlp=builder.build(symbols.vector, cot), discretization=discretization
-        )
+        regularization = rho * symbols.time_step * ca.sumsqr(builder.variables("torques")) if rho else 0
+        nlp = builder.build(symbols.vector, (energy + regularization) / weight)
+        cost_of_transport = ca.Function("objective_cot", [nlp.x, symbols.vector], [energy / weight])
+        return TranscribedStep(structure=structure, nlp=nlp, discretization=discretization,
+                               cost_of_transport=cost_of_transport)
 
 
 def _configuration(transcription: Transcription) -> dict:
@@ -324,13 +351,62 @@ def absolute_power(builder: NLPBuilder, structure: StepStructure, name: str, tau
     smooth for the solver. ``smooth``: the thesis's √(P² + ε²) (DECISIONS §5), whose kink of curvature 1/ε
     makes interior-point solvers crawl; kept to reproduce the thesis.
     """
-    power = ca.sum1(tau * dq)
+    return absolute_value(builder, structure, name, ca.sum1(tau * dq))
+
+
+def absolute_value(builder: NLPBuilder, structure: StepStructure, name: str, power: ca.SX) -> ca.SX:
+    """|P| of a 1 × n row of powers as the objective sees it, by ``structure.options.absolute_value`` (see
+    :func:`absolute_power`)."""
     if structure.options.absolute_value == "smooth":
         return smooth_abs(power, structure.options.smoothing_eps)
     n = power.numel()
     positive = builder.variable(f"{name}_positive", (1, n), 0.0, np.inf)
     negative = builder.variable(f"{name}_negative", (1, n), 0.0, np.inf)
     builder.constrain(f"{name}_split", power - positive + negative)
+    return positive + negative
+
+
+@dataclass(frozen=True)
+class QuadratureRule:
+    """An interpolatory rule on one interval, as fractions of it: the weight of each of its two ends and its
+    interior points with their weights (the weights sum to 1)."""
+
+    end_weight: float
+    points: tuple[float, ...]
+    weights: tuple[float, ...]
+
+
+QUADRATURE_RULES = {
+    "trapezoid": QuadratureRule(1 / 2, (), ()),
+    "simpson": QuadratureRule(1 / 6, (1 / 2,), (4 / 6,)),
+    "boole": QuadratureRule(7 / 90, (1 / 4, 1 / 2, 3 / 4), (32 / 90, 12 / 90, 32 / 90)),
+}
+"""Rules for the hip energy ∫|τ·q̇| dt of one interval, applied to the power of the transcription's own interpolant.
+
+``boole`` (the default of every transcription) is exact for polynomials of degree 5. Each interpolant's power is a
+polynomial on an interval (DMOC: quadratic, trapezoidal: cubic, Hermite–Simpson: quartic), so Boole's rule is its
+exact energy wherever the power keeps its sign, and with five points no nonzero power of those degrees vanishes at
+all of them. Rules with fewer points than that let the net-power optimizer put the power's zeros on the points
+(docs/deviations.md, "Hip-energy quadrature"); where the power changes sign inside an interval every rule is
+approximate, and Boole's is within 2.2 % for the sign change at the midpoint that zero net work on an interval
+makes (a linear power through zero there)."""
+
+
+def interval_absolute_powers(builder: NLPBuilder, structure: StepStructure, name: str, powers: ca.Function,
+                             variables: list[ca.SX], parameters: ca.SX) -> ca.SX:
+    """|P| of ``powers(z_k, p)`` (m × 1 per interval; z_k stacks column k of each of ``variables``) as an
+    m × M matrix, by the split or smoothing of :func:`absolute_value`. The split is declared per interval, so that
+    the NLP gets its per-interval Hessian."""
+    n_intervals, m = variables[0].shape[1], powers.size1_out(0)
+    if structure.options.absolute_value != "slack":
+        values = powers.map(n_intervals)(ca.vertcat(*variables), ca.repmat(parameters, 1, n_intervals))
+        return ca.vertcat(*[absolute_value(builder, structure, f"{name}_{i}", values[i, :]) for i in range(m)])
+    positive = builder.variable(f"{name}_positive", (m, n_intervals), 0.0, np.inf)
+    negative = builder.variable(f"{name}_negative", (m, n_intervals), 0.0, np.inf)
+    n_z = powers.size1_in(0)
+    z, p = ca.SX.sym("z", n_z + 2 * m), ca.SX.sym("p", powers.size1_in(1))
+    split = ca.Function(f"{name}_split", [z, p], [powers(z[:n_z], p) - z[n_z:n_z + m] + z[n_z + m:]])
+    builder.constrain_intervals([f"{name}_split"], split, [*variables, positive, negative], parameters)
     return positive + negative
 
 

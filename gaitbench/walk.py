@@ -80,6 +80,9 @@ class StepOutcome:
             "resim_max_error": check.resim_max_error if check else None,
             "hip_energy": check.hip_energy if check else None,
             "push_off_energy": check.push_off_energy if check else None,
+            "objective_cot": check.objective_cot if check else None,
+            "objective_gap": check.objective_gap if check else None,
+            "objective_agrees": check.objective_agrees if check else None,
             "push_off_impulse": self.trajectory.push_off if self.trajectory else None,
             **({"details": self.details} if self.details else {}),
         }

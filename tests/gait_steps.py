@@ -18,22 +18,30 @@ from plugins.ipopt import Ipopt
 
 TIE_BREAK = 1e-3
 """Weight of ∫τ² next to the cost of transport: enough to make the optimum unique, small against the COT."""
+FORMER_QUADRATURE = {"hermite-simpson": "simpson", "dmoc": "midpoint", "trapezoidal": "trapezoid"}
+"""The hip-energy rules the transcriptions had before Boole's rule became the default of DMOC and trapezoidal
+collocation (Hermite–Simpson's is unchanged). Tests whose numbers were measured on those NLPs (iteration counts, a
+line search, the size of a translation) ask for them: the Boole NLPs have five |P| splits per interval, degenerate
+together on intervals without torque, and some solvers find them harder."""
 
 
 @cache
 def gait_step(transcription: str, n_nodes: int, experiment_name: str = "upward-slope",
-              phase: str = "second") -> ReferenceProblem:
+              phase: str = "second", quadrature: str | None = None) -> ReferenceProblem:
+    """``quadrature``: the transcription's hip-energy rule (its default unless given)."""
     registry = load_registry()
     experiment = registry.create("experiment", experiment_name)
     geometry = experiment.terrain.steps[0]
     data = StepData(experiment.robot, experiment.stance_leg(1), experiment.initial_state[[0, 1, 4, 5]], geometry.D,
                     geometry.theta, experiment.time_step(n_nodes))
     options = ProblemOptions(limits=experiment.limits, torque_regularization=TIE_BREAK)
-    built = registry.create("transcription", transcription).build(StepStructure(phase, n_nodes, options))
+    transcriber = registry.create("transcription", transcription, **({"quadrature": quadrature} if quadrature else {}))
+    built = transcriber.build(StepStructure(phase, n_nodes, options))
     parameters, x0 = data.parameter_vector(), built.initial_guess(data)
     reference = Ipopt().solve(built.nlp, parameters, x0)
     if not reference.converged:
         raise RuntimeError(f"IPOPT does not solve {experiment_name} step 1 ({transcription}, N={n_nodes}): "
                            f"{reference.message}")
-    return ReferenceProblem(f"{experiment_name}-step-{transcription}-{n_nodes}", built.nlp, parameters, x0,
+    label = f"{transcription}-{quadrature}" if quadrature else transcription
+    return ReferenceProblem(f"{experiment_name}-step-{label}-{n_nodes}", built.nlp, parameters, x0,
                             reference.objective, reference.x)

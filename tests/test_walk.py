@@ -8,9 +8,8 @@ from click.testing import CliRunner
 
 from gaitbench.cli import main
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
-from gaitbench.mechanics import BipedModel, biped_functions
+from gaitbench.mechanics import BipedModel
 from gaitbench.plugins import load_registry
-from gaitbench.transcription import state_derivative
 from gaitbench.verify import verify_step
 from gaitbench.walk import WalkProblem, next_step_state
 from plugins.hermite_simpson import HermiteSimpson
@@ -167,15 +166,7 @@ def test_sectional_problem_from_a_node_of_the_complete_optimum_is_no_worse_than_
 def tail_point(built, q, dq, tau, p):
     """A Hermite–Simpson NLP point from nodal q, q̇, τ (leg order = role order on step 1), |power| slacks exact."""
     states, torques = np.vstack([q.T, dq.T]), tau.T
-    n, h = states.shape[1], p[14]
-    slopes = np.asarray(state_derivative(biped_functions(2, 1)).map(n)(states, torques, np.repeat(p[:8, None], n, 1)))
-    mid_states = 0.5 * (states[:, :-1] + states[:, 1:]) + h / 8 * (slopes[:, :-1] - slopes[:, 1:])
-    mid_torques = 0.5 * (torques[:, :-1] + torques[:, 1:])
-    values = {"states": states.flatten(order="F"), "torques": torques.flatten(order="F")}
-    for name, power in (("power_nodes", np.sum(torques * states[2:], axis=0)),
-                        ("power_midpoints", np.sum(mid_torques * mid_states[2:], axis=0))):
-        values[f"{name}_positive"], values[f"{name}_negative"] = np.maximum(power, 0), np.maximum(-power, 0)
     x = np.zeros(built.nlp.n_variables)
-    for name, value in values.items():
-        x[built.nlp.variable_blocks[name]] = value
-    return x
+    x[built.nlp.variable_blocks["states"]] = states.flatten(order="F")
+    x[built.nlp.variable_blocks["torques"]] = torques.flatten(order="F")
+    return built.settle_slacks(x, p)
