@@ -69,7 +69,10 @@ def test_translation_equals_casadi_on_a_gait_step(lift_threshold: int):
     points = problem.x_star + 0.05 * np.random.default_rng(1).normal(size=(3, problem.x0.size))
     _assert_translation_is_exact(problem.nlp, points, problem.parameters, lift_threshold)
     if lift_threshold:
-        assert 0 < len(translate(problem.nlp, lift_threshold).lifted) < problem.nlp.n_variables
+        # Some shared subexpressions are lifted, not all: the heel-strike solve behind the lift-off row alone
+        # shares hundreds of small ones, which stay named expressions.
+        lifted = len(translate(problem.nlp, lift_threshold).lifted)
+        assert 0 < lifted < len(translate(problem.nlp, 1).lifted)
 
 
 def test_translation_maps_piecewise_and_logical_operations_exactly():
