@@ -28,8 +28,6 @@ _EQUALITY_QP = ("the thesis's FSQP takes equality-QP steps on a near-active set;
                 "far from f*")
 KNOWN_SHORTFALLS: dict[tuple[str, str], str] = {
     ("sqp", "gait-dmoc-20"): "converges (KKT residual ~1e-9) to another local minimum, |f - f*|/f* = 6.2e-2",
-    ("pyomo", "gait-dmoc-20"): ("converges (ripopt: Optimal Solution Found) to another local minimum, f = 1.7634 "
-                                "against IPOPT's 1.6593; SQP and scipy's trust-constr end there too"),
     ("sqp", "gait-hermite-simpson-20"): "converges to another local minimum, |f - f*|/f* = 4.8e-3",
     ("fsqp", "gait-dmoc-20"): _EQUALITY_QP,
     ("fsqp", "gait-hermite-simpson-20"): _EQUALITY_QP,

@@ -275,14 +275,14 @@ def test_gait_step_reaches_ipopts_optimum_from_near_it(transcription: str, backe
 
 
 def test_gait_step_from_the_transcriptions_guess_ends_at_another_local_minimum():
-    """From the standard guess (zero torques, violation 16) the SQP converges, but to a different KKT point than
-    IPOPT's, 1.9 % dearer: the gait NLPs are not convex, and CasADi's own SQP lands elsewhere too. (Measured on
-    DMOC's former midpoint rule; on its Boole step daqp's QPs fail.)"""
+    """From the standard guess (zero torques) the SQP converges, but to a different KKT point than IPOPT's, 6.2 %
+    dearer (1.7615 against 1.6593): the gait NLPs are not convex; ripopt and scipy's trust-constr land at 1.7634.
+    (Measured on DMOC's former midpoint rule; on its Boole step daqp's QPs fail.)"""
     problem = gait_step("dmoc", 20, quadrature="midpoint")
     result = _solve(problem, qp_solver="daqp")
     assert result.status is SolverStatus.CONVERGED, result.message
     assert result.constraint_violation <= 1e-8
-    assert problem.f_star < result.objective < 1.05 * problem.f_star
+    assert problem.f_star < result.objective < 1.08 * problem.f_star
 
 
 def test_registered_as_a_solver_plugin(tmp_path: Path):
