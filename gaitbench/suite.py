@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from gaitbench.case import Case, TrackingStage
+from gaitbench.options import OptionError, check_options
 from gaitbench.plugins import (
     PluginConflictError,
     PluginDirectoryError,
@@ -177,6 +178,12 @@ class _Builder:
             if identity in self.built:
                 continue
             try:
+                check_options(self.registry.get(kind, entry.name).factory, variant.choice.options, kind=kind)
+            except OptionError as exc:
+                head = exc.option.split(".")[0]
+                where = f"{entry.key}.{'grid' if head in entry.grid else 'options'}.{exc.option}"
+                raise SuiteError(self.path, where, f"{kind} {entry.name!r}: {exc.message}") from None
+            try:
                 self.built[identity] = self.registry.create(kind, variant.choice.name, **variant.choice.options)
             except (TypeError, ValueError) as exc:
                 options = ", ".join(f"{k}={v!r}" for k, v in variant.choice.options.items()) or "no options"
@@ -215,17 +222,25 @@ def _methods(path: Path, spec: SuiteSpec, builder: _Builder) -> list[Method]:
 
 
 def _check_tracking(path: Path, spec: SuiteSpec, registry: PluginRegistry) -> None:
-    """Tracking plugin names must exist, for each kind of which any plugin is registered (none yet: issue 8)."""
+    """Tracking plugin names must exist, for each kind of which any plugin is registered, and the stage's options
+    must be ones the tracking accepts (checked before any walk is solved, rather than after each one)."""
     if spec.tracking is None:
         return
-    for kind in ("controller", "observer", "disturbance"):
-        name = getattr(spec.tracking, kind)
-        if not registry.names(kind):
-            continue
+    kinds = [kind for kind in ("controller", "observer", "disturbance") if registry.names(kind)]
+    for kind in kinds:
         try:
-            registry.get(kind, name)
+            registry.get(kind, getattr(spec.tracking, kind))
         except (UnknownPluginError, PluginConflictError) as exc:
             raise SuiteError(path, f"[tracking].{kind}", str(exc)) from None
+    if len(kinds) < 3:
+        return  # no tracking plugins to check the options against (a registry without them)
+    from gaitbench.tracking import check_tracking_options
+
+    try:
+        check_tracking_options(spec.tracking.options, registry, spec.tracking.controller, spec.tracking.observer,
+                               spec.tracking.disturbance)
+    except OptionError as exc:
+        raise SuiteError(path, f"[tracking].options.{exc.option}", exc.message) from None
 
 
 def _plugin_dirs(path: Path, spec: SuiteSpec) -> tuple[str, ...]:
