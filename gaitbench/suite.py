@@ -22,6 +22,7 @@ from gaitbench.options import OptionError, check_options
 from gaitbench.plugins import (
     PluginConflictError,
     PluginDirectoryError,
+    PluginProblem,
     PluginRegistry,
     UnknownPluginError,
     load_registry,
@@ -53,6 +54,9 @@ class Suite:
     cases: list[Case]
     methods: tuple[str, ...] = ()
     """The method labels, in file order."""
+    plugin_problems: tuple[PluginProblem, ...] = ()
+    """Plugins that failed to load (or names registered twice) when the suite was loaded: a run shows them and
+    records them in its provenance, since a missing plugin changes what can run."""
 
     def with_methods(self, labels: Iterable[str]) -> Suite:
         """This suite with only the cases of the methods ``labels``: a long sweep run one part at a time (the
@@ -98,7 +102,7 @@ def load_suite(path: str | Path, registry: PluginRegistry | None = None) -> Suit
         name=spec.name, description=spec.description, path=path, text=text, output=spec.output,
         repetitions=spec.repetitions, time_limit_s=spec.time_limit_s, steps=spec.steps, plugin_dirs=plugin_dirs,
         problem_options=dict(spec.problem_options), tracking=spec.tracking, cases=cases,
-        methods=tuple(method.label for method in methods),
+        methods=tuple(method.label for method in methods), plugin_problems=tuple(registry.problems),
     )
 
 
