@@ -207,6 +207,18 @@ def _create(ctx: click.Context, kind: str, name: str, *args, **options):
                                  param_hint=OPTION_OF_KIND.get(kind)) from None
 
 
+def _check_memory(transcription: str, strategy: str, n_nodes: int, steps: int) -> None:
+    """A usage error when the walk cannot fit in memory (:mod:`gaitbench.memory`), before anything is built."""
+    from gaitbench.memory import memory_problem
+
+    try:
+        problem = memory_problem(transcription, strategy, n_nodes, steps, what=f"{strategy} {transcription}")
+    except ValueError as exc:  # a GAITBENCH_MEMORY_LIMIT that is not a size
+        raise click.UsageError(str(exc)) from None
+    if problem is not None:
+        raise click.BadParameter(problem, param_hint="--N")
+
+
 PROBLEM_OPTION_HINT = "'-p' / '--problem-option'"
 
 
@@ -358,6 +370,7 @@ def solve(
     strategy = _create(ctx, "strategy", strategy_name, **_parse_options(strategy_options, "--strategy-option"))
     if steps is not None and steps > experiment.n_steps:
         raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
+    _check_memory(transcription, strategy_name, n_nodes, steps or experiment.n_steps)
     options = replace(ProblemOptions(limits=experiment.limits), **overrides)
     console = Console()
     total = steps or experiment.n_steps

@@ -67,6 +67,12 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             raise click.BadParameter(str(error), param_hint="--method") from None
     if scheduler:
         executor = "dask"
+    if executor != "inprocess" and not scheduler:  # the workers share this machine's memory
+        from gaitbench.memory import concurrent_problem
+
+        problem = concurrent_problem(list(suite.memory_mb.values()), jobs)
+        if problem is not None:
+            raise click.BadParameter(problem, param_hint="--jobs")
     store_dir = store_dir or suite.output
     with _CaseProgress(console) as progress:
         try:

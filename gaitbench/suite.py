@@ -54,6 +54,9 @@ class Suite:
     cases: list[Case]
     methods: tuple[str, ...] = ()
     """The method labels, in file order."""
+    memory_mb: dict[str, float] = dataclasses.field(default_factory=dict)
+    """Each case's estimated peak memory by case key (:mod:`gaitbench.memory`), for a run to check what its workers
+    need together."""
     plugin_problems: tuple[PluginProblem, ...] = ()
     """Plugins that failed to load (or names registered twice) when the suite was loaded: a run shows them and
     records them in its provenance, since a missing plugin changes what can run."""
@@ -97,12 +100,13 @@ def load_suite(path: str | Path, registry: PluginRegistry | None = None) -> Suit
             registry = load_registry(plugin_dirs)
         except PluginDirectoryError as exc:
             raise SuiteError(path, "", str(exc)) from None
-    methods, cases = expand(path, spec, registry, plugin_dirs)
+    methods, cases, memory = _expand(path, spec, registry, plugin_dirs)
     return Suite(
         name=spec.name, description=spec.description, path=path, text=text, output=spec.output,
         repetitions=spec.repetitions, time_limit_s=spec.time_limit_s, steps=spec.steps, plugin_dirs=plugin_dirs,
         problem_options=dict(spec.problem_options), tracking=spec.tracking, cases=cases,
-        methods=tuple(method.label for method in methods), plugin_problems=tuple(registry.problems),
+        methods=tuple(method.label for method in methods), memory_mb=memory,
+        plugin_problems=tuple(registry.problems),
     )
 
 
@@ -110,8 +114,16 @@ def expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
            plugin_dirs: tuple[str, ...] = ()) -> tuple[list[Method], list[Case]]:
     """The suite's methods and its cases, in file order, exclusions dropped and duplicates merged.
 
-    Every plugin choice is built once with its options; the experiments also check ``[suite].steps``.
+    Every plugin choice is built once with its options; the experiments also check ``[suite].steps``, and every
+    case must fit in memory (:mod:`gaitbench.memory`).
     """
+    methods, cases, _ = _expand(path, spec, registry, plugin_dirs)
+    return methods, cases
+
+
+def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
+            plugin_dirs: tuple[str, ...]) -> tuple[list[Method], list[Case], dict[str, float]]:
+    """:func:`expand`, with each case's memory estimate by key."""
     builder = _Builder(path, registry)
     experiments = [variant for entry in spec.experiments for variant in builder.variants("experiment", entry)]
     if spec.steps is not None:
@@ -160,7 +172,32 @@ def expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
         if earlier is not case and earlier.method != case.method:
             raise SuiteError(path, "", f"methods {earlier.method!r} and {case.method!r} are the same "
                                        f"transcription, solver and strategy ({case.label}); remove one")
-    return methods, list(cases.values())
+    memory = _check_memory(path, list(cases.values()), builder)
+    return methods, list(cases.values()), memory
+
+
+def _check_memory(path: Path, cases: list[Case], builder: _Builder) -> dict[str, float]:
+    """Each case's memory estimate by key; a suite with a case that cannot fit (:mod:`gaitbench.memory`) is refused,
+    naming the largest N that fits. Cases are looked at largest N first, so the message is about the worst one."""
+    from gaitbench.memory import estimate_case_memory, memory_limit, memory_problem
+
+    try:
+        limit = memory_limit()
+    except ValueError as exc:
+        raise SuiteError(path, "", str(exc)) from None
+    estimates: dict[tuple, float] = {}
+    memory = {}
+    for case in sorted(cases, key=lambda case: -case.n_nodes):
+        experiment = builder.built[("experiment", json.dumps(case.experiment.as_dict(), sort_keys=True,
+                                                             default=str))]
+        shape = (case.transcription.name, case.strategy.name, case.n_nodes, case.steps or experiment.n_steps)
+        if shape not in estimates:
+            problem = memory_problem(*shape, what=repr(case.method), limit=limit)
+            if problem is not None:
+                raise SuiteError(path, "[sweep].N", problem)
+            estimates[shape] = estimate_case_memory(*shape).mb
+        memory[case.key] = estimates[shape]
+    return memory
 
 
 class _Builder:
