@@ -37,6 +37,7 @@ def measure(transcription: str, strategy: str, n_nodes: int, steps: int = 1) -> 
     import resource
 
     from gaitbench.plugins import load_registry
+    from gaitbench.provenance import git_commit
     from gaitbench.walk import WalkProblem
 
     registry = load_registry()
@@ -48,7 +49,7 @@ def measure(transcription: str, strategy: str, n_nodes: int, steps: int = 1) -> 
     walk = registry.create("strategy", strategy).solve(problem)
     return {"transcription": transcription, "strategy": strategy, "N": n_nodes, "steps": steps, "base_mb": base_mb,
             "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "end_mb": _resident_mb(),
-            "wall_s": time.perf_counter() - started, "complete": walk.complete}
+            "wall_s": time.perf_counter() - started, "complete": walk.complete, "commit": git_commit()}
 
 
 def _resident_mb() -> float:

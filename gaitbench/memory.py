@@ -44,31 +44,31 @@ class MemoryLaw:
         return text + (f" + {self.quadratic_mb:.3g} MB × N²" if self.quadratic_mb else "")
 
 
-LARGE_SOLVE_MB = {"hermite-simpson": 1.39e-5, "dmoc": 5.89e-5, "trapezoidal": 5.89e-5}
+LARGE_SOLVE_MB = {"hermite-simpson": 1.39e-5, "dmoc": 7.83e-6, "trapezoidal": 1.39e-5}
 """c of the c·n² that large step solves peak above the linear law fitted at N ≤ 400, by transcription: fitted to
-one-phase walks at N = 1000 and 2000 (HS), 1000, 1500, 2000 and 3000 (DMOC; at 3000 the peak after 29 minutes,
-when the run was stopped). Large solves take longer and retry more, and the peak is no longer the memory the walk
-ends with (DMOC N = 2000: 438 MB peak, 326 MB at the end). Trapezoidal was not measured there: DMOC's, the larger."""
+one-phase walks at N = 1000 and 2000 (HS) and 1000, 1500, 2000 (DMOC). Large solves take longer, and their peak is
+no longer the memory the walk ends with (HS N = 2000: 486 MB peak, 421 MB at the end). Trapezoidal was not measured
+there: HS's, the larger."""
 
 LAWS: dict[str, dict[str, MemoryLaw]] = {
     "one-phase": {
         "hermite-simpson": MemoryLaw(20.0, 0.129, LARGE_SOLVE_MB["hermite-simpson"]),
-        "dmoc": MemoryLaw(17.0, 0.073, LARGE_SOLVE_MB["dmoc"]),
+        "dmoc": MemoryLaw(17.9, 0.118, LARGE_SOLVE_MB["dmoc"]),
         "trapezoidal": MemoryLaw(11.7, 0.347, LARGE_SOLVE_MB["trapezoidal"]),
     },
     "warm-start": {
         "hermite-simpson": MemoryLaw(18.5, 0.256, LARGE_SOLVE_MB["hermite-simpson"]),
-        "dmoc": MemoryLaw(17.5, 0.148, LARGE_SOLVE_MB["dmoc"]),
+        "dmoc": MemoryLaw(19.2, 0.220, LARGE_SOLVE_MB["dmoc"]),
         "trapezoidal": MemoryLaw(12.4, 0.644, LARGE_SOLVE_MB["trapezoidal"]),
     },
     "decrease-and-conquer": {
         "hermite-simpson": MemoryLaw(17.2, 1.96, 0.0555),
-        "dmoc": MemoryLaw(11.3, 2.17, 0.0336),
+        "dmoc": MemoryLaw(12.2, 2.32, 0.0515),
         "trapezoidal": MemoryLaw(16.6, 1.85, 0.153),
     },
     "whole-walk": {
         "hermite-simpson": MemoryLaw(9.1, 2.15, LARGE_SOLVE_MB["hermite-simpson"]),
-        "dmoc": MemoryLaw(18.9, 0.324, LARGE_SOLVE_MB["dmoc"]),
+        "dmoc": MemoryLaw(12.5, 1.05, LARGE_SOLVE_MB["dmoc"]),
         "trapezoidal": MemoryLaw(16.6, 0.255, LARGE_SOLVE_MB["trapezoidal"]),
     },
 }
@@ -77,9 +77,9 @@ whole-walk). a and b are fitted by least squares (``benchmarks/memory.py --fit``
 walks of the forward experiment with IPOPT, 1 step (whole-walk: 2, 4 or 8): one-phase and warm-start at N = 50, 100,
 200, 400, whole-walk at N·steps = 100, 200, 400, 800 (residuals within 6 %), with :data:`LARGE_SOLVE_MB` as c;
 decrease-and-conquer's a, b, c at N = 20, 40, 60, 80 (residuals within 1.1 %; checked at N = 100, within 1 %), its
-quadratic term being its N−3 sectional NLPs. Source: the rows of ``benchmarks/results/memory.jsonl`` (gaitbench at
-the commit that added this module, CasADi 3.8.2 with its IPOPT 3.14 and MUMPS, Linux x86-64), tabled in
-docs/performance.md, "Memory"."""
+quadratic term being its N−3 sectional NLPs. Source: the rows of ``benchmarks/results/memory.jsonl``, each with the
+gaitbench commit it was measured at (HS and trapezoidal at ff1d38c, DMOC after its cost rule changed; CasADi 3.8.2
+with its IPOPT 3.14 and MUMPS, Linux x86-64), tabled in docs/performance.md, "Memory"."""
 
 WHOLE_WALK = "whole-walk"
 """The strategy whose one NLP chains every step, so that its size is N·steps."""
