@@ -6,7 +6,8 @@ Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/memory.py [TRANSCRIPT
 Each measurement is a fresh process that walks the first forward step (or STEPS steps) with IPOPT, as a suite
 worker would. It records its resident memory once gaitbench and the plugins are imported (``base_mb``) and its peak
 resident memory after the walk (``peak_mb``, ``ru_maxrss``). Rows are appended to
-``benchmarks/results/memory.jsonl``; without arguments the grid :data:`FIT_NODES` is measured. ``--fit`` fits the
+``benchmarks/results/memory.jsonl`` with the commit measured (``+dirty`` as a rule: the results file itself is being
+appended); without arguments the grid :data:`FIT_NODES` is measured. ``--fit`` fits the
 laws to the grid's rows (see :func:`fit`) and compares every other row (larger N, other strategies, several steps)
 with what ``gaitbench.memory`` estimates for it.
 """
