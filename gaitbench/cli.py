@@ -182,16 +182,41 @@ OPTION_OF_KIND = {"experiment": "'--experiment' / '-e'", "transcription": "'--tr
                   "observer": "'--observer'", "disturbance": "'--disturbance'"}
 """The option that names a plugin of each kind, for usage errors."""
 
+OPTIONS_OF_KIND = {"solver": "'-o' / '--solver-option'", "strategy": "'-x' / '--strategy-option'",
+                   "controller": "'-c' / '--controller-option'", "observer": "'--observer-option'",
+                   "disturbance": "'--disturbance-option'"}
+"""The option that passes a plugin's own options, for usage errors."""
 
-def _create(ctx: click.Context, kind: str, name: str, **options):
-    """Build a plugin, or stop with a usage error that names what is available or what was wrong."""
+
+def _create(ctx: click.Context, kind: str, name: str, *args, **options):
+    """Build a plugin, or stop with a usage error that names what is available or what was wrong. ``args`` are what
+    gaitbench passes the factory itself (a controller's model and reference); ``options`` are checked first
+    (:func:`gaitbench.options.check_options`), as a suite's are."""
+    from gaitbench.options import OptionError, check_options
+
     try:
-        return ctx.obj.registry.create(kind, name, **options)
+        check_options(ctx.obj.registry.get(kind, name).factory, options, kind=kind, injected=len(args))
+        return ctx.obj.registry.create(kind, name, *args, **options)
     except (UnknownPluginError, PluginConflictError) as exc:
         raise click.BadParameter(str(exc), param_hint=OPTION_OF_KIND.get(kind)) from None
+    except OptionError as exc:
+        raise click.BadParameter(f"{kind} {name!r}, option {exc.option}: {exc.message}",
+                                 param_hint=OPTIONS_OF_KIND.get(kind)) from None
     except (TypeError, ValueError) as exc:
         raise click.BadParameter(f"cannot build {kind} {name!r} with options {options}: {exc}",
                                  param_hint=OPTION_OF_KIND.get(kind)) from None
+
+
+def _check_memory(transcription: str, strategy: str, n_nodes: int, steps: int) -> None:
+    """A usage error when the walk cannot fit in memory (:mod:`gaitbench.memory`), before anything is built."""
+    from gaitbench.memory import memory_problem
+
+    try:
+        problem = memory_problem(transcription, strategy, n_nodes, steps, what=f"{strategy} {transcription}")
+    except ValueError as exc:  # a GAITBENCH_MEMORY_LIMIT that is not a size
+        raise click.UsageError(str(exc)) from None
+    if problem is not None:
+        raise click.BadParameter(problem, param_hint="--N")
 
 
 PROBLEM_OPTION_HINT = "'-p' / '--problem-option'"
@@ -345,6 +370,7 @@ def solve(
     strategy = _create(ctx, "strategy", strategy_name, **_parse_options(strategy_options, "--strategy-option"))
     if steps is not None and steps > experiment.n_steps:
         raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
+    _check_memory(transcription, strategy_name, n_nodes, steps or experiment.n_steps)
     options = replace(ProblemOptions(limits=experiment.limits), **overrides)
     console = Console()
     total = steps or experiment.n_steps
@@ -400,10 +426,9 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
                "disturbance": _parse_options(disturbance_options, "--disturbance-option")}
     model = reference.model
     plugins = {
-        "controller": _create(ctx, "controller", controller, model=model, reference=reference, **options["controller"]),
-        "observer": _create(ctx, "observer", observer, model=model, **options["observer"]),
-        "disturbance": _create(ctx, "disturbance", disturbance, experiment=reference.experiment,
-                               **options["disturbance"]),
+        "controller": _create(ctx, "controller", controller, model, reference, **options["controller"]),
+        "observer": _create(ctx, "observer", observer, model, **options["observer"]),
+        "disturbance": _create(ctx, "disturbance", disturbance, reference.experiment, **options["disturbance"]),
     }
     names = {"controller": controller, "observer": observer, "disturbance": disturbance}
     configuration = {kind: {"name": names[kind], "options": options[kind]} for kind in names}

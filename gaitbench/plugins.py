@@ -44,6 +44,9 @@ KINDS: dict[str, str] = {
 
 _DIR_MODULE_PREFIX = "gaitbench_plugin_dir"
 
+CONFLICT_SOURCE = "plugin conflict"
+"""The ``source`` of a :class:`PluginProblem` that is a name registered twice rather than a plugin that failed."""
+
 
 @dataclass(frozen=True)
 class LoadedPlugin:
@@ -102,7 +105,7 @@ class PluginRegistry:
                 listed = ", ".join(modules[:-1]) + f" and {modules[-1]}"
                 message = f"{kind} {name!r} is registered by {listed}; rename all but one"
             self._conflicts[kind, name] = message
-            self._problems.append(PluginProblem("plugin conflict", message))
+            self._problems.append(PluginProblem(CONFLICT_SOURCE, message))
 
     @property
     def problems(self) -> list[PluginProblem]:
@@ -135,7 +138,21 @@ class PluginRegistry:
         except KeyError:
             available = self.names(kind)
             listing = f"available: {', '.join(available)}" if available else f"no {kind} is registered"
-            raise UnknownPluginError(f"unknown {kind} {name!r}; {listing}") from None
+            raise UnknownPluginError(f"unknown {kind} {name!r}; {listing}{self._failures_note()}") from None
+
+    @property
+    def load_failures(self) -> list[PluginProblem]:
+        """The problems that kept a plugin's registrations out (import failures, broken hooks), not conflicts."""
+        return [problem for problem in self._problems if problem.source != CONFLICT_SOURCE]
+
+    def _failures_note(self) -> str:
+        """Why a name may be missing: the plugins that failed to load, each with its error."""
+        failures = self.load_failures
+        if not failures:
+            return ""
+        which = "1 plugin" if len(failures) == 1 else f"{len(failures)} plugins"
+        listed = "; ".join(f"{problem.source}: {problem.message}" for problem in failures)
+        return f"; {which} failed to load and may have registered it: {listed}"
 
     def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any:
         """Build the named plugin's object: ``get(kind, name).factory(*args, **kwargs)``."""

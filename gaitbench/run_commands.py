@@ -57,6 +57,9 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         suite = load_suite(suite_file)
     except SuiteError as error:  # the file names itself, the key and what was expected
         raise click.UsageError(str(error)) from None
+    console = Console(stderr=True)
+    for problem in suite.plugin_problems:  # as `gaitbench plugins` shows them: a missing plugin changes the run
+        console.print(Text(f"warning: {problem.source}: {problem.message}", style="yellow"), soft_wrap=True)
     if methods:
         try:
             suite = suite.with_methods(methods)
@@ -64,8 +67,13 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             raise click.BadParameter(str(error), param_hint="--method") from None
     if scheduler:
         executor = "dask"
+    if executor != "inprocess" and not scheduler:  # the workers share this machine's memory
+        from gaitbench.memory import concurrent_problem
+
+        problem = concurrent_problem(list(suite.memory_mb.values()), jobs)
+        if problem is not None:
+            raise click.BadParameter(problem, param_hint="--jobs")
     store_dir = store_dir or suite.output
-    console = Console(stderr=True)
     with _CaseProgress(console) as progress:
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,

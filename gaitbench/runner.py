@@ -257,7 +257,7 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                                   "suite_path": str(suite.path), "suite_text": suite.text,
                                   "executor": executor.name, "jobs": executor.jobs,
                                   "cases_total": len(suite.cases), "cases_skipped": len(present),
-                                  "started_at": _now(), "provenance": provenance()})
+                                  "started_at": _now(), "provenance": run_provenance(suite)})
         finished_at = None
         try:
             store.clean_leftovers(run_id)
@@ -283,6 +283,14 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
             store.finish_run(run_id, finished_at)  # a stopped run's claims go too; it stays unfinished
     return RunSummary(run_id, Path(store_dir), len(suite.cases), len(present), solved, failed,
                       time.perf_counter() - started, len(elsewhere))
+
+
+def run_provenance(suite) -> dict[str, Any]:
+    """The run's provenance: this process's (:func:`gaitbench.provenance.provenance`) and the plugins that failed to
+    load when the suite was loaded (``plugin_problems``, each ``{source, message}``; empty when all loaded)."""
+    problems = [{"source": problem.source, "message": problem.message}
+                for problem in getattr(suite, "plugin_problems", ())]
+    return {**provenance(), "plugin_problems": problems}
 
 
 def _claimed(store, run_id: str, cases: Iterable[Case], stored: dict[str, str],

@@ -18,9 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from gaitbench.case import Case, TrackingStage
+from gaitbench.options import OptionError, check_options
 from gaitbench.plugins import (
     PluginConflictError,
     PluginDirectoryError,
+    PluginProblem,
     PluginRegistry,
     UnknownPluginError,
     load_registry,
@@ -52,6 +54,12 @@ class Suite:
     cases: list[Case]
     methods: tuple[str, ...] = ()
     """The method labels, in file order."""
+    memory_mb: dict[str, float] = dataclasses.field(default_factory=dict)
+    """Each case's estimated peak memory by case key (:mod:`gaitbench.memory`), for a run to check what its workers
+    need together."""
+    plugin_problems: tuple[PluginProblem, ...] = ()
+    """Plugins that failed to load (or names registered twice) when the suite was loaded: a run shows them and
+    records them in its provenance, since a missing plugin changes what can run."""
 
     def with_methods(self, labels: Iterable[str]) -> Suite:
         """This suite with only the cases of the methods ``labels``: a long sweep run one part at a time (the
@@ -92,12 +100,13 @@ def load_suite(path: str | Path, registry: PluginRegistry | None = None) -> Suit
             registry = load_registry(plugin_dirs)
         except PluginDirectoryError as exc:
             raise SuiteError(path, "", str(exc)) from None
-    methods, cases = expand(path, spec, registry, plugin_dirs)
+    methods, cases, memory = _expand(path, spec, registry, plugin_dirs)
     return Suite(
         name=spec.name, description=spec.description, path=path, text=text, output=spec.output,
         repetitions=spec.repetitions, time_limit_s=spec.time_limit_s, steps=spec.steps, plugin_dirs=plugin_dirs,
         problem_options=dict(spec.problem_options), tracking=spec.tracking, cases=cases,
-        methods=tuple(method.label for method in methods),
+        methods=tuple(method.label for method in methods), memory_mb=memory,
+        plugin_problems=tuple(registry.problems),
     )
 
 
@@ -105,8 +114,16 @@ def expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
            plugin_dirs: tuple[str, ...] = ()) -> tuple[list[Method], list[Case]]:
     """The suite's methods and its cases, in file order, exclusions dropped and duplicates merged.
 
-    Every plugin choice is built once with its options; the experiments also check ``[suite].steps``.
+    Every plugin choice is built once with its options; the experiments also check ``[suite].steps``, and every
+    case must fit in memory (:mod:`gaitbench.memory`).
     """
+    methods, cases, _ = _expand(path, spec, registry, plugin_dirs)
+    return methods, cases
+
+
+def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
+            plugin_dirs: tuple[str, ...]) -> tuple[list[Method], list[Case], dict[str, float]]:
+    """:func:`expand`, with each case's memory estimate by key."""
     builder = _Builder(path, registry)
     experiments = [variant for entry in spec.experiments for variant in builder.variants("experiment", entry)]
     if spec.steps is not None:
@@ -155,7 +172,32 @@ def expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
         if earlier is not case and earlier.method != case.method:
             raise SuiteError(path, "", f"methods {earlier.method!r} and {case.method!r} are the same "
                                        f"transcription, solver and strategy ({case.label}); remove one")
-    return methods, list(cases.values())
+    memory = _check_memory(path, list(cases.values()), builder)
+    return methods, list(cases.values()), memory
+
+
+def _check_memory(path: Path, cases: list[Case], builder: _Builder) -> dict[str, float]:
+    """Each case's memory estimate by key; a suite with a case that cannot fit (:mod:`gaitbench.memory`) is refused,
+    naming the largest N that fits. Cases are looked at largest N first, so the message is about the worst one."""
+    from gaitbench.memory import estimate_case_memory, memory_limit, memory_problem
+
+    try:
+        limit = memory_limit()
+    except ValueError as exc:
+        raise SuiteError(path, "", str(exc)) from None
+    estimates: dict[tuple, float] = {}
+    memory = {}
+    for case in sorted(cases, key=lambda case: -case.n_nodes):
+        experiment = builder.built[("experiment", json.dumps(case.experiment.as_dict(), sort_keys=True,
+                                                             default=str))]
+        shape = (case.transcription.name, case.strategy.name, case.n_nodes, case.steps or experiment.n_steps)
+        if shape not in estimates:
+            problem = memory_problem(*shape, what=repr(case.method), limit=limit)
+            if problem is not None:
+                raise SuiteError(path, "[sweep].N", problem)
+            estimates[shape] = estimate_case_memory(*shape).mb
+        memory[case.key] = estimates[shape]
+    return memory
 
 
 class _Builder:
@@ -176,6 +218,12 @@ class _Builder:
             identity = _identity(kind, variant)
             if identity in self.built:
                 continue
+            try:
+                check_options(self.registry.get(kind, entry.name).factory, variant.choice.options, kind=kind)
+            except OptionError as exc:
+                head = exc.option.split(".")[0]
+                where = f"{entry.key}.{'grid' if head in entry.grid else 'options'}.{exc.option}"
+                raise SuiteError(self.path, where, f"{kind} {entry.name!r}: {exc.message}") from None
             try:
                 self.built[identity] = self.registry.create(kind, variant.choice.name, **variant.choice.options)
             except (TypeError, ValueError) as exc:
@@ -215,17 +263,25 @@ def _methods(path: Path, spec: SuiteSpec, builder: _Builder) -> list[Method]:
 
 
 def _check_tracking(path: Path, spec: SuiteSpec, registry: PluginRegistry) -> None:
-    """Tracking plugin names must exist, for each kind of which any plugin is registered (none yet: issue 8)."""
+    """Tracking plugin names must exist, for each kind of which any plugin is registered, and the stage's options
+    must be ones the tracking accepts (checked before any walk is solved, rather than after each one)."""
     if spec.tracking is None:
         return
-    for kind in ("controller", "observer", "disturbance"):
-        name = getattr(spec.tracking, kind)
-        if not registry.names(kind):
-            continue
+    kinds = [kind for kind in ("controller", "observer", "disturbance") if registry.names(kind)]
+    for kind in kinds:
         try:
-            registry.get(kind, name)
+            registry.get(kind, getattr(spec.tracking, kind))
         except (UnknownPluginError, PluginConflictError) as exc:
             raise SuiteError(path, f"[tracking].{kind}", str(exc)) from None
+    if len(kinds) < 3:
+        return  # no tracking plugins to check the options against (a registry without them)
+    from gaitbench.tracking import check_tracking_options
+
+    try:
+        check_tracking_options(spec.tracking.options, registry, spec.tracking.controller, spec.tracking.observer,
+                               spec.tracking.disturbance)
+    except OptionError as exc:
+        raise SuiteError(path, f"[tracking].options.{exc.option}", exc.message) from None
 
 
 def _plugin_dirs(path: Path, spec: SuiteSpec) -> tuple[str, ...]:

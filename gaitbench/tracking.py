@@ -27,7 +27,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -889,6 +889,53 @@ def model_terms(model: BipedModel) -> ModelTerms:
 # The entry point for the CLI and the suite runner
 
 
+TRACKING_OPTIONS = ("controller", "observer", "disturbance", "sample_rate", "steps", "fall", "rtol", "atol")
+"""The keys of :func:`track_walk`'s ``options`` (a suite's ``[tracking].options``)."""
+
+_INJECTED = {"controller": 2, "observer": 1, "disturbance": 1}
+"""How many leading arguments gaitbench passes each tracking plugin itself (model and reference; model;
+experiment): the rest of its parameters are its options."""
+
+
+def check_tracking_options(options: Mapping[str, Any], registry: PluginRegistry, controller: str = "thesis",
+                           observer: str = "thesis", disturbance: str = "friction") -> None:
+    """Raise :class:`~gaitbench.options.OptionError` for the first of ``options`` that :func:`track_walk` would
+    refuse, before any walk is solved: unknown keys, the plugins' own options (their signatures and
+    ``check_options`` hooks), and the values of ``sample_rate``, ``steps``, ``fall``, ``rtol`` and ``atol``.
+    The option is named as a dotted path (``controller.kp``, ``fall.hip_fraction``). Unknown plugin names raise
+    :class:`~gaitbench.plugins.UnknownPluginError`, as building them would."""
+    from gaitbench.options import OptionError, check_options, describe, unknown_option
+
+    for name, value in options.items():
+        if name not in TRACKING_OPTIONS:
+            raise unknown_option(name, TRACKING_OPTIONS)
+        if name in _INJECTED or name == "fall":
+            if not isinstance(value, Mapping):
+                raise OptionError(name, f"expected a table of options, found {describe(value)}")
+        elif name == "steps":
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise OptionError(name, f"expected an integer ≥ 1, found {describe(value)}")
+        elif not (value is None and name == "sample_rate") and not (
+                isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+            raise OptionError(name, f"expected a number > 0, found {describe(value)}")
+    names = {"controller": controller, "observer": observer, "disturbance": disturbance}
+    for kind, name in names.items():
+        factory = registry.get(kind, name).factory
+        try:
+            check_options(factory, options.get(kind) or {}, kind=kind, injected=_INJECTED[kind])
+        except OptionError as error:
+            raise OptionError(f"{kind}.{error.option}", f"{kind} {name!r}: {error.message}") from None
+    fall = dict(options.get("fall") or {})
+    allowed = [item.name for item in fields(FallCriteria)]
+    for name in fall:
+        if name not in allowed:
+            raise OptionError(f"fall.{name}", unknown_option(name, allowed).message)
+    try:
+        FallCriteria(**fall)
+    except (TypeError, ValueError) as error:
+        raise OptionError("fall", str(error)) from None
+
+
 def track_walk(walk_json_path_or_result: str | Path | WalkResult, controller: str = "thesis",
                observer: str = "thesis", disturbance: str = "friction", options: dict | None = None,
                registry: PluginRegistry | None = None, experiment: Experiment | None = None) -> TrackingResult:
@@ -903,11 +950,8 @@ def track_walk(walk_json_path_or_result: str | Path | WalkResult, controller: st
     :class:`~gaitbench.plugins.UnknownPluginError`; a bad result file raises :class:`TrackingInputError`.
     """
     options = dict(options or {})
-    unknown = set(options) - {"controller", "observer", "disturbance", "sample_rate", "steps", "fall", "rtol", "atol"}
-    if unknown:
-        raise ValueError(f"unknown tracking options {sorted(unknown)}; expected controller, observer, disturbance, "
-                         "sample_rate, steps, fall, rtol, atol")
     registry = registry or load_registry()
+    check_tracking_options(options, registry, controller, observer, disturbance)
     reference = load_reference(walk_json_path_or_result, registry, experiment)
     experiment = reference.experiment
     plugin_options = {kind: dict(options.get(kind) or {}) for kind in ("controller", "observer", "disturbance")}

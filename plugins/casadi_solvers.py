@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import re
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -35,6 +37,7 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline
 from gaitbench.nlp import NLP
+from gaitbench.options import OptionError, unknown_option
 from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus, options_key
 
@@ -102,6 +105,33 @@ class CasadiMethod(ABC):
     """The method's return statuses with a shared meaning; every other one is an error."""
     explanations: dict[str, str] = {}
     """What a terse return status means, appended to the message."""
+
+    @classmethod
+    def check_options(cls, options: Mapping[str, Any]) -> None:
+        """The method's own options, by CasADi's list of them: a one-variable ``nlpsol`` is built with the options
+        this solver would pass, and an unknown option or a value of the wrong type is refused (docs/plugins.md).
+        Values within a type (a string option's choices) are the method's to check when it runs."""
+        try:
+            solver = cls(**options)
+        except (TypeError, ValueError):
+            return  # refused again, with its own message, when the suite builds it
+        x = ca.SX.sym("x")
+        try:
+            with quiet_stdout():
+                ca.nlpsol("option_check", cls.plugin, {"x": x, "f": x**2}, solver.options)
+        except RuntimeError as error:
+            message = str(error)
+            own = _signature_options(cls)
+            unknown = re.search(r"Unknown option: (\w+)", message)
+            if unknown and unknown.group(1) in options:
+                raise unknown_option(unknown.group(1), own, candidates=[*own, *ca.nlpsol_options(cls.plugin)],
+                                     cutoff=0.75, more=f", or any {cls.plugin} option (casadi.doc_nlpsol("
+                                                       f"'{cls.plugin}'))") from None
+            illegal = re.search(r"Illegal type for (\w+): (\w+) cannot be cast to (\w+)", message)
+            if illegal and illegal.group(1) in options:
+                name, found, expected = illegal.groups()
+                raise OptionError(name, f"{cls.plugin} takes {_CASADI_TYPES.get(expected, expected)}, found "
+                                        f"{_CASADI_TYPES.get(found, found)}") from None
 
     def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, **method_options) -> None:
@@ -184,6 +214,20 @@ class CasadiMethod(ABC):
             evaluations={key.removeprefix("n_call_nlp_"): int(value) for key, value in stats.items()
                          if key.startswith("n_call_nlp_") and value > 0},
             multipliers=multipliers)
+
+
+_CASADI_TYPES = {"OT_INT": "an integer", "OT_DOUBLE": "a number", "OT_BOOL": "true or false",
+                 "OT_STRING": "a string", "OT_DICT": "a table", "OT_INTVECTOR": "an array of integers",
+                 "OT_DOUBLEVECTOR": "an array of numbers", "OT_STRINGVECTOR": "an array of strings"}
+"""CasADi's option types, as suite errors name them."""
+
+
+def _signature_options(cls: type) -> list[str]:
+    """The keyword options a solver class names in its signature (``**method_options`` aside)."""
+    import inspect
+
+    return [name for name, parameter in inspect.signature(cls).parameters.items()
+            if parameter.kind is parameter.POSITIONAL_OR_KEYWORD or parameter.kind is parameter.KEYWORD_ONLY]
 
 
 _LOCATION = re.compile(r"^\S+\.(?:cpp|hpp):\d+:\s*")

@@ -10,8 +10,9 @@ kept in ``nlp.solver_cache``; a re-solve with new parameters only points the cal
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import cyipopt
 import numpy as np
@@ -21,7 +22,7 @@ from gaitbench.evaluation import Deadline, NLPEvaluator, error_result, solver_re
 from gaitbench.nlp import NLP
 from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus, options_key
-from plugins.ipopt import IPOPT_STATUSES
+from plugins.ipopt import IPOPT_STATUSES, check_ipopt_options
 
 _RETURN_STATUSES = {
     0: "Solve_Succeeded",
@@ -120,13 +121,22 @@ class CyIpopt:
     ``tolerance`` (``tol``) and ``print_level`` (0 also sets ``sb=yes``, which silences IPOPT's banner) are the
     options every gaitbench solver shares, mapped exactly as the ``ipopt`` plugin maps them, so both take the same
     iterations. Any other keyword is an IPOPT option passed unchanged (https://coin-or.github.io/Ipopt/OPTIONS.html);
-    an integer given for a numeric option is converted. An option IPOPT rejects makes every solve return ERROR.
+    an integer given for a numeric option is converted. :meth:`check_options` asks cyipopt's IPOPT about each of them,
+so one it does not know or accept is refused when a suite loads; built without that check, it makes every solve
+return ERROR.
 
     ``multipliers`` are IPOPT's constraint multipliers (``info["mult_g"]``), which are CasADi's ``lam_g`` too:
     ∇f + Jᵀλ_g + λ_x = 0, so they equal the ``ipopt`` plugin's.
     """
 
     name = "cyipopt"
+    own_options = ("max_iterations", "time_limit_s", "tolerance", "print_level")
+    """gaitbench's options; every other keyword is IPOPT's."""
+
+    @classmethod
+    def check_options(cls, options: Mapping[str, Any]) -> None:
+        """Every IPOPT option known to IPOPT and accepted by cyipopt's own IPOPT build (docs/plugins.md)."""
+        check_ipopt_options(options, cls.own_options, _cyipopt_accepts)
 
     def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, **ipopt_options) -> None:
@@ -179,6 +189,27 @@ class CyIpopt:
                     _add_option(problem, option, value)
             nlp.solver_cache[key] = _Built(problem, callbacks)
         return nlp.solver_cache[key]
+
+
+class _NoProblem:
+    """Callbacks of a problem that is never solved: options are only set on it."""
+
+    def objective(self, x: np.ndarray) -> float:
+        return 0.0
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        return np.zeros_like(x)
+
+
+def _cyipopt_accepts(name: str, value: Any) -> bool:
+    """Whether cyipopt's IPOPT accepts ``name = value``, set as a solve would set it on a one-variable problem."""
+    problem = cyipopt.Problem(n=1, m=0, problem_obj=_NoProblem(), lb=[-1.0], ub=[1.0])
+    try:
+        with quiet_stdout():  # IPOPT prints why it refuses
+            _add_option(problem, name, value)
+    except ValueError:
+        return False
+    return True
 
 
 def _add_option(problem: cyipopt.Problem, option: str, value) -> None:

@@ -340,3 +340,25 @@ def test_help_documents_the_exit_codes(invoke):
     text = " ".join(result.stdout.split())
     assert "Exit status:" in text and "0 success" in text
     assert "1 the work failed" in text and "2 usage error" in text
+# solve -o / -x: plugin options are checked before anything is solved
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["-o", "bogus_option=1"], "Error: Invalid value for '-o' / '--solver-option': solver 'ipopt', option "
+                                   "bogus_option: unknown option 'bogus_option'; allowed: max_iterations, "
+                                   "time_limit_s, tolerance, print_level, scaling, or any IPOPT option"),
+        (["-o", "max_iterations=many"], "solver 'ipopt', option max_iterations: expected an integer ≥ 1, found a "
+                                        "string 'many'"),
+        (["-o", "mu_strategy=adaptiv"], "IPOPT rejects mu_strategy = 'adaptiv': it accepts 'monotone' or 'adaptive'"),
+        (["-S", "decrease-and-conquer", "-x", "worker=2"],
+         "Invalid value for '-x' / '--strategy-option': strategy 'decrease-and-conquer', option worker: unknown "
+         "option 'worker' (did you mean 'workers'?)"),
+    ],
+)
+def test_bad_plugin_options_are_refused_before_solving(invoke, args, expected):
+    result = invoke("solve", "-e", "forward", "-t", "dmoc", "--N", "8", "--steps", "1", *args)
+    assert result.exit_code == 2
+    assert expected in " ".join(result.stderr.split()), result.stderr
+    assert "Traceback" not in result.output and "ACOT" not in result.stdout

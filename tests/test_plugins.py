@@ -274,6 +274,30 @@ def test_unknown_name_lists_the_available_names():
         registry.create("solver", "ipopt")
 
 
+def test_unknown_name_names_the_plugins_that_failed_to_load(plugin_file, experiment_plugin):
+    """A name that a broken plugin would have registered: the error says which plugin failed and why."""
+    broken = plugin_file("gentle_slope", "raise ImportError('half-finished plugin')\n")
+    plugin_file("flat", experiment_plugin("flat"))
+    registry = load_registry([broken.parent], use_entry_points=False)
+
+    with pytest.raises(UnknownPluginError) as error:
+        registry.get("experiment", "gentle-slope")
+
+    assert str(error.value) == (
+        "unknown experiment 'gentle-slope'; available: flat; 1 plugin failed to load and may have registered it: "
+        f"{broken.resolve()}: import failed: ImportError: half-finished plugin")
+    assert registry.load_failures == registry.problems
+
+
+def test_a_conflict_is_not_a_load_failure():
+    registry = PluginRegistry([LoadedPlugin("model", "m", "", module, dict) for module in ("a", "b")])
+
+    assert registry.load_failures == [] and len(registry.problems) == 1
+    with pytest.raises(UnknownPluginError) as error:
+        registry.get("model", "n")
+    assert "failed to load" not in str(error.value)
+
+
 def test_unknown_kind_lists_the_kinds():
     with pytest.raises(UnknownPluginError) as error:
         PluginRegistry().names("experiments")

@@ -617,3 +617,15 @@ def test_a_partial_gait_chosen_by_hand_is_labelled_partial(store, tmp_path):
     assert all("partial walk" in figure.title for figure in section.figures)
     assert key not in set(report.tables["acot"].get("case_key", []))
     assert tables.chosen_gaits(report.cases)["forward"] != key
+
+
+def test_provenance_lists_the_plugins_that_failed_to_load():
+    runs = [{"run_id": "r1", "provenance": {"python": "3.11", "plugin_problems": [
+        {"source": "/p/gentle_slope.py", "message": "import failed: ImportError: half-finished plugin"}]}},
+            {"run_id": "r2", "provenance": {"python": "3.11", "plugin_problems": []}}]
+    table = tables.provenance_table(runs)
+    problems = table[table["item"] == "plugin_problems"]
+    assert problems.to_dict("records") == [
+        {"run_id": "r1", "item": "plugin_problems",
+         "value": "/p/gentle_slope.py: import failed: ImportError: half-finished plugin"},
+        {"run_id": "r2", "item": "plugin_problems", "value": "none"}]

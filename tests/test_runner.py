@@ -451,3 +451,46 @@ def test_a_store_written_before_the_stop_columns_opens_and_gains_them(tmp_path: 
         store.record_case(case_row(CaseOutcome(walk_case(8), "crashed", "SIGKILL", 1.0), "s", "r"))
         rows = {row["case_key"]: row for row in store.cases()}
     assert rows[walk_case(8).key]["stop_cause"] == "crashed" and rows["old"]["stop_cause"] is None
+
+
+TINY_SUITE = """
+[suite]
+name = "tiny"
+steps = 1
+plugins = ["plugins"]
+
+[sweep]
+experiments = ["{experiment}"]
+N = [6]
+transcriptions = ["dmoc"]
+solvers = ["ipopt"]
+strategies = ["one-phase"]
+"""
+
+
+def test_run_reports_plugins_that_failed_to_load_and_records_them(tmp_path: Path) -> None:
+    """`gaitbench run` says which plugin failed and why, as `gaitbench plugins` does, and the run records it."""
+    plugins = tmp_path / "plugins"
+    plugins.mkdir()
+    broken = plugins / "gentle_slope.py"
+    broken.write_text("raise ImportError('half-finished plugin')\n")
+    suite = tmp_path / "tiny.toml"
+    store = tmp_path / "store"
+    arguments = ["run", str(suite), "--executor", "inprocess", "--no-report", "--store", str(store)]
+
+    suite.write_text(TINY_SUITE.format(experiment="gentle-slope"))
+    missing = CliRunner().invoke(main, arguments)
+    assert missing.exit_code == 2
+    error = " ".join(missing.stderr.split())
+    assert "unknown experiment 'gentle-slope'" in error
+    assert f"1 plugin failed to load and may have registered it: {broken.resolve()}: import failed: ImportError: " \
+           "half-finished plugin" in error
+
+    suite.write_text(TINY_SUITE.format(experiment="forward"))
+    result = CliRunner().invoke(main, arguments)
+    assert result.exit_code == 0, result.output
+    assert result.stderr.startswith(f"warning: {broken.resolve()}: import failed: ImportError: half-finished plugin")
+    with ResultStore.open(store) as opened:
+        (run,) = opened.runs()
+    assert run["provenance"]["plugin_problems"] == [
+        {"source": str(broken.resolve()), "message": "import failed: ImportError: half-finished plugin"}]

@@ -143,9 +143,9 @@ def test_shipped_suites_keep_the_file_text():
         (BASE.replace('"one-phase", "decrease', '{ name = "one-phase", options = { phase = "third" } }, "decrease'),
          ["[sweep].strategies[0]: cannot build strategy 'one-phase' with phase='third'", "expected 'first'"]),
         (BASE.replace('"one-phase", "decrease', '{ name = "one-phase", options = { bogus = 1 } }, "decrease'),
-         ["[sweep].strategies[0]: cannot build strategy 'one-phase' with bogus=1", "bogus"]),
+         ["[sweep].strategies[0].options.bogus: strategy 'one-phase': unknown option 'bogus'; allowed: phase"]),
         (BASE.replace('["forward"]', '[{ name = "forward", options = { speed = 1 } }]'),
-         ["[sweep].experiments[0]: cannot build experiment 'forward' with speed=1", "speed"]),
+         ["[sweep].experiments[0].options.speed: experiment 'forward': unknown option 'speed'; it takes no options"]),
         (BASE.replace('name = "t"', 'name = "t"\nsteps = 12'),
          ["[suite].steps: steps = 12 exceeds the 11 steps of experiment 'forward'"]),
         (BASE.replace('name = "t"', 'name = "t"\nproblem_options = { absolute_valu = "smooth" }'),
@@ -207,6 +207,129 @@ def test_validation_errors_name_the_file_the_key_and_the_fix(tmp_path, text, exp
     message = _error(tmp_path, text)
     for fragment in expected:
         assert fragment in message, f"{fragment!r} not in {message!r}"
+
+
+def _solver(entry: str) -> str:
+    return BASE.replace('solvers = ["ipopt"]', f"solvers = [{entry}]")
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (_solver('{ name = "ipopt", options = { bogus_option = 1 } }'),
+         ["[sweep].solvers[0].options.bogus_option: solver 'ipopt': unknown option 'bogus_option'; allowed: "
+          "max_iterations, time_limit_s, tolerance, print_level, scaling, or any IPOPT option"]),
+        (_solver('{ name = "ipopt", options = { mu_stratgy = "adaptive" } }'),
+         ["[sweep].solvers[0].options.mu_stratgy: solver 'ipopt': unknown option 'mu_stratgy' (did you mean "
+          "'mu_strategy'"]),
+        (_solver('{ name = "ipopt", options = { max_iterations = "many" } }'),
+         ["[sweep].solvers[0].options.max_iterations: solver 'ipopt': expected an integer ≥ 1, found a string "
+          "'many'"]),
+        (_solver('{ name = "ipopt", grid = { max_iterations = [100, 0] } }'),
+         ["[sweep].solvers[0].grid.max_iterations: solver 'ipopt': expected an integer ≥ 1, found an integer (0)"]),
+        (_solver('{ name = "ipopt", options = { tolerance = 0 } }'),
+         ["[sweep].solvers[0].options.tolerance: solver 'ipopt': expected a number > 0, found an integer (0)"]),
+        (_solver('{ name = "ipopt", options = { time_limit_s = "1h" } }'),
+         ["[sweep].solvers[0].options.time_limit_s: solver 'ipopt': expected a number > 0"]),
+        (_solver('{ name = "ipopt", options = { print_level = 1.5 } }'),
+         ["[sweep].solvers[0].options.print_level: solver 'ipopt': expected an integer ≥ 0, found a float (1.5)"]),
+        (_solver('{ name = "ipopt", options = { max_iter = "many" } }'),
+         ["[sweep].solvers[0].options.max_iter: solver 'ipopt': IPOPT's max_iter is integer: expected an integer"]),
+        (_solver('{ name = "ipopt", options = { tol = -1 } }'),
+         ["[sweep].solvers[0].options.tol: solver 'ipopt': IPOPT rejects tol = -1: it accepts 0 < tol"]),
+        (_solver('{ name = "ipopt", options = { mu_strategy = "adaptiv" } }'),
+         ["[sweep].solvers[0].options.mu_strategy: solver 'ipopt': IPOPT rejects mu_strategy = 'adaptiv': it "
+          "accepts 'monotone' or 'adaptive'"]),
+        (_solver('{ name = "ipopt", options = { scaling = "nominl" } }'),
+         ["[sweep].solvers[0].options.scaling: solver 'ipopt': expected one of none, nominal"]),
+        (_solver('{ name = "cyipopt", options = { bogus_option = 1 } }'),
+         ["[sweep].solvers[0].options.bogus_option: solver 'cyipopt': unknown option 'bogus_option'", "IPOPT"]),
+        (_solver('{ name = "cyipopt", options = { mu_strategy = "adaptiv" } }'),
+         ["[sweep].solvers[0].options.mu_strategy: solver 'cyipopt': IPOPT rejects mu_strategy = 'adaptiv'"]),
+        (_solver('{ name = "casadi-sqp", options = { max_iter_l = 3 } }'),
+         ["[sweep].solvers[0].options.max_iter_l: solver 'casadi-sqp': unknown option 'max_iter_l' (did you mean "
+          "'max_iter_ls'", "any sqpmethod option"]),
+        (_solver('{ name = "casadi-sqp", options = { max_iter_ls = "x" } }'),
+         ["[sweep].solvers[0].options.max_iter_ls: solver 'casadi-sqp': sqpmethod takes an integer, found a "
+          "string"]),
+        (_solver('{ name = "sqp", options = { qp_solvr = "piqp" } }'),
+         ["[sweep].solvers[0].options.qp_solvr: solver 'sqp': unknown option 'qp_solvr' (did you mean "
+          "'qp_solver'?); allowed: max_iterations"]),
+        (_solver('{ name = "sqp", options = { second_order_correction = "yes" } }'),
+         ["[sweep].solvers[0].options.second_order_correction: solver 'sqp': expected true or false, found a "
+          "string 'yes'"]),
+        (BASE.replace('"one-phase", "decrease', '{ name = "decrease-and-conquer", options = { workers = "two" } }, '
+                                               '"decrease'),
+         ["[sweep].strategies[0].options.workers: strategy 'decrease-and-conquer': expected an integer, found a "
+          "string 'two'"]),
+        (BASE.replace('"one-phase", "decrease', '{ name = "decrease-and-conquer", options = { worker = 2 } }, '
+                                               '"decrease'),
+         ["[sweep].strategies[0].options.worker: strategy 'decrease-and-conquer': unknown option 'worker' (did you "
+          "mean 'workers'?); allowed: polish, sectional_guess, max_checks, workers"]),
+        (BASE + "[tracking]\noptions = { gainz = 3 }\n",
+         ["[tracking].options.gainz: unknown option 'gainz'; allowed: controller, observer, disturbance, "
+          "sample_rate, steps, fall, rtol, atol"]),
+        (BASE + "[tracking]\noptions = { controller = { kpp = 400 } }\n",
+         ["[tracking].options.controller.kpp: controller 'thesis': unknown option 'kpp' (did you mean 'kp'?); "
+          "allowed: kp, kv, contact_force"]),
+        (BASE + "[tracking]\ndisturbance = 'push'\noptions = { disturbance = { force = 'strong' } }\n",
+         ["[tracking].options.disturbance.force: disturbance 'push': expected a number, found a string 'strong'"]),
+        (BASE + "[tracking]\noptions = { fall = { hip_fraction = 2 } }\n",
+         ["[tracking].options.fall: hip_fraction = 2: expected a fraction in [0, 1)"]),
+        (BASE + "[tracking]\noptions = { sample_rate = 0 }\n",
+         ["[tracking].options.sample_rate: expected a number > 0, found an integer (0)"]),
+    ],
+)
+def test_options_are_checked_when_the_suite_loads(tmp_path, text, expected):
+    message = _error(tmp_path, text)
+    for fragment in expected:
+        assert fragment in message, f"{fragment!r} not in {message!r}"
+
+
+def test_options_the_plugins_accept_load(tmp_path):
+    text = _solver('{ name = "ipopt", options = { linear_solver = "mumps", mu_strategy = "adaptive", '
+                   'acceptable_tol = 1e-6, max_iterations = 500, time_limit_s = 60, print_level = 0 } }, '
+                   '{ name = "cyipopt", options = { tol = 1 } }, '
+                   '{ name = "casadi-sqp", options = { max_iter_ls = 3 } }')
+    text += ("[tracking]\noptions = { controller = { kp = [900, 400] }, sample_rate = 1000, "
+             "fall = { hip_fraction = 0.4 } }\n")
+    assert len(_load(tmp_path, text).cases) == 2 * 3 * 2 * 2
+
+
+def test_a_plugin_s_own_check_options_hook_is_asked_at_load(tmp_path, plugin_file):
+    """A third-party solver that takes ``**options`` checks them itself; the suite names the key it refused."""
+    directory = plugin_file("picky", """
+        from gaitbench import Registration, hookimpl
+        from gaitbench.options import OptionError, unknown_option
+
+
+        class Picky:
+            name = "picky"
+
+            @classmethod
+            def check_options(cls, options):
+                for key, value in options.items():
+                    if key != "depth":
+                        raise unknown_option(key, ["depth"])
+                    if value not in (1, 2):
+                        raise OptionError(key, f"expected 1 or 2, found {value!r}")
+
+            def __init__(self, **options):
+                self.options = options
+
+
+        @hookimpl
+        def register_solvers():
+            return [Registration("picky", "test solver", Picky)]
+        """).parent
+    registry = load_registry([directory])
+    text = _solver('{ name = "picky", options = { depht = 1 } }')
+    with pytest.raises(SuiteError, match=r"\[sweep\]\.solvers\[0\]\.options\.depht: solver 'picky': unknown option "
+                                         r"'depht' \(did you mean 'depth'\?\); allowed: depth"):
+        load_suite(_write(tmp_path, text), registry)
+    with pytest.raises(SuiteError, match=r"solvers\[0\]\.grid\.depth: solver 'picky': expected 1 or 2, found 3"):
+        load_suite(_write(tmp_path, _solver('{ name = "picky", grid = { depth = [1, 3] } }')), registry)
+    assert len(load_suite(_write(tmp_path, _solver('{ name = "picky", options = { depth = 2 } }')), registry).cases)
 
 
 def test_energetics_infeasible_grid_value_is_reported(tmp_path):
@@ -363,10 +486,10 @@ def test_every_problem_option_is_accepted_with_an_allowed_value(tmp_path):
 def test_suite_settings_reach_every_case(tmp_path):
     text = BASE.replace('name = "t"', 'name = "t"\noutput = "out/here"\ntime_limit_s = 60\nsteps = 3\n'
                                       'problem_options = { absolute_value = "smooth", smoothing_eps = 0.1 }')
-    text += '[tracking]\ncontroller = "thesis"\noptions = { gain = 2 }\n'
+    text += '[tracking]\ncontroller = "thesis"\noptions = { controller = { kp = 400 } }\n'
     suite = _load(tmp_path, text)
     assert suite.output == Path("out/here") and suite.steps == 3
-    assert suite.tracking == TrackingStage(options={"gain": 2})
+    assert suite.tracking == TrackingStage(options={"controller": {"kp": 400}})
     case = suite.cases[0]
     assert (case.steps, case.time_limit_s, case.tracking) == (3, 60.0, suite.tracking)
     assert case.problem_options == {"absolute_value": "smooth", "smoothing_eps": 0.1}

@@ -199,8 +199,11 @@ def test_bad_inputs_name_the_file_and_the_fix(saved, tmp_path):
         load_walk(tmp_path / "broken.json", REGISTRY)
     with pytest.raises(UnknownPluginError, match="unknown controller 'nope'"):
         track_walk(saved, controller="nope", registry=REGISTRY)
-    with pytest.raises(ValueError, match="unknown tracking options"):
+    with pytest.raises(ValueError, match="unknown option 'sampling'; allowed: controller, observer"):
         track_walk(saved, options={"sampling": 10}, registry=REGISTRY)
+    with pytest.raises(ValueError, match=r"controller\.kpp: controller 'thesis': unknown option 'kpp' \(did you "
+                                         r"mean 'kp'\?\)"):
+        track_walk(saved, options={"controller": {"kpp": 10}}, registry=REGISTRY)
 
 
 def test_track_command(saved, tmp_path):
@@ -217,6 +220,10 @@ def test_track_command(saved, tmp_path):
     assert missing.exit_code == 2 and "no such result file" in missing.output
     unknown = runner.invoke(main, ["track", str(saved), "--observer", "nope"])
     assert unknown.exit_code == 2 and "unknown observer 'nope'" in unknown.output
+    typo = runner.invoke(main, ["track", str(saved), "-c", "kpp=400"])
+    assert typo.exit_code == 2 and "Traceback" not in typo.output
+    assert ("'-c' / '--controller-option': controller 'thesis', option kpp: unknown option 'kpp' (did you mean "
+            "'kp'?)") in " ".join(typo.stderr.split())
 
 
 def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tmp_path):

@@ -469,7 +469,8 @@ def failed_cases(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def provenance_table(runs: Iterable[dict]) -> pd.DataFrame:
-    """Run by run: suite, executor, times and the machine and versions it ran with (``packages.NAME`` rows)."""
+    """Run by run: suite, executor, times, the machine and versions it ran with (``packages.NAME`` rows) and the
+    plugins that failed to load (``plugin_problems``, one row each, or ``none``)."""
     rows = []
     for run in runs:
         run_id = run.get("run_id")
@@ -481,6 +482,11 @@ def provenance_table(runs: Iterable[dict]) -> pd.DataFrame:
             if isinstance(value, dict):
                 rows.extend({"run_id": run_id, "item": f"{key}.{name}", "value": version}
                             for name, version in value.items())
+            elif key == "plugin_problems":  # plugins that failed to load when the run started, one row each
+                rows.extend({"run_id": run_id, "item": key, "value": f"{problem['source']}: {problem['message']}"}
+                            for problem in value)
+                if not value:
+                    rows.append({"run_id": run_id, "item": key, "value": "none"})
             else:
                 rows.append({"run_id": run_id, "item": key, "value": value})
     return pd.DataFrame(rows, columns=PROVENANCE_COLUMNS)
