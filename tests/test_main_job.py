@@ -33,7 +33,7 @@ def test_demo_suite_walks_the_four_terrains_whole_at_small_n():
     suite = load_suite(ROOT / "suites" / "demo.toml", load_registry())
     assert {case.experiment.name for case in suite.cases} == TERRAINS
     assert set(suite.methods) == {"OP-DC", "OP-DM"}
-    assert len(suite.cases) == 8 and {case.n_nodes for case in suite.cases} == {20}
+    assert len(suite.cases) == 8 and {case.n_nodes for case in suite.cases} == {30}
     assert all(case.steps is None for case in suite.cases)  # whole walks: every step of each experiment
     assert {case.strategy.name for case in suite.cases} == {"one-phase"}
     assert suite.tracking is None  # the minute goes to the walks and the report

@@ -20,7 +20,7 @@ REGISTRY = load_registry()
 
 THESIS_METHODS = ("OP-DC", "OP-DM", "D&C-DC", "D&C-DM", "reference")
 EXPECTED_CASES = {
-    "demo": 4 * 2,  # the four terrains × OP-DC and OP-DM at N = 20: `make run`
+    "demo": 4 * 2,  # the four terrains × OP-DC and OP-DM at N = 30: `make run`
     "smoke": 8,  # 1 experiment × 2 N × (2 transcriptions × 1 solver × 2 strategies)
     "thesis-forward": 20 * 5,  # N = 10..200 step 10 × 5 methods
     "thesis-downslope": 20 * 5,
