@@ -2,7 +2,8 @@
 
 Several solvers write from C straight to file descriptor 1 (qpOASES' banner, HiGHS', OSQP's polishing notes,
 IPOPT's option complaints), which Python's ``sys.stdout`` redirection cannot catch; ``print_level=0`` promises
-silence, so solver plugins wrap those calls in :func:`quiet_stdout`.
+silence, so solver plugins wrap those calls in :func:`quiet_stdout` (and :func:`quiet_stderr` for libraries that
+warn on standard error, such as Uno's BQPD).
 """
 
 from __future__ import annotations
@@ -35,5 +36,25 @@ def quiet_stdout(active: bool = True) -> Iterator[None]:
         if _C_RUNTIME is not None:
             _C_RUNTIME.fflush(None)
         os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+@contextlib.contextmanager
+def quiet_stderr(active: bool = True) -> Iterator[None]:
+    """Discard what is written to file descriptor 2 while active. Python's own ``sys.stderr`` is flushed first and
+    still goes to descriptor 2 afterwards, so a traceback printed outside the block is unaffected."""
+    if not active:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, 2)
         os.close(saved)
         os.close(devnull)

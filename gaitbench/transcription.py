@@ -27,7 +27,7 @@ from gaitbench.gait_problem import (
 )
 from gaitbench.mechanics import BipedFunctions, biped_functions
 from gaitbench.nlp import NLP, NLPBuilder
-from gaitbench.terrain import clearance, heel_strike_configuration, terrain_clearance
+from gaitbench.terrain import clearance, heel_strike_configuration, leg_angle_window, terrain_clearance
 
 
 @dataclass(frozen=True)
@@ -289,15 +289,11 @@ def _add_step_constraints(
         builder.constrain("clearance", clearance(interior[0, :], interior[1, :], theta), options.clearance_margin,
                           np.inf)
     if options.angle_bounds == "physical":
-        # No leg points into the ground (DECISIONS §4), linear in q: the stance leg's hip stays above the ground
-        # where its foot stands, which bends from the previous chord to this one (above both lines in a valley,
-        # above either on a crest: θ − π/2 ≤ q_st ≤ θ_behind + π/2); the swing leg points down from the hip
-        # relative to the chord it swings over (|q_sw − θ| ≤ π/2).
-        half_turn = np.pi / 2
-        builder.constrain("leg_angles", ca.vertcat(q[0, :] - theta + half_turn,
-                                                   symbols.previous_slope + half_turn - q[0, :],
-                                                   q[1, :] - theta + half_turn, theta + half_turn - q[1, :]),
-                          0.0, np.inf)
+        # No leg points into the ground (DECISIONS §4), linear in q: the windows of `leg_angle_window`.
+        stance_low, stance_high = leg_angle_window(theta, symbols.previous_slope)
+        swing_low, swing_high = leg_angle_window(theta)
+        builder.constrain("leg_angles", ca.vertcat(q[0, :] - stance_low, stance_high - q[0, :],
+                                                   q[1, :] - swing_low, swing_high - q[1, :]), 0.0, np.inf)
     # Replaces the thesis's infeasible "monotonically descending swing foot" (DECISIONS §4): d/dt of the
     # clearance at the last node is negative, i.e. the swing foot comes down onto the ground.
     approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]

@@ -16,13 +16,11 @@ curvature reversed: HS071 then takes 59 iterations instead of 5, and with the ``
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
-import os
 import re
 import sys
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -33,6 +31,7 @@ from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.nlp import NLP
 from gaitbench.scaling import nominal_factors
+from gaitbench.silence import quiet_stderr
 from gaitbench.solver import SolverResult, SolverStatus, options_key
 from plugins.ipopt import SCALINGS
 
@@ -251,7 +250,7 @@ class Uno:
             model.set_initial_primal_iterate((x0 / d).tolist())
             log = _Log(echo=self.print_level > 0)
             built.solver.set_logger_stream(log)  # Uno's logger is global: set for every solve
-            with _quiet_stderr(self.print_level == 0):  # BQPD writes workspace warnings to standard error itself
+            with quiet_stderr(self.print_level == 0):  # BQPD writes workspace warnings to standard error itself
                 try:
                     result = built.solver.optimize(model)
                 finally:
@@ -301,7 +300,7 @@ class Uno:
 def _fortran_flush() -> Callable[[], None]:
     """A function that flushes every unit of the libgfortran bundled in unopy's wheel (a no-op where it is not
     found). That library buffers BQPD's messages when they do not go to a terminal, and would otherwise write them
-    when the process exits, after :func:`_quiet_stderr` has restored standard error."""
+    when the process exits, after :func:`gaitbench.silence.quiet_stderr` has restored standard error."""
     try:
         libraries = Path(unopy.__file__).resolve().parent.parent / "unopy.libs"
         flush = ctypes.CDLL(str(next(libraries.glob("libgfortran*.so*"))))._gfortran_flush_i4
@@ -312,28 +311,6 @@ def _fortran_flush() -> Callable[[], None]:
 
 
 _flush_fortran_units = _fortran_flush()
-
-
-@contextlib.contextmanager
-def _quiet_stderr(active: bool) -> Iterator[None]:
-    """Discard what is written to file descriptor 2 while active (BQPD's "insufficient space available for
-    profile" and its workspace sizes, from the wheel's compiled code), as :func:`gaitbench.silence.quiet_stdout` does
-    for standard output. Python's own ``sys.stderr`` is flushed first and written to file descriptor 2 as well, so
-    an exception's traceback printed outside the solve is unaffected."""
-    if not active:
-        yield
-        return
-    sys.stderr.flush()
-    saved = os.dup(2)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        sys.stderr.flush()
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
 
 
 def _configured_solver(preset: str, options: dict) -> unopy.UnoSolver:

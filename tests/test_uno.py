@@ -214,8 +214,9 @@ def test_print_level_zero_is_silent_and_one_prints_the_log():
 def test_standard_error_written_by_compiled_code_during_a_quiet_solve_is_discarded():
     """BQPD's Fortran writes workspace warnings to standard error (on HS, N = 50 with ``preset=filtersqp``); at
     print_level 0 the solve discards file descriptor 2 and flushes libgfortran's buffers before restoring it."""
-    script = ("import os; from plugins.uno_solver import _flush_fortran_units, _quiet_stderr\n"
-              "with _quiet_stderr(True):\n    os.write(2, b'from C')\n    _flush_fortran_units()\n"
+    script = ("import os\nfrom gaitbench.silence import quiet_stderr\n"
+              "from plugins.uno_solver import _flush_fortran_units\n"
+              "with quiet_stderr(True):\n    os.write(2, b'from C')\n    _flush_fortran_units()\n"
               "os.write(2, b'after')")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
     assert (run.returncode, run.stderr) == (0, "after")
