@@ -3,6 +3,8 @@
 With ``phase="second"`` (the default) this is the thesis's One Phase method and the baseline that
 decrease-and-conquer is compared against: the full 4-DOF problem with push-off, heel strike and ground reactions.
 ``phase="first"`` walks with the 2-DOF First Phase problem alone, which is what the thesis's Chapter 2 evaluates.
+``look_ahead=H`` solves each step together with the next H − 1 and commits it alone (DECISIONS §7); H = 1, the
+default, is the thesis's greedy walk.
 """
 
 from __future__ import annotations
@@ -13,18 +15,26 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.walk import StepOutcome, WalkProblem, WalkResult, solve_with_retries, walk_step_by_step
+from gaitbench.walk_chain import LookAhead
 
 
 class OnePhase:
     name = "one-phase"
 
-    def __init__(self, phase: str = "second") -> None:
+    def __init__(self, phase: str = "second", look_ahead: int = 1) -> None:
         if phase not in ("first", "second"):
             raise ValueError(f"phase = {phase!r}: expected 'first' (2-DOF) or 'second' (4-DOF)")
+        if int(look_ahead) != look_ahead or look_ahead < 1:
+            raise ValueError(f"look_ahead = {look_ahead!r}: expected a whole number of steps, at least 1")
+        if look_ahead > 1 and phase != "second":
+            raise ValueError("look_ahead > 1 chains steps through push-off and heel strike: it needs phase = 'second'")
         self.phase = phase
+        self.look_ahead = int(look_ahead)
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
         built = problem.transcription.build(problem.structure(self.phase))
+        if self.look_ahead > 1:
+            return walk_step_by_step(problem, self.name, LookAhead(built, self.look_ahead).solve_step, on_step)
 
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
             return solve_with_retries(problem, index, built, problem.step_data(index, state), phase=self.phase)

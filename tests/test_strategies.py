@@ -333,3 +333,47 @@ def test_whole_walk_solves_the_full_forward_walk(forward):
     assert walk.complete, walk.failure
     assert len(walk.steps) == forward.n_steps == 11
     assert 0 < walk.acot < 1 and all(step.verification.max_defect < 1e-6 for step in walk.steps)
+
+
+def test_a_chain_starts_each_step_where_the_event_map_of_the_previous_one_ends():
+    """The symbolic push-off and heel-strike map inside a chain is the numeric one the per-step walk uses, also for
+    a Leg-2 stance step of a robot with unequal legs (whose role-ordered robot vector the chain turns back)."""
+    from gaitbench.robot import RobotParameters
+    from gaitbench.walk import next_step_state
+    from gaitbench.walk_chain import WalkChain
+
+    experiment = dataclasses.replace(_short_slope(3), robot=RobotParameters(m1=15.0, m2=25.0, M=40.0, l=1.0, a=0.5))
+    problem = WalkProblem(experiment, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 8)
+    built = problem.transcription.build(problem.structure("second"))
+    chain = WalkChain(built, first_stance=2, count=2)
+    state = np.array([0.25, -0.2, -1.1, -0.4])
+    p = chain.parameters(problem, 2, state)
+    x = chain.guess(problem, 2, [(state, None)]) + 0.01 * np.random.default_rng(0).standard_normal(chain.nlp.n_variables)
+    (x1, data1), (_, data2) = chain.steps(problem, 2, x, p)
+    assert (data1.stance, data2.stance) == (2, 1)
+    np.testing.assert_allclose(data1.initial_state, state)
+    expected = next_step_state(problem.model("second"), built.trajectory(x1, data1))
+    np.testing.assert_allclose(data2.initial_state, expected, atol=1e-10)
+
+
+def test_look_ahead_walks_past_the_greedy_dead_end():
+    """Stairs, DMOC, N = 20: the greedy walk (H = 1) stops at step 8, infeasible after every rung of the retry
+    ladder; solving each step with the next one (H = 2) and committing it alone walks all 11 steps."""
+    stairs = REGISTRY.create("experiment", "stairs")
+    problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 20)
+    greedy = REGISTRY.create("strategy", "one-phase").solve(problem)
+    assert not greedy.complete and greedy.steps[-1].index == 8 and greedy.steps[-1].status == "infeasible"
+    walk = REGISTRY.create("strategy", "one-phase", look_ahead=2).solve(problem)
+    assert walk.complete, walk.failure
+    assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
+    windows = [step.details["look_ahead"] for step in walk.steps[:-1]]
+    assert all(window["horizon"] == 2 and "fallback" not in window for window in windows)
+    assert "look_ahead" not in walk.steps[-1].details  # the last step has nothing to look ahead to
+
+
+def test_look_ahead_must_be_a_positive_whole_number_of_second_phase_steps():
+    with pytest.raises(ValueError, match="look_ahead = 0"):
+        REGISTRY.create("strategy", "one-phase", look_ahead=0)
+    with pytest.raises(ValueError, match="needs phase = 'second'"):
+        REGISTRY.create("strategy", "one-phase", phase="first", look_ahead=2)
