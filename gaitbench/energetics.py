@@ -115,24 +115,9 @@ def average_cot(cots: Sequence[float] | np.ndarray) -> float:
     return float(values.mean())
 
 
-def point_costs(dq: np.ndarray, tau: np.ndarray, push_off_energy: float) -> np.ndarray:
-    """The thesis's point cost of transport PCOT_k per node (ch3b §6.3, L9875–10002).
-
-    ``dq`` and ``tau`` are (N, 2) arrays of leg angular velocities and hip torques (columns leg 1, leg 2).
-    PCOT_k = |P_hip,k| at every node, and the push-off kinetic-energy increase is added at the last node.
-    Decrease & Conquer ranks candidate trajectories node by node with it; it uses exact |·|, no smoothing.
-    """
-    dq = np.asarray(dq, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-    if dq.ndim != 2 or dq.shape[1] != 2 or dq.shape != tau.shape:
-        raise ValueError(f"dq {dq.shape} and tau {tau.shape} must both be (N, 2) arrays")
-    pcot = np.abs(hip_power(dq[:, 0], dq[:, 1], tau[:, 0], tau[:, 1]))
-    pcot[-1] += push_off_energy
-    return pcot
-
-
 def candidate_cot(pcot: np.ndarray, total_mass: float, chord: float, g: float = G_CONST) -> float:
-    """Σ_k PCOT_k / (M_total g D), the thesis's COT of a synthesized candidate (L10093–10100).
+    """Σ_k PCOT_k / (M_total g D), the thesis's COT of a synthesized candidate (L10093–10100), from the point
+    costs of :meth:`gaitbench.objective.Objective.point_costs`.
 
     Taken literally this mixes watts (the nodal powers, with no h or quadrature weights) and joules (the
     push-off term), so it is not an energy per weight and distance. It ranks candidates of one step on one

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gaitbench.experiment import Limits
+from gaitbench.objective import NET_POWER, Objective
 from gaitbench.robot import RobotParameters
 
 PHASES = ("first", "second")
@@ -74,6 +75,8 @@ class StepStructure:
     phase: str
     n_nodes: int
     options: ProblemOptions = field(default_factory=ProblemOptions)
+    objective: Objective = NET_POWER
+    """What the step's NLP minimises and its verification reports (:mod:`gaitbench.objective`)."""
 
     def __post_init__(self) -> None:
         for name, choices in OPTION_CHOICES.items():
@@ -151,4 +154,4 @@ def sectional_structure(structure: StepStructure, start_node: int) -> StepStruct
     """
     if not 1 <= start_node <= structure.n_nodes - 2:
         raise ValueError(f"start node k0 = {start_node} must lie in 1 … N − 2 = {structure.n_nodes - 2}")
-    return StepStructure(structure.phase, structure.n_nodes - start_node + 1, structure.options)
+    return StepStructure(structure.phase, structure.n_nodes - start_node + 1, structure.options, structure.objective)

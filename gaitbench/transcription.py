@@ -1,10 +1,11 @@
 """Transcriptions turn a per-step gait problem into an :class:`~gaitbench.nlp.NLP`.
 
 A transcription plugin subclasses :class:`Transcription` and implements :meth:`Transcription.discretize`:
-its decision variables, its dynamics constraints, the initial-state constraint, the hip energy quadrature and
-the interpolant of its solution. Everything else about a step — the heel-strike configuration, clearance, the
-approach to the ground, push-off and ground reactions, and the objective — is added here, identically for every
-transcription, so that methods are compared on the same problem.
+its decision variables, its dynamics constraints, the initial-state constraint, the quadrature of the objective's
+running cost (:func:`running_cost`, :func:`interval_running_costs`) and the interpolant of its solution. Everything
+else about a step — the heel-strike configuration, clearance, the approach to the ground, push-off and ground
+reactions, and the objective's event cost — is added here, identically for every transcription, so that methods are
+compared on the same problem.
 """
 
 from __future__ import annotations
@@ -96,7 +97,8 @@ class Discretization:
     positions: ca.SX
     velocities: ca.SX
     accelerations: list[ca.SX | None]
-    hip_energy: ca.SX
+    running_cost: ca.SX
+    """∫ r dt over the step by the transcription's quadrature: the objective's running cost (J)."""
     decode: Callable[[dict[str, np.ndarray], np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
     interpolant: Callable[[dict[str, np.ndarray], np.ndarray], Interpolant]
     guess: Callable[[Seed, np.ndarray], dict[str, np.ndarray]]
@@ -156,8 +158,8 @@ class TranscribedStep:
     nlp: NLP
     discretization: Discretization
     cost_of_transport: ca.Function | None = None
-    """(x, p) -> the objective without its torque regularization: the transcription's hip-energy quadrature plus
-    the push-off energy, over M g D."""
+    """(x, p) -> the objective without its torque regularization: the transcription's quadrature of the running
+    cost plus the push-off's event cost, over M g D."""
 
     def objective_cot(self, x: np.ndarray, data: StepData) -> float:
         """The cost of transport the NLP's objective assigns to ``x``, without the torque regularization: what
@@ -171,8 +173,8 @@ class TranscribedStep:
         return float(self.cost_of_transport(self.settle_slacks(x, p), p))
 
     def settle_slacks(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """``x`` with each |P| slack pair of :func:`absolute_value` (blocks ``name_positive``, ``name_negative``
-        with the constraint ``name_split``) set to the positive and negative parts of the power it stands for."""
+        """``x`` with each slack pair of :func:`charged` (blocks ``name_positive``, ``name_negative`` with the
+        constraint ``name_split``) set to the positive and negative parts of the power it stands for."""
         x = np.array(x, dtype=float)
         g = self.nlp.constraint_values(x, p)
         variables = self.nlp.variable_blocks
@@ -251,8 +253,12 @@ class Transcription(ABC):
         builder = NLPBuilder()
         swing_model = biped_functions(2, 1)  # role coordinates: the stance leg is "Leg 1"
         discretization = self.discretize(structure, builder, symbols, swing_model)
-        push_off_energy = _add_step_constraints(structure, builder, symbols, discretization)
-        energy = discretization.hip_energy + push_off_energy
+        push_off_work = _add_step_constraints(structure, builder, symbols, discretization)
+        if structure.objective.signed_event or structure.phase == "first":
+            event_cost = push_off_work
+        else:
+            event_cost = charged(builder, structure, "push_off_work", push_off_work)
+        energy = discretization.running_cost + event_cost
         weight = symbols.total_mass * symbols.gravity * symbols.chord
         rho = structure.options.torque_regularization
         regularization = rho * symbols.time_step * ca.sumsqr(builder.variables("torques")) if rho else 0
@@ -340,26 +346,58 @@ def _add_step_constraints(
     return push_off_energy
 
 
-def absolute_power(builder: NLPBuilder, structure: StepStructure, name: str, tau: ca.SX, dq: ca.SX) -> ca.SX:
-    """|τ·q̇| column by column (a 1 × n row) as the objective sees it.
+def running_cost(builder: NLPBuilder, structure: StepStructure, name: str, dq: ca.SX, tau: ca.SX,
+                 robot: ca.SX) -> ca.SX:
+    """The objective's running cost (:mod:`gaitbench.objective`) at each column of the role-order rates and
+    torques ``dq``, ``tau`` (2 × n), as a 1 × n row: its charged powers by :func:`charged`, plus its smooth rate."""
+    objective = structure.objective
+    args = (dq[0, :], dq[1, :], tau[0, :], tau[1, :])
+    rate = _channel_sum(charged(builder, structure, name, ca.vertcat(*objective.powers(*args))), 1)
+    smooth = objective.smooth_rate(*args, robot)
+    return _plus(rate, smooth)
 
-    ``slack`` (default): P = s⁺ − s⁻ with s± ≥ 0 as new variables and |P| = s⁺ + s⁻, exact at any optimum and
-    smooth for the solver. ``smooth``: the thesis's √(P² + ε²) (DECISIONS §5), whose kink of curvature 1/ε
-    makes interior-point solvers crawl; kept to reproduce the thesis.
+
+def charged(builder: NLPBuilder, structure: StepStructure, name: str, powers: ca.SX) -> ca.SX:
+    """w⁺ max(P, 0) + w⁻ max(−P, 0) for each entry of ``powers`` (any shape), the weights the objective's, as the
+    NLP sees it by ``structure.options.absolute_value``.
+
+    ``slack`` (default): P = s⁺ − s⁻ with s± ≥ 0 as new variables (blocks ``name_positive``, ``name_negative``, the
+    constraint ``name_split``) and the charge w⁺ s⁺ + w⁻ s⁻, exact at any optimum and smooth for the solver.
+    ``smooth``: the thesis's √(P² + ε²) for |P| (DECISIONS §5), whose kink of curvature 1/ε makes interior-point
+    solvers crawl; kept to reproduce the thesis.
     """
-    return absolute_value(builder, structure, name, ca.sum1(tau * dq))
-
-
-def absolute_value(builder: NLPBuilder, structure: StepStructure, name: str, power: ca.SX) -> ca.SX:
-    """|P| of a 1 × n row of powers as the objective sees it, by ``structure.options.absolute_value`` (see
-    :func:`absolute_power`)."""
+    if powers.numel() == 0:
+        return powers
+    objective = structure.objective
+    positive_weight, negative_weight = objective.positive_weight, objective.negative_weight
     if structure.options.absolute_value == "smooth":
-        return smooth_abs(power, structure.options.smoothing_eps)
-    n = power.numel()
-    positive = builder.variable(f"{name}_positive", (1, n), 0.0, np.inf)
-    negative = builder.variable(f"{name}_negative", (1, n), 0.0, np.inf)
-    builder.constrain(f"{name}_split", power - positive + negative)
-    return positive + negative
+        magnitude = smooth_abs(powers, structure.options.smoothing_eps)
+        if positive_weight == negative_weight:
+            return _scaled(magnitude, positive_weight)
+        return ((positive_weight + negative_weight) / 2 * magnitude
+                + (positive_weight - negative_weight) / 2 * powers)
+    positive = builder.variable(f"{name}_positive", powers.shape, 0.0, np.inf)
+    negative = builder.variable(f"{name}_negative", powers.shape, 0.0, np.inf)
+    builder.constrain(f"{name}_split", powers - positive + negative)
+    return _scaled(positive, positive_weight) + _scaled(negative, negative_weight)
+
+
+def _scaled(values: ca.SX, weight: float) -> ca.SX:
+    return values if weight == 1.0 else weight * values
+
+
+def _plus(values: ca.SX, more: ca.SX | None) -> ca.SX:
+    if more is None:
+        return values
+    return more if values.numel() == 0 else values + more
+
+
+def _channel_sum(charges: ca.SX, channels: int) -> ca.SX:
+    """Rows i·c … i·c + c − 1 of ``charges`` (point-major, c = ``channels``) summed: one row per point."""
+    if channels == 1 or charges.numel() == 0:
+        return charges
+    return ca.vertcat(*[ca.sum1(charges[i * channels:(i + 1) * channels, :])
+                        for i in range(charges.shape[0] // channels)])
 
 
 @dataclass(frozen=True)
@@ -388,22 +426,45 @@ approximate, and Boole's is within 2.2 % for the sign change at the midpoint tha
 makes (a linear power through zero there)."""
 
 
-def interval_absolute_powers(builder: NLPBuilder, structure: StepStructure, name: str, powers: ca.Function,
-                             variables: list[ca.SX], parameters: ca.SX) -> ca.SX:
-    """|P| of ``powers(z_k, p)`` (m × 1 per interval; z_k stacks column k of each of ``variables``) as an
-    m × M matrix, by the split or smoothing of :func:`absolute_value`. The split is declared per interval, so that
-    the NLP gets its per-interval Hessian."""
-    n_intervals, m = variables[0].shape[1], powers.size1_out(0)
+def interval_running_costs(builder: NLPBuilder, structure: StepStructure, name: str, motion: ca.Function,
+                           variables: list[ca.SX], parameters: ca.SX) -> ca.SX:
+    """The objective's running cost at m points of each interval, as an m × M matrix.
+
+    ``motion(z_k, p)`` gives the role-order (q̇_st, q̇_sw, τ_st, τ_sw) at the m points stacked (4m × 1); z_k stacks
+    column k of each of ``variables``. The charged powers are split as in :func:`charged`, declared per interval,
+    so that the NLP gets its per-interval Hessian.
+    """
+    objective = structure.objective
+    n_intervals, m = variables[0].shape[1], motion.size1_out(0) // 4
+    c = len(objective.channels)
+    n_z = motion.size1_in(0)
+    z, p = ca.SX.sym("z", n_z), ca.SX.sym("p", motion.size1_in(1))
+    values = motion(z, p)
+    powers, smooth = [], []
+    for i in range(m):
+        args = (values[4 * i], values[4 * i + 1], values[4 * i + 2], values[4 * i + 3])
+        powers += objective.powers(*args)
+        rate = objective.smooth_rate(*args, p[PARAMETER_LAYOUT["robot"]])
+        if rate is not None:
+            smooth.append(rate)
+    stacked = ca.repmat(parameters, 1, n_intervals)
+    smooth_rates = (ca.Function(f"{name}_smooth", [z, p], [ca.vertcat(*smooth)]).map(n_intervals)(
+        ca.vertcat(*variables), stacked) if smooth else None)
+    if not powers:
+        return smooth_rates
+    power_function = ca.Function(f"{name}_powers", [z, p], [ca.vertcat(*powers)])
     if structure.options.absolute_value != "slack":
-        values = powers.map(n_intervals)(ca.vertcat(*variables), ca.repmat(parameters, 1, n_intervals))
-        return ca.vertcat(*[absolute_value(builder, structure, f"{name}_{i}", values[i, :]) for i in range(m)])
-    positive = builder.variable(f"{name}_positive", (m, n_intervals), 0.0, np.inf)
-    negative = builder.variable(f"{name}_negative", (m, n_intervals), 0.0, np.inf)
-    n_z = powers.size1_in(0)
-    z, p = ca.SX.sym("z", n_z + 2 * m), ca.SX.sym("p", powers.size1_in(1))
-    split = ca.Function(f"{name}_split", [z, p], [powers(z[:n_z], p) - z[n_z:n_z + m] + z[n_z + m:]])
+        charges = charged(builder, structure, name, power_function.map(n_intervals)(ca.vertcat(*variables), stacked))
+        return _plus(_channel_sum(charges, c), smooth_rates)
+    rows = c * m
+    positive = builder.variable(f"{name}_positive", (rows, n_intervals), 0.0, np.inf)
+    negative = builder.variable(f"{name}_negative", (rows, n_intervals), 0.0, np.inf)
+    split_z = ca.SX.sym("z", n_z + 2 * rows)
+    split = ca.Function(f"{name}_split", [split_z, p], [power_function(split_z[:n_z], p)
+                                                          - split_z[n_z:n_z + rows] + split_z[n_z + rows:]])
     builder.constrain_intervals([f"{name}_split"], split, [*variables, positive, negative], parameters)
-    return positive + negative
+    charges = (_scaled(positive, objective.positive_weight) + _scaled(negative, objective.negative_weight))
+    return _plus(_channel_sum(charges, c), smooth_rates)
 
 
 def blended_seed(p: np.ndarray, n_nodes: int) -> Seed:

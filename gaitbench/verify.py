@@ -1,7 +1,8 @@
 """Verification of every solved step: is it a trajectory of the robot, and what does it really cost?
 
 The optimizer's objective is not trusted for reporting (DECISIONS §5): the COT is recomputed from the trajectory's
-own interpolant on a fine grid with exact |power|, and the trajectory is re-simulated with the core simulator driven
+own interpolant on a fine grid with the step's objective (:mod:`gaitbench.objective`) read exactly (|·| without
+slacks or smoothing), and the trajectory is re-simulated with the core simulator driven
 by its controls from its initial state.
 
 The objective is still compared with the verified COT: a transcription whose cost quadrature sees less than its
@@ -16,9 +17,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from gaitbench.energetics import cost_of_transport, hip_energy, hip_power
-from gaitbench.gait_problem import StepData
+from gaitbench.energetics import cost_of_transport, hip_energy
+from gaitbench.gait_problem import StepData, role_robot_vector
 from gaitbench.mechanics import BipedModel
+from gaitbench.objective import Objective
 from gaitbench.simulate import OpenLoop, simulate
 from gaitbench.transcription import StepTrajectory, TranscribedStep
 
@@ -37,8 +39,8 @@ class StepVerification:
     max_defect: float  # largest violation of the transcription's dynamics constraints
     resim_error: float  # largest state error (angles in rad, rates in rad/s) at the step's end
     resim_max_error: float  # largest state error at any node along the step
-    hip_energy: float  # J, exact |power| on a fine grid of the interpolant
-    push_off_energy: float  # J
+    hip_energy: float  # J, the objective's running cost on a fine grid of the interpolant (net-power: exact |power|)
+    push_off_energy: float  # J, the push-off's work (kinetic-energy increase); the COT has its event cost
     cot: float
     objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
     objective_gap: float | None = None  # (cot − objective_cot) / max(cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
@@ -55,13 +57,15 @@ def verify_step(
     p = data.parameter_vector()
     max_defect = built.nlp.block_violations(x, p)["dynamics"]
 
-    energy = fine_grid_hip_energy(trajectory)
+    objective = built.structure.objective
+    energy = fine_grid_running_cost(trajectory, objective, role_robot_vector(data.robot, data.stance))
     push_off_energy = 0.0
     q_end, dq_end = trajectory.q[-1], trajectory.dq[-1]
     if model.dof == 4:
         foot = np.zeros(2)
         _, push_off_energy = model.push_off(np.r_[q_end, foot], np.r_[dq_end, foot], trajectory.push_off, data.stance)
-    cot = cost_of_transport(energy + push_off_energy, data.robot.total_mass, data.chord, data.robot.g)
+    cot = cost_of_transport(energy + objective.event_cost(push_off_energy), data.robot.total_mass, data.chord,
+                            data.robot.g)
 
     resim = resimulate(trajectory, data, model)
     errors = np.abs(np.hstack([resim.q[:, :2] - trajectory.q, resim.dq[:, :2] - trajectory.dq])).max(axis=1)
@@ -86,8 +90,10 @@ def objective_gap(cot: float, objective_cot: float) -> float:
     return (cot - objective_cot) / max(abs(cot), OBJECTIVE_ATOL / OBJECTIVE_RTOL)
 
 
-def fine_grid_hip_energy(trajectory: StepTrajectory, samples_per_interval: int = SAMPLES_PER_INTERVAL) -> float:
-    """∫ |τ·q̇| dt from the interpolant, Simpson on a grid ``samples_per_interval`` times finer than the nodes.
+def fine_grid_running_cost(trajectory: StepTrajectory, objective: Objective, robot: np.ndarray,
+                           samples_per_interval: int = SAMPLES_PER_INTERVAL) -> float:
+    """∫ r dt of the objective's running cost (exact, ∫ |τ·q̇| dt under ``net-power``) from the interpolant,
+    Simpson on a grid ``samples_per_interval`` times finer than the nodes; ``robot`` in role order.
 
     Each interval is integrated on its own, its ends read just inside it (:data:`INSIDE`): controls may jump at
     the nodes (DMOC's are piecewise constant), and one composite rule across the step would read the power at a
@@ -100,8 +106,8 @@ def fine_grid_hip_energy(trajectory: StepTrajectory, samples_per_interval: int =
         samples = start + (end - start) * fractions
         tau = np.array([trajectory.control(t) for t in samples])
         dq = np.array([trajectory.state(t)[1] for t in samples])
-        power = hip_power(dq[:, 0], dq[:, 1], tau[:, 0], tau[:, 1])
-        energy += hip_energy((end - start) / samples_per_interval, power)
+        rate = objective.rate(dq, tau, trajectory.stance, robot)
+        energy += hip_energy((end - start) / samples_per_interval, rate)
     return energy
 
 

@@ -20,6 +20,7 @@ from gaitbench.energetics import average_cot
 from gaitbench.experiment import Experiment
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.mechanics import BipedModel
+from gaitbench.objective import NET_POWER, Objective
 from gaitbench.solver import Solver, SolverResult, SolverStatus
 from gaitbench.terrain import StepCheck
 from gaitbench.transcription import Seed, StepTrajectory, TranscribedStep, Transcription
@@ -103,6 +104,8 @@ class WalkResult:
     """Walk-level figures of the strategy (for decrease-and-conquer: claimed and verified ACOT, candidates)."""
     problem_options: dict = field(default_factory=dict)
     """The :class:`ProblemOptions` the walk was solved under, every field (limits included)."""
+    objective: str = NET_POWER.name
+    """The objective every COT of the walk is measured in (:meth:`gaitbench.objective.Objective.describe`)."""
 
     @property
     def failure(self) -> str | None:
@@ -124,6 +127,7 @@ class WalkResult:
             "transcription": self.transcription,
             "solver": self.solver,
             "strategy": self.strategy,
+            "objective": self.objective,
             "N": self.N,
             "phase": self.phase,
             "requested_steps": self.requested_steps,
@@ -175,7 +179,7 @@ def trajectory_arrays(trajectory: StepTrajectory, prefix: str) -> dict[str, np.n
 @dataclass(frozen=True)
 class WalkProblem:
     """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
-    transcription and one solver, under the given problem options."""
+    transcription and one solver, under the given problem options, for the given objective."""
 
     experiment: Experiment
     transcription: Transcription
@@ -183,6 +187,7 @@ class WalkProblem:
     n_nodes: int
     steps: int | None = None
     options: ProblemOptions | None = None
+    objective: Objective = NET_POWER
 
     def __post_init__(self) -> None:
         if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
@@ -196,7 +201,7 @@ class WalkProblem:
         return self.experiment.n_steps if self.steps is None else self.steps
 
     def structure(self, phase: str, n_nodes: int | None = None) -> StepStructure:
-        return StepStructure(phase, n_nodes or self.n_nodes, self.options)
+        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective)
 
     def step_data(self, index: int, state: np.ndarray) -> StepData:
         """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""
@@ -221,7 +226,8 @@ class WalkProblem:
     def result(self, strategy: str, phase: str = "second") -> WalkResult:
         return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
                           solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
-                          requested_steps=self.n_steps, problem_options=asdict(self.options))
+                          requested_steps=self.n_steps, problem_options=asdict(self.options),
+                          objective=self.objective.describe())
 
 
 class Strategy(Protocol):

@@ -25,13 +25,15 @@ from __future__ import annotations
 import multiprocessing
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.energetics import candidate_cot, point_costs
-from gaitbench.gait_problem import StepData, StepStructure, sectional_structure
+from gaitbench.energetics import candidate_cot
+from gaitbench.gait_problem import StepData, StepStructure, role_robot_vector, sectional_structure
+from gaitbench.objective import Objective
 from gaitbench.solver import SolverResult, prepare
 from gaitbench.transcription import StepTrajectory, TranscribedStep, Transcription, nodal_trajectory
 from gaitbench.verify import verify_step
@@ -112,7 +114,8 @@ class DecreaseAndConquer:
             else:
                 failed.append({"k0": k0, "status": result.status.value, "message": result.message})
 
-        nodes = NodeValues.of(candidates, starts, n, h, problem.model("second"))
+        costs = PointCosts(problem.objective, data.stance, role_robot_vector(data.robot, data.stance))
+        nodes = NodeValues.of(candidates, starts, n, h, problem.model("second"), costs)
         synthesis = synthesize(nodes.pcot, nodes.values, max_checks=self.max_checks)
         completed = nodes.completed(starts)
         options = {"synthesized": nodes.patch(synthesis.selection)}
@@ -214,7 +217,8 @@ def sectional_builder(transcription: Transcription, structure: StepStructure) ->
     if builder is None:
         _SECTION_BUILDERS.append(builder := transcription)
     for kept in _SECTION_BUILDERS:
-        kept.keep_builds(lambda section: section.options == structure.options)
+        kept.keep_builds(lambda section: (section.options, section.objective)
+                                         == (structure.options, structure.objective))
     return builder
 
 
@@ -228,16 +232,32 @@ def _label(start: int) -> str:
     return "complete" if start == 0 else f"sectional-{start + 1}"
 
 
+@dataclass
+class PointCosts:
+    """The walk's objective as point costs at one step's nodes (:meth:`Objective.point_costs`): what synthesis
+    ranks candidates by and the candidate COT sums, so that decrease and conquer chooses by the cost it reports."""
+
+    objective: Objective
+    stance: int
+    robot: np.ndarray
+    """The step's robot vector in role order."""
+
+    def __call__(self, dq: np.ndarray, tau: np.ndarray, push_off_work: float) -> np.ndarray:
+        return self.objective.point_costs(dq, tau, push_off_work, self.stance, self.robot)
+
+
 class NodeValues:
     """Every candidate's values at the step's N nodes (NaN before its start): states, torques, point costs."""
 
     def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: np.ndarray,
-                 push_off_energy: np.ndarray) -> None:
+                 push_off_energy: np.ndarray, costs: PointCosts) -> None:
         self.q, self.dq, self.tau = q, dq, tau  # (J, N, 2), leg order
         self.push_off, self.push_off_energy = push_off, push_off_energy  # (J,)
+        self.costs = costs
 
     @classmethod
-    def of(cls, candidates: list[StepTrajectory], starts: list[int], n_nodes: int, h: float, model) -> NodeValues:
+    def of(cls, candidates: list[StepTrajectory], starts: list[int], n_nodes: int, h: float, model,
+           costs: PointCosts) -> NodeValues:
         shape = (len(candidates), n_nodes, 2)
         q, dq, tau = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
         push_off, energy = np.zeros(len(candidates)), np.zeros(len(candidates))
@@ -248,7 +268,7 @@ class NodeValues:
             foot = np.zeros(2)
             _, energy[j] = model.push_off(np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot],
                                           trajectory.push_off, trajectory.stance)
-        return cls(q, dq, tau, push_off, energy)
+        return cls(q, dq, tau, push_off, energy, costs)
 
     @property
     def values(self) -> np.ndarray:
@@ -257,36 +277,38 @@ class NodeValues:
 
     @property
     def pcot(self) -> np.ndarray:
-        """(J, N) point costs, the push-off energy of each candidate at its last node."""
+        """(J, N) point costs, the push-off's event cost of each candidate at its last node."""
         rows = []
         for j in range(self.q.shape[0]):
             defined = ~np.isnan(self.q[j, :, 0])
             row = np.full(self.q.shape[1], np.nan)
-            row[defined] = point_costs(self.dq[j, defined], self.tau[j, defined], self.push_off_energy[j])
+            row[defined] = self.costs(self.dq[j, defined], self.tau[j, defined], self.push_off_energy[j])
             rows.append(row)
         return np.array(rows)
 
     def completed(self, starts: list[int]) -> NodeValues:
         return NodeValues(complete_sections(self.q, starts), complete_sections(self.dq, starts),
-                          complete_sections(self.tau, starts), self.push_off, self.push_off_energy)
+                          complete_sections(self.tau, starts), self.push_off, self.push_off_energy, self.costs)
 
     def patch(self, selection: list[int]) -> Patch:
         nodes = np.arange(len(selection))
         last = selection[-1]
         return Patch(self.q[selection, nodes], self.dq[selection, nodes], self.tau[selection, nodes],
-                     float(self.push_off[last]), float(self.push_off_energy[last]))
+                     float(self.push_off[last]), float(self.push_off_energy[last]), self.costs)
 
 
 class Patch:
     """A trajectory assembled node by node from candidates: what the thesis synthesizes and completes."""
 
-    def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float, push_off_energy: float):
+    def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float, push_off_energy: float,
+                 costs: PointCosts):
         self.q, self.dq, self.tau = q, dq, tau
         self.push_off, self.push_off_energy = push_off, push_off_energy
+        self.costs = costs
 
     @property
     def pcot(self) -> np.ndarray:
-        return point_costs(self.dq, self.tau, self.push_off_energy)
+        return self.costs(self.dq, self.tau, self.push_off_energy)
 
     def trajectory(self, stance: int, h: float) -> StepTrajectory:
         """The patch as a step trajectory: cubic Hermite angles through the nodal (q, q̇), linear rates and

@@ -9,8 +9,9 @@ momentum leaving into the interval after (p_k⁻ = −D1 L_d(q_k, q_{k+1}) − (
 continuous momenta M(q) q̇ of the boundary velocities take their place ((8.58), (8.60) corrected), so the
 heel-strike and push-off maps act on true velocities.
 
-The hip energy integrates each interval's own power P_k(s) = τ_k·q̇(s) by Boole's rule, at the nodes and at ¼, ½
-and ¾ of the interval, weights 7, 32, 12, 32, 7 over 90 (``interval_powers``). The velocities at the interval's ends
+The hip energy (the objective's running cost, :mod:`gaitbench.objective`; below for the default ``net-power``)
+integrates each interval's own power P_k(s) = τ_k·q̇(s) by Boole's rule, at the nodes and at ¼, ½
+and ¾ of the interval, weights 7, 32, 12, 32, 7 over 90 (``interval_motion``). The velocities at the interval's ends
 are its forced discrete Legendre transforms, the momenta with which its discrete forces f_k^± = (h/2) τ_k act at
 its two nodes (equal to the node velocities by the discrete Euler–Lagrange equations); inside, the velocity is that
 of the cubic Hermite positions through them, the interpolant verification and tracking use. With τ_k constant that
@@ -48,11 +49,11 @@ from gaitbench.transcription import (
     Interpolant,
     StepSymbols,
     Transcription,
-    absolute_power,
     angle_box,
     cubic_hermite,
-    interval_absolute_powers,
+    interval_running_costs,
     locate_interval,
+    running_cost,
     sample_seed,
 )
 
@@ -98,13 +99,13 @@ class DiscreteMechanics(Transcription):
         v = (q[:, 1:] - q[:, :-1]) / h
         builder.constrain("velocity_bounds", v, -limits.dq_max, limits.dq_max)
         if self.quadrature == "midpoint":
-            hip_energy = h * ca.sum2(absolute_power(builder, structure, "power_intervals", tau, v))
+            cost = h * ca.sum2(running_cost(builder, structure, "power_intervals", v, tau, robot))
         else:
             rule = QUADRATURE_RULES[self.quadrature]
             points, weights = (0.0, *rule.points, 1.0), (rule.end_weight, *rule.weights, rule.end_weight)
-            absolute = interval_absolute_powers(builder, structure, "power_intervals", interval_powers(model, points),
-                                                [q[:, :-1], q[:, 1:], tau], symbols.vector)
-            hip_energy = h * ca.sum2(ca.mtimes(ca.DM(weights).T, absolute))
+            rates = interval_running_costs(builder, structure, "power_intervals", interval_motion(model, points),
+                                           [q[:, :-1], q[:, 1:], tau], symbols.vector)
+            cost = h * ca.sum2(ca.mtimes(ca.DM(weights).T, rates))
 
         # Node velocities M(q_k)⁻¹ p_k⁺ (App. A §2.4); the boundary velocities themselves at the two ends.
         interior = _velocity(model).map(n - 2)(q[:, 1:-1], arriving[:, 1:-1], ca.repmat(robot, 1, n - 2))
@@ -134,7 +135,7 @@ class DiscreteMechanics(Transcription):
                     "end_velocity": dq_guess[:, -1], "torques": tau_guess.flatten(order="F")}
 
         return Discretization(positions=q, velocities=velocities, accelerations=accelerations,
-                              hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
+                              running_cost=cost, decode=decode, interpolant=interpolant, guess=guess)
 
 
 def _discrete_lagrangian_slopes(model: BipedFunctions) -> ca.Function:
@@ -161,14 +162,14 @@ def momentum_balance(model: BipedFunctions) -> ca.Function:
                        [balance])
 
 
-def interval_powers(model: BipedFunctions, points: tuple[float, ...] = (0.0, 0.5, 1.0)) -> ca.Function:
-    """The hip power τ_k·q̇ of one interval's interpolant at the fractions ``points`` of the interval, from
-    (q_k, q_k+1, τ_k).
+def interval_motion(model: BipedFunctions, points: tuple[float, ...] = (0.0, 0.5, 1.0)) -> ca.Function:
+    """(q̇, τ_k) of one interval's interpolant at the fractions ``points`` of the interval, stacked, from
+    (q_k, q_k+1, τ_k): where the objective's running cost is read (the hip power τ_k·q̇ under ``net-power``).
 
     The end velocities are the interval's own forced discrete Legendre transforms, M(q_k)⁻¹ (−D1 L_d − (h/2) τ_k)
     and M(q_k+1)⁻¹ (D2 L_d + (h/2) τ_k), which the discrete Euler–Lagrange equations make the node velocities;
     inside, the velocity is that of the cubic Hermite positions through them (at the midpoint
-    (3/2) v_k − (q̇_k + q̇_k+1)/4). With τ_k constant the power is a quadratic on the interval.
+    (3/2) v_k − (q̇_k + q̇_k+1)/4). With τ_k constant a power is a quadratic on the interval.
     """
     q_a, q_b, tau = ca.SX.sym("q_a", 2), ca.SX.sym("q_b", 2), ca.SX.sym("tau", 2)
     p = ca.SX.sym("p", N_STEP_PARAMETERS)
@@ -176,8 +177,10 @@ def interval_powers(model: BipedFunctions, points: tuple[float, ...] = (0.0, 0.5
     d1, d2 = _discrete_lagrangian_slopes(model)(q_a, q_b, h, robot)
     dq_start = ca.solve(model.mass(q_a, robot), -d1 - h / 2 * tau)
     dq_end = ca.solve(model.mass(q_b, robot), d2 + h / 2 * tau)
-    powers = [ca.dot(tau, cubic_hermite(q_a, q_b, h * dq_start, h * dq_end, s)[1] / h) for s in points]
-    return ca.Function("dmoc_interval_powers", [ca.vertcat(q_a, q_b, tau), p], [ca.vertcat(*powers)])
+    motion = []
+    for s in points:
+        motion += [cubic_hermite(q_a, q_b, h * dq_start, h * dq_end, s)[1] / h, tau]
+    return ca.Function("dmoc_interval_motion", [ca.vertcat(q_a, q_b, tau), p], [ca.vertcat(*motion)])
 
 
 def _momentum(model: BipedFunctions) -> ca.Function:

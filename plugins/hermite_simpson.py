@@ -27,11 +27,11 @@ from gaitbench.transcription import (
     Discretization,
     Interpolant,
     Transcription,
-    absolute_power,
     collocation_variables,
     cubic_hermite,
-    interval_absolute_powers,
+    interval_running_costs,
     locate_interval,
+    running_cost,
     sample_seed,
     state_derivative,
 )
@@ -59,27 +59,17 @@ class HermiteSimpson(Transcription):
         builder.constrain_intervals(["dynamics"], simpson_defect(dynamics), interval, symbols.vector)
         builder.constrain("initial_state", states[:, 0] - symbols.initial_state)
 
-        power_nodes = absolute_power(builder, structure, "power_nodes", controls, states[2:4, :])
+        power_nodes = running_cost(builder, structure, "power_nodes", states[2:4, :], controls, symbols.robot)
         if self.quadrature == "boole":
             rule = QUADRATURE_RULES["boole"]
-            interior = interval_absolute_powers(builder, structure, "power_interior",
-                                                interior_powers(dynamics, rule.points), interval, symbols.vector)
-            hip_energy = h * (rule.end_weight * ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:])
-                              + ca.sum2(ca.mtimes(ca.DM(rule.weights).T, interior)))
+            interior = interval_running_costs(builder, structure, "power_interior",
+                                              interior_motion(dynamics, rule.points), interval, symbols.vector)
+            cost = h * (rule.end_weight * ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:])
+                        + ca.sum2(ca.mtimes(ca.DM(rule.weights).T, interior)))
         else:
-            if structure.options.absolute_value == "slack":
-                # |P| at the midpoints by the same split as absolute_power, declared per interval for its Hessian.
-                positive = builder.variable("power_midpoints_positive", (1, n - 1), 0.0, np.inf)
-                negative = builder.variable("power_midpoints_negative", (1, n - 1), 0.0, np.inf)
-                builder.constrain_intervals(["power_midpoints_split"], midpoint_power_split(dynamics),
-                                            [*interval, positive, negative], symbols.vector)
-                power_mid = positive + negative
-            else:
-                f_left, f_right = slopes[:, :-1], slopes[:, 1:]
-                mid_states = 0.5 * (left + right) + h / 8 * (f_left - f_right)
-                mid_controls = 0.5 * (controls[:, :-1] + controls[:, 1:])
-                power_mid = absolute_power(builder, structure, "power_midpoints", mid_controls, mid_states[2:4, :])
-            hip_energy = h / 6 * (ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:]) + 4 * ca.sum2(power_mid))
+            power_mid = interval_running_costs(builder, structure, "power_midpoints", midpoint_motion(dynamics),
+                                               interval, symbols.vector)
+            cost = h / 6 * (ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:]) + 4 * ca.sum2(power_mid))
 
         def unpack(blocks):
             return (np.reshape(blocks["states"], (4, n), order="F"),
@@ -100,7 +90,7 @@ class HermiteSimpson(Transcription):
 
         accelerations = [slopes[2:4, k] for k in range(n)]
         return Discretization(positions=states[:2, :], velocities=states[2:4, :], accelerations=accelerations,
-                              hip_energy=hip_energy, decode=decode, interpolant=interpolant, guess=guess)
+                              running_cost=cost, decode=decode, interpolant=interpolant, guess=guess)
 
 
 def _interval(dynamics: ca.Function):
@@ -124,26 +114,24 @@ def simpson_defect(dynamics: ca.Function) -> ca.Function:
     return ca.Function("hermite_simpson_defect", [z, p], [defect])
 
 
-def midpoint_power_split(dynamics: ca.Function) -> ca.Function:
-    """P_mid − s⁺ + s⁻ of one interval: the hip power at the Hermite midpoint, split as in ``absolute_power``."""
+def midpoint_motion(dynamics: ca.Function) -> ca.Function:
+    """(q̇, τ) at one interval's Hermite midpoint (8.80), as a function of (x_k, x_k+1, u_k, u_k+1) and p: where
+    Simpson's rule reads the running cost inside the interval."""
     z, p, _, _, mid_state, mid_control = _interval(dynamics)
-    positive, negative = ca.SX.sym("s_positive"), ca.SX.sym("s_negative")
-    power = ca.dot(mid_control, mid_state[2:4])
-    return ca.Function("hermite_simpson_midpoint_power", [ca.vertcat(z, positive, negative), p],
-                       [power - positive + negative])
+    return ca.Function("hermite_simpson_midpoint_motion", [z, p], [ca.vertcat(mid_state[2:4], mid_control)])
 
 
-def interior_powers(dynamics: ca.Function, points: tuple[float, ...]) -> ca.Function:
-    """The hip power of one interval's interpolant (cubic Hermite states, linear controls) at the fractions
-    ``points`` of the interval, as a function of (x_k, x_k+1, u_k, u_k+1) and p."""
+def interior_motion(dynamics: ca.Function, points: tuple[float, ...]) -> ca.Function:
+    """(q̇, τ) of one interval's interpolant (cubic Hermite states, linear controls) at the fractions ``points`` of
+    the interval, stacked, as a function of (x_k, x_k+1, u_k, u_k+1) and p."""
     z, p, f_left, f_right, _, _ = _interval(dynamics)
     left, right, u_left, u_right = z[0:4], z[4:8], z[8:10], z[10:12]
     h = p[PARAMETER_LAYOUT["time_step"]]
-    powers = []
+    motion = []
     for s in points:
         state, _ = cubic_hermite(left, right, h * f_left, h * f_right, s)
-        powers.append(ca.dot((1 - s) * u_left + s * u_right, state[2:4]))
-    return ca.Function("hermite_interior_powers", [z, p], [ca.vertcat(*powers)])
+        motion += [state[2:4], (1 - s) * u_left + s * u_right]
+    return ca.Function("hermite_interior_motion", [z, p], [ca.vertcat(*motion)])
 
 
 def hermite_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:

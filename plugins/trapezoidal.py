@@ -5,8 +5,9 @@ applied to ẋ = f(x, u), second order. Controls are piecewise linear. The inter
 *Practical Methods for Optimal Control*): per interval the state is the quadratic whose slope is linear between
 f_k and f_{k+1}, so it passes through both nodes at a solution.
 
-The hip energy integrates the interpolant's own power by Boole's rule on each interval: at the nodes and at ¼, ½
-and ¾ of the interval (the quadratic states there, the linear torques), weights 7, 32, 12, 32, 7 over 90. The power
+The hip energy (the objective's running cost, :mod:`gaitbench.objective`) integrates the interpolant's own power
+by Boole's rule on each interval: at the nodes and at ¼, ½ and ¾ of the interval (the quadratic states there, the
+linear torques), weights 7, 32, 12, 32, 7 over 90. The power
 (quadratic velocities times linear torques) is a cubic on an interval, which the rule integrates exactly, so the
 objective is the energy verification measures wherever the power keeps its sign. ``quadrature="trapezoid"`` is the
 trapezoid rule on the nodes alone, the quadrature the defects suggest: it sees nothing between the nodes, and the
@@ -32,10 +33,10 @@ from gaitbench.transcription import (
     Interpolant,
     StepSymbols,
     Transcription,
-    absolute_power,
     collocation_variables,
-    interval_absolute_powers,
+    interval_running_costs,
     locate_interval,
+    running_cost,
     sample_seed,
     state_derivative,
 )
@@ -65,14 +66,14 @@ class Trapezoidal(Transcription):
         builder.constrain("dynamics", states[:, 1:] - states[:, :-1] - h / 2 * (slopes[:, :-1] + slopes[:, 1:]))
         builder.constrain("initial_state", states[:, 0] - symbols.initial_state)
 
-        power_nodes = absolute_power(builder, structure, "power_nodes", controls, states[2:4, :])
+        power_nodes = running_cost(builder, structure, "power_nodes", states[2:4, :], controls, symbols.robot)
         rule = QUADRATURE_RULES[self.quadrature]
-        hip_energy = h * rule.end_weight * ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:])
+        cost = h * rule.end_weight * ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:])
         if rule.points:
             interval = [states[:, :-1], states[:, 1:], controls[:, :-1], controls[:, 1:]]
-            interior = interval_absolute_powers(builder, structure, "power_interior",
-                                                interior_powers(dynamics, rule.points), interval, symbols.vector)
-            hip_energy += h * ca.sum2(ca.mtimes(ca.DM(rule.weights).T, interior))
+            interior = interval_running_costs(builder, structure, "power_interior",
+                                              interior_motion(dynamics, rule.points), interval, symbols.vector)
+            cost += h * ca.sum2(ca.mtimes(ca.DM(rule.weights).T, interior))
 
         def unpack(blocks):
             return (np.reshape(blocks["states"], (4, n), order="F"),
@@ -92,24 +93,24 @@ class Trapezoidal(Transcription):
             return {"states": np.vstack([q, dq]).flatten(order="F"), "torques": tau.flatten(order="F")}
 
         return Discretization(positions=states[:2, :], velocities=states[2:4, :],
-                              accelerations=[slopes[2:4, k] for k in range(n)], hip_energy=hip_energy,
+                              accelerations=[slopes[2:4, k] for k in range(n)], running_cost=cost,
                               decode=decode, interpolant=interpolant, guess=guess)
 
 
-def interior_powers(dynamics: ca.Function, points: tuple[float, ...]) -> ca.Function:
-    """The hip power of one interval's interpolant (below) at the fractions ``points`` of the interval, as a
+def interior_motion(dynamics: ca.Function, points: tuple[float, ...]) -> ca.Function:
+    """(q̇, τ) of one interval's interpolant (below) at the fractions ``points`` of the interval, stacked, as a
     function of (x_k, x_k+1, u_k, u_k+1) and p."""
     left, right = ca.SX.sym("x_k", 4), ca.SX.sym("x_k1", 4)
     u_left, u_right = ca.SX.sym("u_k", 2), ca.SX.sym("u_k1", 2)
     p = ca.SX.sym("p", N_STEP_PARAMETERS)
     robot, h = p[ROBOT], p[TIME_STEP]
     f_left, f_right = dynamics(left, u_left, robot), dynamics(right, u_right, robot)
-    powers = []
+    motion = []
     for s in points:
         dq = left[2:4] + f_left[2:4] * s * h + s**2 * h / 2 * (f_right[2:4] - f_left[2:4])
-        powers.append(ca.dot((1 - s) * u_left + s * u_right, dq))
-    return ca.Function("trapezoidal_interior_powers", [ca.vertcat(left, right, u_left, u_right), p],
-                       [ca.vertcat(*powers)])
+        motion += [dq, (1 - s) * u_left + s * u_right]
+    return ca.Function("trapezoidal_interior_motion", [ca.vertcat(left, right, u_left, u_right), p],
+                       [ca.vertcat(*motion)])
 
 
 def trapezoidal_interpolant(states: np.ndarray, slopes: np.ndarray, controls: np.ndarray, h: float) -> Interpolant:

