@@ -178,11 +178,13 @@ def _parse_options(pairs: tuple[str, ...], option: str) -> dict[str, object]:
 
 
 OPTION_OF_KIND = {"experiment": "'--experiment' / '-e'", "transcription": "'--transcription' / '-t'",
-                  "solver": "'--solver' / '-s'", "strategy": "'--strategy' / '-S'", "controller": "'--controller'",
+                  "solver": "'--solver' / '-s'", "strategy": "'--strategy' / '-S'", "objective": "'--objective'",
+                  "controller": "'--controller'",
                   "observer": "'--observer'", "disturbance": "'--disturbance'"}
 """The option that names a plugin of each kind, for usage errors."""
 
 OPTIONS_OF_KIND = {"solver": "'-o' / '--solver-option'", "strategy": "'-x' / '--strategy-option'",
+                   "objective": "'--objective-option'",
                    "controller": "'-c' / '--controller-option'", "observer": "'--observer-option'",
                    "disturbance": "'--disturbance-option'"}
 """The option that passes a plugin's own options, for usage errors."""
@@ -304,6 +306,21 @@ def _problem_options(pairs: tuple[str, ...], **flags: object) -> dict[str, objec
     help="Passed to the solver, e.g. -o max_iterations=500 -o linear_solver=mumps (repeatable).",
 )
 @click.option(
+    "--objective",
+    "objective_name",
+    default="net-power",
+    show_default=True,
+    help="Objective plugin: what each step minimises and every reported COT measures (net-power, the thesis's "
+         "cost; actuator-work; torque-squared; `gaitbench plugins --kind objective`).",
+)
+@click.option(
+    "--objective-option",
+    "objective_options",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Passed to the objective, e.g. --objective-option margaria=true (repeatable).",
+)
+@click.option(
     "--problem-option",
     "-p",
     "problem_options",
@@ -345,6 +362,8 @@ def solve(
     strategy_name: str,
     strategy_options: tuple[str, ...],
     solver_options: tuple[str, ...],
+    objective_name: str,
+    objective_options: tuple[str, ...],
     problem_options: tuple[str, ...],
     absolute_value: str | None,
     torque_regularization: float | None,
@@ -368,6 +387,8 @@ def solve(
     transcriber = _create(ctx, "transcription", transcription)
     solver = _create(ctx, "solver", solver_name, **_parse_options(solver_options, "--solver-option"))
     strategy = _create(ctx, "strategy", strategy_name, **_parse_options(strategy_options, "--strategy-option"))
+    objective = _create(ctx, "objective", objective_name,
+                        **_parse_options(objective_options, "--objective-option"))
     if steps is not None and steps > experiment.n_steps:
         raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
     _check_memory(transcription, strategy_name, n_nodes, steps or experiment.n_steps)
@@ -375,7 +396,8 @@ def solve(
     console = Console()
     total = steps or experiment.n_steps
     with console.status(f"solving step 1 of {total}") as status:
-        problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options)
+        problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options,
+                              objective=objective)
         walk = strategy.solve(problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
     _print_walk(console, walk)
     if out is not None:
@@ -487,7 +509,8 @@ def _print_tracking(console: Console, tracked) -> None:
 
 
 def _print_walk(console: Console, walk) -> None:
-    table = Table(title=f"{walk.experiment}: {walk.strategy}, {walk.transcription} + {walk.solver}, N = {walk.N}")
+    table = Table(title=f"{walk.experiment}: {walk.strategy}, {walk.transcription} + {walk.solver}, N = {walk.N}, "
+                        f"objective {walk.objective}")
     for column in ("step", "stance", "status", "COT", "time (s)", "iterations", "max defect", "resim error"):
         table.add_column(column, justify="right" if column not in ("status",) else "left")
     for step in walk.steps:

@@ -52,6 +52,16 @@ def register_transcriptions():
 
 
 @hookspec
+def register_objectives():
+    """Objectives: what a step costs, the NLP's running and event costs and the COT verification recomputes.
+
+    ``factory(**options)`` returns a :class:`gaitbench.objective.Objective` (a frozen dataclass, since built NLPs
+    are cached under it): its charged powers and smooth rate, in role order, serve the NLP and the fine-grid check
+    alike. Built-in: ``net-power`` (the thesis's cost, the default), ``actuator-work`` and ``torque-squared``.
+    """
+
+
+@hookspec
 def register_solvers():
     """NLP solvers.
 

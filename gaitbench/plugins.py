@@ -33,6 +33,7 @@ KINDS: dict[str, str] = {
     "experiment": "register_experiments",
     "model": "register_models",
     "transcription": "register_transcriptions",
+    "objective": "register_objectives",
     "solver": "register_solvers",
     "strategy": "register_strategies",
     "controller": "register_controllers",

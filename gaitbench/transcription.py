@@ -352,7 +352,8 @@ def running_cost(builder: NLPBuilder, structure: StepStructure, name: str, dq: c
     torques ``dq``, ``tau`` (2 × n), as a 1 × n row: its charged powers by :func:`charged`, plus its smooth rate."""
     objective = structure.objective
     args = (dq[0, :], dq[1, :], tau[0, :], tau[1, :])
-    rate = _channel_sum(charged(builder, structure, name, ca.vertcat(*objective.powers(*args))), 1)
+    charges = charged(builder, structure, name, ca.vertcat(*objective.powers(*args)))
+    rate = charges if charges.shape[0] <= 1 else ca.sum1(charges)
     smooth = objective.smooth_rate(*args, robot)
     return _plus(rate, smooth)
 
