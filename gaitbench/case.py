@@ -31,6 +31,10 @@ class PluginChoice:
         return {"name": self.name, "options": dict(sorted(self.options.items()))}
 
 
+DEFAULT_OBJECTIVE = PluginChoice("net-power")
+"""The thesis's cost, what a case without an objective is solved for."""
+
+
 @dataclass(frozen=True)
 class TrackingStage:
     """Closed-loop tracking of the walk once it is solved (issue 8): which controller, observer, disturbance."""
@@ -62,12 +66,15 @@ class Case:
     tracking: TrackingStage | None = None
     method: str = ""
     """The suite's label for the transcription/solver/strategy combination (``OP-DC``); not part of the key."""
+    objective: PluginChoice = DEFAULT_OBJECTIVE
+    """What every step minimises and every COT measures."""
     time_limit_s: float | None = None
     plugin_dirs: tuple[str, ...] = ()
 
     def identity(self) -> dict[str, Any]:
-        """What the result depends on, in canonical form: the key is a hash of exactly this."""
-        return {
+        """What the result depends on, in canonical form: the key is a hash of exactly this. The default objective
+        is left out, so cases keep the keys they had before objectives were plugins (and ``--resume`` finds them)."""
+        identity = {
             "experiment": self.experiment.as_dict(),
             "N": self.n_nodes,
             "steps": self.steps,
@@ -78,6 +85,9 @@ class Case:
             "repetition": self.repetition,
             "tracking": self.tracking.as_dict() if self.tracking else None,
         }
+        if self.objective != DEFAULT_OBJECTIVE:
+            identity["objective"] = self.objective.as_dict()
+        return identity
 
     @property
     def key(self) -> str:
@@ -90,6 +100,7 @@ class Case:
         """A short human-readable name for progress lines and error messages."""
         return (f"{self.experiment.describe()} N={self.n_nodes} {self.method or self.strategy.name}: "
                 f"{self.transcription.describe()} + {self.solver.describe()}"
+                + (f" [{self.objective.describe()}]" if self.objective != DEFAULT_OBJECTIVE else "")
                 + (f" #{self.repetition}" if self.repetition else ""))
 
 

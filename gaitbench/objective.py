@@ -87,8 +87,10 @@ class Objective:
         return pcot
 
     def describe(self) -> str:
-        """``name`` or ``name(option=value, ...)``: how results name the objective of their numbers."""
-        options = ", ".join(f"{item.name}={getattr(self, item.name)}" for item in fields(self))
+        """``name`` or ``name(option=value, ...)`` with the options not at their defaults: how results name the
+        objective of their numbers."""
+        options = ", ".join(f"{item.name}={getattr(self, item.name)}" for item in fields(self)
+                            if getattr(self, item.name) != item.default)
         return f"{self.name}({options})" if options else self.name
 
 

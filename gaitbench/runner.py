@@ -83,8 +83,10 @@ def _solve_walk(case: Case):
         solver_options.setdefault("time_limit_s", case.time_limit_s)
     solver = registry.create("solver", case.solver.name, **solver_options)
     strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
+    objective = registry.create("objective", case.objective.name, **case.objective.options)
     options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
-    problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options)
+    problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
+                          objective=objective)
     return strategy.solve(problem)
 
 
@@ -127,6 +129,7 @@ def case_row(outcome: CaseOutcome, suite: str, run_id: str) -> dict[str, Any]:
         "transcription": case.transcription.name, "transcription_options": case.transcription.options,
         "solver": case.solver.name, "solver_options": case.solver.options,
         "strategy": case.strategy.name, "strategy_options": case.strategy.options,
+        "objective": case.objective.describe(),
         "problem_options": case.problem_options, "repetition": case.repetition, "time_limit_s": case.time_limit_s,
         "tracking_stage": case.tracking.as_dict() if case.tracking else None,
         "status": outcome.status, "message": outcome.message, "wall_time_s": outcome.wall_time_s,

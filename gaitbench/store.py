@@ -72,6 +72,7 @@ CASE_COLUMNS: dict[str, str] = {
     "solver_options": "TEXT",
     "strategy": "TEXT",
     "strategy_options": "TEXT",
+    "objective": "TEXT",
     "problem_options": "TEXT",
     "repetition": "INTEGER",
     "time_limit_s": "REAL",

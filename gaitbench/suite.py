@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from gaitbench.case import Case, TrackingStage
+from gaitbench.case import DEFAULT_OBJECTIVE, Case, TrackingStage
 from gaitbench.options import OptionError, check_options
 from gaitbench.plugins import (
     PluginConflictError,
@@ -144,6 +144,7 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
                 experiment=experiment.choice, n_nodes=n_nodes,
                 transcription=method.parts["transcription"].choice, solver=method.parts["solver"].choice,
                 strategy=method.parts["strategy"].choice, steps=spec.steps,
+                objective=method.parts["objective"].choice if "objective" in method.parts else DEFAULT_OBJECTIVE,
                 problem_options=dict(spec.problem_options), repetition=repetition, tracking=spec.tracking,
                 method=method.label, time_limit_s=spec.time_limit_s, plugin_dirs=plugin_dirs,
             )
@@ -245,12 +246,17 @@ def _methods(path: Path, spec: SuiteSpec, builder: _Builder) -> list[Method]:
     else:
         for method in spec.methods:
             lists = [builder.variants(part, method.parts[part]) for part in METHOD_PARTS]
-            for transcription, solver, strategy in itertools.product(*lists):
+            objectives = builder.variants("objective", method.parts["objective"]) if "objective" in method.parts \
+                else [None]
+            for transcription, solver, strategy, objective in itertools.product(*lists, objectives):
                 parts = {"transcription": transcription, "solver": solver, "strategy": strategy}
+                if objective is not None:
+                    parts["objective"] = objective
                 if method.label is None:
                     label = f"{strategy.label} {transcription.label} {solver.label}"
+                    label += f" {objective.label}" if objective is not None else ""
                 else:
-                    suffixes = [parts[part].grid_suffix for part in METHOD_PARTS if parts[part].grid_suffix]
+                    suffixes = [part.grid_suffix for part in parts.values() if part.grid_suffix]
                     label = f"{method.label}({'; '.join(suffixes)})" if suffixes else method.label
                 methods.append(Method(label, method.key, parts))
     seen: dict[str, Method] = {}

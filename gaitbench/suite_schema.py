@@ -35,7 +35,7 @@ TABLES = ("suite", "sweep", "exclude", "method", "tracking")
 SUITE_KEYS = ("name", "description", "output", "repetitions", "time_limit_s", "steps", "plugins", "problem_options")
 SWEEP_KEYS = ("experiments", "N", "transcriptions", "solvers", "strategies")
 ENTRY_KEYS = ("name", "options", "grid", "label")
-METHOD_KEYS = ("label", "transcription", "solver", "strategy")
+METHOD_KEYS = ("label", "transcription", "solver", "strategy", "objective")
 METHOD_PARTS = ("transcription", "solver", "strategy")
 EXCLUDE_KEYS = ("experiment", "N", "transcription", "solver", "strategy", "method")
 TRACKING_KEYS = ("controller", "observer", "disturbance", "options")
@@ -104,7 +104,8 @@ class Variant:
 
 @dataclass(frozen=True)
 class MethodSpec:
-    """One ``[[method]]``: an optional label and its three parts."""
+    """One ``[[method]]``: an optional label, its three parts and optionally its ``objective`` (an entry under the
+    part name ``objective``; net-power when not given)."""
 
     key: str
     label: str | None
@@ -223,6 +224,8 @@ class _Parser:
                     raise self.error(key, f"missing required key '{part}' (a {part} name or a table "
                                           f"{{name, options}})")
                 parts[part] = self.entry(table[part], f"{key}.{part}")
+            if "objective" in table:
+                parts["objective"] = self.entry(table["objective"], f"{key}.objective")
             methods.append(MethodSpec(key, label, parts))
         return methods
 

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from gaitbench.objective import NET_POWER
 from gaitbench.reports import thesis_values
 
 DC_STRATEGY = "decrease-and-conquer"
@@ -59,6 +60,7 @@ FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "stop_cause
                   "message", "steps_solved", "partial_acot", "retries", "wall_time_s"]
 PROVENANCE_COLUMNS = ["run_id", "item", "value"]
 CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "transcription", "solver", "strategy",
+                 "objective",
                  "repetition", "status", "message", "acot", "claimed_acot", "cot_min", "cot_max", "steps_solved",
                  "stop_cause", "stop_step", "stop_status", "retries", "partial_acot", "wall_time_s", "solve_time_s",
                  "iterations", "max_defect", "max_resim_error", "walk_path", "tracking_path"]
@@ -74,14 +76,16 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     """The store's case rows with the columns every table uses.
 
     ``experiment`` becomes a label (the plugin name, with its options for parametrized experiments other than
-    ``energetics``), ``method`` falls back to strategy/transcription/solver when a case has no label,
+    ``energetics``), ``method`` falls back to strategy/transcription/solver when a case has no label and names its
+    objective in brackets unless it is the thesis's ``net-power`` (``objective``; null in stores that predate it),
+    so that no table sets numbers of different objectives side by side unnamed,
     ``store_acot`` keeps the store's ``acot`` and ``acot`` becomes the verified ACOT (see the module docstring).
     ``complete`` marks complete walks; ``acot``, ``claimed_acot``, ``cot_min`` and ``cot_max`` are kept only for them,
     and ``partial_acot`` holds the mean COT of the steps an incomplete walk solved. ``stop_cause`` is filled from the
     status where a store predates the column.
     """
     df = cases.copy()
-    for column in ("stop_cause", "stop_step", "stop_status", "retries", "cot_steps", "steps_solved"):
+    for column in ("stop_cause", "stop_step", "stop_status", "retries", "cot_steps", "steps_solved", "objective"):
         if column not in df.columns:
             df[column] = None
     if df.empty:
@@ -94,6 +98,10 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     df["method"] = [method if isinstance(method, str) and method else
                     f"{strategy} {transcription} {solver}" for method, strategy, transcription, solver in
                     zip(df["method"], df["strategy"], df["transcription"], df["solver"], strict=True)]
+    df["objective"] = [objective if isinstance(objective, str) and objective else NET_POWER.name
+                       for objective in df["objective"]]
+    df["method"] = [method if objective == NET_POWER.name else f"{method} [{objective}]"
+                    for method, objective in zip(df["method"], df["objective"], strict=True)]
     df["is_dc"] = df["strategy"] == DC_STRATEGY
     df["store_acot"] = pd.to_numeric(df["acot"], errors="coerce")
     df["claimed_acot"] = pd.to_numeric(df["claimed_acot"], errors="coerce")
