@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import textwrap
@@ -23,6 +24,7 @@ EXPECTED_CASES = {
     "demo": 4 * 2,  # the four terrains × OP-DC and OP-DM at N = 30: `make run`
     "smoke": 8,  # 1 experiment × 2 N × (2 transcriptions × 1 solver × 2 strategies)
     "thesis-forward": 20 * 5,  # N = 10..200 step 10 × 5 methods
+    "thesis-forward-work": 20 * 5,  # the same under actuator-work
     "thesis-downslope": 20 * 5,
     "thesis-upslope": 20 * 5,
     "thesis-stairs": 20 * 5,
@@ -82,8 +84,8 @@ def test_every_shipped_suite_is_tested():
     assert {path.stem for path in SUITES.glob("*.toml")} == set(EXPECTED_CASES)
 
 
-@pytest.mark.parametrize("name", ["thesis-forward", "thesis-downslope", "thesis-upslope", "thesis-stairs",
-                                  "thesis-all"])
+@pytest.mark.parametrize("name", ["thesis-forward", "thesis-forward-work", "thesis-downslope", "thesis-upslope",
+                                  "thesis-stairs", "thesis-all"])
 def test_thesis_suites_have_the_five_methods_over_n_10_to_200(name):
     suite = load_suite(SUITES / f"{name}.toml", REGISTRY)
     assert suite.methods == THESIS_METHODS
@@ -562,3 +564,13 @@ def test_energetics_rejects_invalid_options_clearly(options, fragment):
 def test_energetics_is_registered():
     experiment = REGISTRY.create("experiment", "energetics", step_length=0.5, steps=2)
     assert experiment.name == "energetics" and experiment.n_steps == 2
+
+
+def test_thesis_forward_work_is_thesis_forward_under_actuator_work():
+    work = load_suite(SUITES / "thesis-forward-work.toml", REGISTRY)
+    thesis = load_suite(SUITES / "thesis-forward.toml", REGISTRY)
+    assert {case.objective.name for case in work.cases} == {"actuator-work"}
+    assert {case.objective.name for case in thesis.cases} == {"net-power"}
+    strip = [dataclasses.replace(case, objective=thesis.cases[0].objective) for case in work.cases]
+    assert {case.key for case in strip} == {case.key for case in thesis.cases}
+    assert not {case.key for case in work.cases} & {case.key for case in thesis.cases}
