@@ -4,7 +4,8 @@ Run:    .venv/bin/gaitbench run benchmarks/suites/complete-walks.toml --jobs 2
         .venv/bin/python benchmarks/completion.py results/complete-walks --out benchmarks/results/complete_walks.md
 
 Per experiment and method: how many walks walked every step, the N of those that stopped with the cause, step and
-status recorded by the store, and the solve retries the walks needed (docs/solvers.md, "Retries"). Every figure is
+status recorded by the store, the solve retries the walks needed (docs/solvers.md, "Retries") and the steps solved
+again after a dead end (back-ups, docs/deviations.md "Dead ends"). Every figure is
 read from the store; the table names the commits the cases ran at.
 """
 
@@ -31,6 +32,8 @@ def completion_table(frame: pd.DataFrame) -> pd.DataFrame:
             "complete": int(complete.sum()),
             "steps solved": int(group["steps_solved"].fillna(0).sum()),
             "retries": int(pd.to_numeric(group["retries"], errors="coerce").fillna(0).sum()),
+            "back-ups": int(pd.to_numeric(group.get("back_ups"), errors="coerce").fillna(0).sum())
+            if "back_ups" in group else 0,
             "case time (s)": round(float(group["wall_time_s"].sum()), 1),
             "stopped (N: cause at step, status)": "; ".join(
                 f"{int(row.N)}: {row.stop_cause} at {_step(row.stop_step)}, {row.stop_status}"

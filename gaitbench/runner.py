@@ -165,20 +165,24 @@ def stop_cause(status: str) -> str:
 
 
 def walk_stop(walk) -> dict[str, Any]:
-    """Why and where a walk stopped (store columns ``stop_cause``, ``stop_step``, ``stop_status``) and how many
-    solve retries it took (``retries``: each step's ``details["retries"]``, a list; missing means none)."""
-    retries = 0
+    """Why and where a walk stopped (store columns ``stop_cause``, ``stop_step``, ``stop_status``), how many
+    solve retries it took (``retries``: each step's ``details["retries"]``, a list; missing means none) and how many
+    steps were solved again after a dead end (``back_ups``: steps with ``details["backed_up_from"]``)."""
+    retries, back_ups = 0, 0
     for step in walk.steps:
-        recorded = step.details.get("retries") if isinstance(step.details, dict) else None
+        details = step.details if isinstance(step.details, dict) else {}
+        recorded = details.get("retries")
         retries += len(recorded) if isinstance(recorded, list) else int(recorded or 0)
+        back_ups += "backed_up_from" in details
+    counts = {"retries": retries, "back_ups": back_ups}
     failed = next((step for step in walk.steps if not step.solved), None)
     if failed is not None:
         return {"stop_cause": stop_cause(failed.status), "stop_step": failed.index, "stop_status": failed.status,
-                "retries": retries}
+                **counts}
     if walk.complete:
-        return {"stop_cause": "complete", "stop_step": None, "stop_status": None, "retries": retries}
+        return {"stop_cause": "complete", "stop_step": None, "stop_status": None, **counts}
     # Fewer steps than requested, each solved: the strategy ended the walk without a failing step to blame.
-    return {"stop_cause": "solver", "stop_step": len(walk.steps) + 1, "stop_status": None, "retries": retries}
+    return {"stop_cause": "solver", "stop_step": len(walk.steps) + 1, "stop_status": None, **counts}
 
 
 def walk_metrics(walk) -> dict[str, Any]:

@@ -89,6 +89,7 @@ CASE_COLUMNS: dict[str, str] = {
     "stop_step": "INTEGER",
     "stop_status": "TEXT",
     "retries": "INTEGER",
+    "back_ups": "INTEGER",
     "wall_time_s": "REAL",
     "solve_time_s": "REAL",
     "function_time_s": "REAL",

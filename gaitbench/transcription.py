@@ -305,6 +305,14 @@ def _add_step_constraints(
     approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]
     builder.constrain("approach", approach, -np.inf, -options.approach_rate)
     if structure.phase == "first":
+        if options.lift_off:
+            # The 2-DOF impact map alone decides where the old stance foot goes (no push-off): relative to the new
+            # stance foot, pinned at the old swing foot Y(q), it is at −Y(q) and moves at −∂Y/∂q q̇⁺.
+            model2 = biped_functions(2, 1)
+            dq_after, _ = model2.heel_strike(q[:, -1], dq[:, -1], symbols.robot)
+            velocity = -ca.mtimes(model2.swing_foot_jacobian(q[:, -1], symbols.robot), dq_after)
+            normal_rate = -ca.sin(theta) * velocity[0] + ca.cos(theta) * velocity[1]
+            builder.constrain("lift_off", normal_rate / symbols.leg_length, options.lift_off_rate, np.inf)
         return ca.SX(0)
 
     model4 = biped_functions(4, 1)

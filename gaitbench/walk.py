@@ -244,29 +244,51 @@ StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
 
 
 def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
-                      on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second") -> WalkResult:
+                      on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
+                      back_up: StepSolver | None = None) -> WalkResult:
     """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
 
     A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
-    steps before it are kept.
+    steps before it are kept. With ``back_up``, a step that the solver cannot solve is first taken as a dead end
+    the previous step walked into: that step is solved again by ``back_up`` (which looks further ahead) from its
+    own initial state, and the walk goes on from the new one. Each step is backed up at most once; the step that
+    was replaced is recorded in the new one's ``details["backed_up_from"]``.
     """
     walk = problem.result(strategy, phase)
     started = time.perf_counter()
     checks = problem.feasibility()
-    state = problem.start_state()
-    for index in range(1, problem.n_steps + 1):
+    states = [problem.start_state()]  # states[i - 1]: where step i starts
+    backed_up: set[int] = set()
+    index = 1
+    while index <= problem.n_steps:
         check = checks[index - 1]
         if check.ok:
-            outcome = solve_step(problem, index, state)
+            outcome = solve_step(problem, index, states[index - 1])
         else:
             outcome = StepOutcome(index, problem.experiment.stance_leg(index), "infeasible_geometry",
                                   "; ".join(check.problems))
+        if not outcome.solved and check.ok and back_up is not None and index > 1 and index - 1 not in backed_up:
+            backed_up.add(index - 1)
+            replaced = walk.steps[-1]
+            previous = back_up(problem, index - 1, states[index - 2])
+            if previous.solved:
+                previous.details = {**previous.details, "backed_up_from": {
+                    **replaced.summary(), "dead_end": {"step": index, "message": outcome.message}}}
+                walk.steps[-1] = previous
+                if on_step:
+                    on_step(previous)
+                del states[index - 1:]
+                states.append(previous.next_state)
+                continue
+            outcome.details = {**outcome.details, "back_up": {"step": index - 1, "message": previous.message,
+                                                              **previous.summary()}}
         walk.steps.append(outcome)
         if on_step:
             on_step(outcome)
         if not outcome.solved:
             break
-        state = outcome.next_state
+        states.append(outcome.next_state)
+        index += 1
     walk.wall_time_s = time.perf_counter() - started
     return walk
 

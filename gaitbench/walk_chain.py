@@ -103,13 +103,14 @@ class LookAhead:
     """One Phase with a receding horizon: step i is solved together with the next ``horizon − 1`` steps, and only
     step i is committed (DECISIONS §7). Each window starts from the previous window's later steps; its last step
     from the blended guess. A window that fails after the solver's remedies falls back to step i alone, with the
-    retry ladder, and says so in the step's details.
+    retry ladder, and says so in the step's details (unless ``fallback`` is off: then the failure is returned).
 
     Chains are built once per window length and first stance leg, and kept for the walk.
     """
 
     built: TranscribedStep
     horizon: int
+    fallback: bool = True
 
     def __post_init__(self) -> None:
         self._chains: dict[tuple[int, int], WalkChain] = {}
@@ -132,7 +133,7 @@ class LookAhead:
             if outcome.solved:
                 break
         window = {"horizon": count, "attempts": attempts, "time_s": time.perf_counter() - started}
-        if not outcome.solved:
+        if not outcome.solved and self.fallback:
             self._carried = []
             outcome = solve_with_retries(problem, index, self.built, data)
             window["fallback"] = "step alone"
@@ -158,11 +159,16 @@ class LookAhead:
         return StepOutcome(index, stance, result.status.value, result.message, result, trajectory, verification,
                            next_state=next_step_state(model, trajectory))
 
+    def seed_for(self, state: np.ndarray) -> Seed | None:
+        """The last window's solution of the step that starts at ``state``, if the window reached that far."""
+        if self._carried and np.allclose(self._carried[0][0], state, atol=1e-6):
+            return self._carried[0][1]
+        return None
+
     def _known(self, state: np.ndarray) -> list[tuple[np.ndarray, Seed | None]]:
         """Step i from ``state``, seeded by the last window's solution of it when that started there."""
-        if self._carried and np.allclose(self._carried[0][0], state, atol=1e-6):
-            return [(state, self._carried[0][1]), *self._carried[1:]]
-        return [(state, None)]
+        seed = self.seed_for(state)
+        return [(state, seed), *self._carried[1:]] if seed is not None else [(state, None)]
 
     def _chain(self, first_stance: int, count: int) -> WalkChain:
         key = (first_stance, count)

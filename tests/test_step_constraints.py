@@ -52,6 +52,29 @@ def test_lift_off_row_is_the_old_stance_feet_normal_velocity_after_heel_strike(t
         assert row == pytest.approx(lift_off_rate(problem, data, x, built) / problem.experiment.robot.l, rel=1e-9)
 
 
+@pytest.mark.parametrize("transcription", [HermiteSimpson(), DiscreteMechanics()], ids=["hs", "dmoc"])
+def test_first_phase_lift_off_row_is_the_old_stance_feet_normal_velocity_after_the_2dof_impact(transcription):
+    """The 2-DOF step has no push-off: its impact map alone must send the old stance foot up (a First-Phase walk at
+    N = 100 on flat ground otherwise reaches step 6 with that foot moving into the ground at 2.0 m/s)."""
+    problem = replace(stairs_problem(), transcription=transcription)
+    built = transcription.build(problem.structure("first"))
+    data = problem.step_data(6, problem.start_state())
+    model = BipedModel(problem.experiment.robot, 2)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        x = built.initial_guess(data) + 0.05 * rng.standard_normal(built.nlp.n_variables)
+        g = np.asarray(built.nlp.functions.constraints(x, data.parameter_vector())).ravel()
+        trajectory = built.trajectory(x, data)
+        strike = model.heel_strike(trajectory.q[-1], trajectory.dq[-1], data.stance)
+        new_stance = 3 - data.stance  # the old stance foot is the next step's swing foot, relative to its stance foot
+        jacobian = (np.array([model.swing_foot_position(strike.q + 1e-7 * e, new_stance) for e in np.eye(2)])
+                    - model.swing_foot_position(strike.q, new_stance)) / 1e-7
+        velocity = jacobian.T @ strike.dq
+        expected = -np.sin(data.slope) * velocity[0] + np.cos(data.slope) * velocity[1]
+        row = g[built.nlp.constraint_blocks["lift_off"]]
+        assert row == pytest.approx(expected / problem.experiment.robot.l, rel=1e-5, abs=1e-7)
+
+
 def test_a_solved_step_lifts_the_old_stance_foot_and_without_the_constraint_the_row_is_gone():
     problem = stairs_problem()
     built = problem.transcription.build(problem.structure("second"))

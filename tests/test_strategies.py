@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -356,8 +357,8 @@ def test_a_chain_starts_each_step_where_the_event_map_of_the_previous_one_ends()
     chain = WalkChain(built, first_stance=2, count=2)
     state = np.array([0.25, -0.2, -1.1, -0.4])
     p = chain.parameters(problem, 2, state)
-    noise = np.random.default_rng(0).standard_normal(chain.nlp.n_variables)
-    x = chain.guess(problem, 2, [(state, None)]) + 0.01 * noise
+    noise = 0.01 * np.random.default_rng(0).standard_normal(chain.nlp.n_variables)
+    x = chain.guess(problem, 2, [(state, None)]) + noise
     (x1, data1), (_, data2) = chain.steps(problem, 2, x, p)
     assert (data1.stance, data2.stance) == (2, 1)
     np.testing.assert_allclose(data1.initial_state, state)
@@ -365,19 +366,60 @@ def test_a_chain_starts_each_step_where_the_event_map_of_the_previous_one_ends()
     np.testing.assert_allclose(data2.initial_state, expected, atol=1e-10)
 
 
-def test_look_ahead_walks_past_the_greedy_dead_end():
-    """Stairs, DMOC, N = 20: the greedy walk (H = 1) stops at step 8, infeasible after every rung of the retry
-    ladder; solving each step with the next one (H = 2) and committing it alone walks all 11 steps."""
+def test_look_ahead_and_back_up_walk_past_the_greedy_dead_end():
+    """Stairs, DMOC, N = 20: the greedy walk (H = 1, no back-up) stops at step 8, infeasible after every rung of the
+    retry ladder. Backing up (the default) solves step 7 again with step 8 and walks on; a fixed look-ahead of two
+    steps walks all 11 without a dead end."""
     stairs = REGISTRY.create("experiment", "stairs")
     problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 20)
-    greedy = REGISTRY.create("strategy", "one-phase").solve(problem)
+    greedy = REGISTRY.create("strategy", "one-phase", back_up=False).solve(problem)
     assert not greedy.complete and greedy.steps[-1].index == 8 and greedy.steps[-1].status == "infeasible"
-    walk = REGISTRY.create("strategy", "one-phase", look_ahead=2).solve(problem)
+
+    walk = REGISTRY.create("strategy", "one-phase").solve(problem)
     assert walk.complete, walk.failure
-    assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
-    windows = [step.details["look_ahead"] for step in walk.steps[:-1]]
+    backed_up = [step for step in walk.steps if "backed_up_from" in step.details]
+    assert [step.index for step in backed_up] == [7]
+    assert backed_up[0].details["backed_up_from"]["dead_end"]["step"] == 8
+    assert backed_up[0].details["backed_up_from"]["cot"] == pytest.approx(greedy.steps[6].verification.cot)
+    assert [step.verification.cot for step in walk.steps[:6]] == [step.verification.cot for step in greedy.steps[:6]]
+
+    ahead = REGISTRY.create("strategy", "one-phase", look_ahead=2).solve(problem)
+    assert ahead.complete, ahead.failure
+    assert all(step.verification.max_defect < 1e-6 for step in ahead.steps)
+    windows = [step.details["look_ahead"] for step in ahead.steps[:-1]]
     assert all(window["horizon"] == 2 and "fallback" not in window for window in windows)
-    assert "look_ahead" not in walk.steps[-1].details  # the last step has nothing to look ahead to
+    assert "look_ahead" not in ahead.steps[-1].details  # the last step has nothing to look ahead to
+
+
+def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
+    """walk_step_by_step's back-up on made-up steps: step 3 is a dead end from the greedy step 2 only; step 5 from
+    every step 4, so its back-up fails and the walk stops there, naming the back-up."""
+    from gaitbench.walk import StepOutcome, walk_step_by_step
+
+    experiment = _short_slope(6)
+    problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)
+
+    def outcome(index, state, solved):
+        return StepOutcome(index, experiment.stance_leg(index), "converged" if solved else "infeasible", "",
+                           verification=SimpleNamespace(cot=0.1, resim_error=0.0) if solved else None,
+                           next_state=state + np.array([1.0, 0, 0, 0]) if solved else None)
+
+    def greedy(problem, index, state):
+        if index == 3:
+            return outcome(index, state, solved=state[1] > 0.5)  # only from the backed-up step 2
+        return outcome(index, state, solved=index != 5)
+
+    def back_up(problem, index, state):
+        result = outcome(index, state, solved=index == 2)
+        if result.solved:
+            result.next_state = state + np.array([1.0, 1.0, 0, 0])
+        return result
+
+    walk = walk_step_by_step(problem, "test", greedy, back_up=back_up)
+    assert [step.index for step in walk.steps] == [1, 2, 3, 4, 5]
+    assert walk.steps[1].details["backed_up_from"]["dead_end"]["step"] == 3
+    assert not walk.steps[-1].solved and walk.steps[-1].details["back_up"]["step"] == 4
+    assert walk_step_by_step(problem, "test", greedy).steps[-1].index == 3  # without back-up: the first dead end
 
 
 def test_look_ahead_must_be_a_positive_whole_number_of_second_phase_steps():

@@ -55,7 +55,8 @@ ENERGETICS_COLUMNS = ["method", "N", *ENERGETICS_OPTIONS, "status", "acot", "cla
 TRACKING_COLUMNS = ["experiment", "method", "N", "case_key", "max_position_error", "max_velocity_error",
                     "acot_reference", "acot_tracked", "acot_increase_percent", "fell", "published_increase_percent",
                     "published_position_error", "published_velocity_error"]
-STOP_CAUSE_COLUMNS = ["experiment", "method", "stop_cause", "cases", "N", "stop_steps", "stop_statuses", "retries"]
+STOP_CAUSE_COLUMNS = ["experiment", "method", "stop_cause", "cases", "N", "stop_steps", "stop_statuses", "retries",
+                      "back_ups"]
 FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "stop_cause", "stop_step", "stop_status",
                   "message", "steps_solved", "partial_acot", "retries", "wall_time_s"]
 PROVENANCE_COLUMNS = ["run_id", "item", "value"]
@@ -85,7 +86,8 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     status where a store predates the column.
     """
     df = cases.copy()
-    for column in ("stop_cause", "stop_step", "stop_status", "retries", "cot_steps", "steps_solved", "objective"):
+    for column in ("stop_cause", "stop_step", "stop_status", "retries", "back_ups", "cot_steps", "steps_solved",
+                   "objective"):
         if column not in df.columns:
             df[column] = None
     if df.empty:
@@ -113,7 +115,7 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     df["acot"] = df["verified_acot"].where(complete)
     df["claimed_acot"] = df["claimed_acot"].where(complete & df["is_dc"])
     for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N",
-                   "retries", "steps_solved"):
+                   "retries", "back_ups", "steps_solved"):
         df[column] = pd.to_numeric(df[column], errors="coerce")
     for column in ("cot_min", "cot_max"):  # a partial walk's bounds would pass for the walk's
         df[column] = df[column].where(complete)
@@ -444,7 +446,7 @@ def tracking_table(df: pd.DataFrame, summaries: dict[str, dict]) -> pd.DataFrame
 
 def stop_causes(df: pd.DataFrame) -> pd.DataFrame:
     """How many walks of each experiment and method ended for each cause (``complete`` included), at which N and
-    steps, with which raw statuses, and the solve retries they took."""
+    steps, with which raw statuses, and the solve retries and dead-end back-ups they took."""
     if df.empty:
         return pd.DataFrame(columns=STOP_CAUSE_COLUMNS)
     rows = []
@@ -453,7 +455,7 @@ def stop_causes(df: pd.DataFrame) -> pd.DataFrame:
                      "N": _listed(group["N"].dropna().astype(int)),
                      "stop_steps": _listed(group["stop_step"].dropna().astype(int)),
                      "stop_statuses": _listed(group["stop_status"].dropna()),
-                     "retries": int(group["retries"].sum())})
+                     "retries": int(group["retries"].sum()), "back_ups": int(group["back_ups"].fillna(0).sum())})
     table = pd.DataFrame(rows, columns=STOP_CAUSE_COLUMNS)
     causes = {cause: i for i, cause in enumerate(STOP_CAUSE_ORDER)}
     table["_cause"] = table["stop_cause"].map(lambda cause: causes.get(cause, len(causes)))
