@@ -77,6 +77,11 @@ class StepStructure:
     options: ProblemOptions = field(default_factory=ProblemOptions)
     objective: Objective = NET_POWER
     """What the step's NLP minimises and its verification reports (:mod:`gaitbench.objective`)."""
+    walked: bool = False
+    """A First-Phase step the walk goes on from (the 2-DOF walk), whose impact map must then lift the old stance
+    foot (``lift_off``). A First-Phase step that only seeds a 4-DOF one (decrease-and-conquer, warm start, the
+    retry ladder) is not walked from, and the row would only refuse starts the 4-DOF step, with its push-off, can
+    take (measured: downward slope, D&C-DC, N = 50, step 6)."""
 
     def __post_init__(self) -> None:
         for name, choices in OPTION_CHOICES.items():

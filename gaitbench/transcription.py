@@ -305,7 +305,7 @@ def _add_step_constraints(
     approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]
     builder.constrain("approach", approach, -np.inf, -options.approach_rate)
     if structure.phase == "first":
-        if options.lift_off:
+        if options.lift_off and structure.walked:
             # The 2-DOF impact map alone decides where the old stance foot goes (no push-off): relative to the new
             # stance foot, pinned at the old swing foot Y(q), it is at −Y(q) and moves at −∂Y/∂q q̇⁺.
             model2 = biped_functions(2, 1)

@@ -200,8 +200,9 @@ class WalkProblem:
     def n_steps(self) -> int:
         return self.experiment.n_steps if self.steps is None else self.steps
 
-    def structure(self, phase: str, n_nodes: int | None = None) -> StepStructure:
-        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective)
+    def structure(self, phase: str, n_nodes: int | None = None, walked: bool = False) -> StepStructure:
+        """The step NLP's shape; ``walked``: a First-Phase step the walk goes on from (see StepStructure)."""
+        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective, walked)
 
     def step_data(self, index: int, state: np.ndarray) -> StepData:
         """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""

@@ -35,7 +35,7 @@ class OnePhase:
         self.back_up = bool(back_up) and phase == "second"
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
-        built = problem.transcription.build(problem.structure(self.phase))
+        built = problem.transcription.build(problem.structure(self.phase, walked=True))
         window = LookAhead(built, self.look_ahead)
         backing = LookAhead(built, self.look_ahead + 1, fallback=False)
 
