@@ -2,17 +2,14 @@
 
 States are C¹ piecewise-cubic Hermite polynomials through the nodes with the dynamics' slopes there; controls are
 piecewise linear. The only dynamic constraints are the Simpson defects, equivalent to collocation at interval
-midpoints. The hip energy uses Simpson's rule on each interval with its midpoint, the quadrature the scheme itself
-implies (fourth order, any N) and the thesis's (DECISIONS §5).
+midpoints.
 
-The power of the interpolant (cubic velocities times linear torques) is a quartic on each interval, which Simpson's
-three points do not pin down: a quartic can vanish at them without vanishing, and the net-power optimizer finds
-such powers. The verified COT then exceeds the objective: on the forward walk by up to 5.5 % on costly steps and
-7 % (1.4e-3 in COT) on its nearly free first step, on the upward slope by up to 70 % on its cheap first step,
-shrinking with N (docs/convergence.md; ``objective_gap`` reports it per step). ``quadrature="boole"`` integrates
-the interpolant's power by Boole's rule (the nodes and ¼, ½, ¾ of the interval), exact for the quartic, and closes
-the gap (≤ 1 % on the forward walk), but IPOPT solves its steps less reliably: 31 of 52 steps of eight forward and
-upward-slope walks against 42 with Simpson (N = 20 … 160). So the thesis's rule stays the default.
+The hip energy integrates the interpolant's power (cubic velocities times linear torques: a quartic on each
+interval) by Boole's rule, the nodes and ¼, ½, ¾ of the interval, exact for the quartic. ``quadrature="simpson"``
+is the thesis's rule (DECISIONS §5): its three points leave quartics that vanish at them unseen, and the net-power
+optimizer finds such powers, so the verified COT exceeds the objective, on the upward slope by 33–51 % at every N
+from 10 to 160 (docs/convergence.md; ``objective_gap`` reports it per step). Boole's rule keeps the gap within
+3.2 % there and 1.2 % on the forward walk, and with the retry ladder every walk of the study completes with it.
 """
 
 from __future__ import annotations
@@ -42,7 +39,7 @@ QUADRATURES = ("simpson", "boole")
 class HermiteSimpson(Transcription):
     name = "hermite-simpson"
 
-    def __init__(self, quadrature: str = "simpson") -> None:
+    def __init__(self, quadrature: str = "boole") -> None:
         super().__init__()
         if quadrature not in QUADRATURES:
             raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(QUADRATURES)}")

@@ -220,7 +220,7 @@ def test_compass_gait_optimum_with_scuffing_allowed_is_the_passive_gait(invoke, 
 
 
 def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_simpsons():
-    """HS's default Simpson rule sees the power only at nodes and midpoints: the optimizer ends at torques whose
+    """HS with the thesis's Simpson rule sees the power only at nodes and midpoints: the optimizer ends at torques whose
     power vanishes there (objective COT ~1e-4, verified 0.0045). Boole's rule on the interpolant's power finds the
     passive gait (measured 1.9e-9)."""
     from gaitbench.gait_problem import ProblemOptions
@@ -235,6 +235,7 @@ def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_si
     acots = {rule: OnePhase().solve(WalkProblem(experiment, HermiteSimpson(quadrature=rule), Ipopt(), 40, steps=2,
                                                 options=options)).acot for rule in ("boole", "simpson")}
     assert acots["boole"] < 1e-3 < acots["simpson"]
+    assert HermiteSimpson().quadrature == "boole"  # the default passes the check
 
 
 # the spinner of solve

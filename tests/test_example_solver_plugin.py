@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from gait_steps import gait_step
+from gait_steps import FORMER_QUADRATURE, gait_step
 
 from gaitbench.cli import main
 from gaitbench.plugins import load_registry
@@ -26,7 +26,7 @@ def example_solver():
 def test_the_example_reaches_ipopts_optimum_on_a_gait_step(example_solver):
     """Started near IPOPT's optimum: from the standard guess trust-constr converges to other local minima of these
     non-convex steps (HS 2.1777 against IPOPT's 1.7736; DMOC 1.7634 against 1.6593, where SQP and ripopt end too)."""
-    problem = gait_step("hermite-simpson", 20)
+    problem = gait_step("hermite-simpson", 20, quadrature=FORMER_QUADRATURE["hermite-simpson"])
     start = problem.x_star * (1 + 1e-3 * np.random.default_rng(5).standard_normal(problem.x_star.size))
     result = example_solver().solve(problem.nlp, problem.parameters, start)
     assert result.status is SolverStatus.CONVERGED, result.message
