@@ -84,6 +84,7 @@ import qpsolvers
 import scipy.linalg
 import scipy.linalg.lapack
 import scipy.sparse as sp
+import scipy.sparse.linalg
 
 from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline, NLPEvaluator, error_result, solver_result
@@ -169,9 +170,13 @@ class SQP:
     def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, qp_solver: str = "piqp", qp_tolerance: float = 1e-10,
                  hessian: str = "exact", merit: str = "l1", second_order_correction: bool = True,
-                 acceptable_tolerance: float = 1e-6) -> None:
+                 acceptable_tolerance: float = 1e-6, fallback_qp_solver: str | None = "clarabel") -> None:
         if qp_solver not in qpsolvers.available_solvers:
             raise ValueError(f"unknown QP solver {qp_solver!r}; available: "
+                             f"{', '.join(sorted(qpsolvers.available_solvers))}")
+        fallback_qp_solver = None if fallback_qp_solver in (None, "none") else fallback_qp_solver
+        if fallback_qp_solver is not None and fallback_qp_solver not in qpsolvers.available_solvers:
+            raise ValueError(f"unknown fallback QP solver {fallback_qp_solver!r}; available: "
                              f"{', '.join(sorted(qpsolvers.available_solvers))}")
         if hessian not in _HESSIANS:
             raise ValueError(f"unknown hessian {hessian!r}; choose one of {', '.join(_HESSIANS)}")
@@ -184,6 +189,7 @@ class SQP:
         self.tolerance = float(tolerance)
         self.print_level = int(print_level)
         self.qp_solver = qp_solver
+        self.fallback_qp_solver = fallback_qp_solver
         self.qp_tolerance = float(qp_tolerance)
         self.hessian = hessian
         self.merit = merit
@@ -221,8 +227,9 @@ class _QPOutcome:
 class _Model:
     """The QP matrix P of one iteration and how it was made positive definite."""
 
-    P: np.ndarray
-    curvature: np.ndarray
+    P: np.ndarray | sp.csc_matrix
+    """Sparse for the exact Hessian, dense for BFGS."""
+    curvature: np.ndarray | sp.csc_matrix
     """P without the augmentation: the curvature the ℓ1 weight update may rely on."""
     rows: np.ndarray
     """The rows of g in the augmentation (empty when there is none)."""
@@ -251,6 +258,14 @@ class _Linearization:
         self.upper = np.flatnonzero(~equal & np.isfinite(nlp.ubg))
         self.lower = np.flatnonzero(~equal & np.isfinite(nlp.lbg))
         self.m = nlp.n_constraints
+        self.upper_only = np.setdiff1d(self.upper, self.lower)
+        self.lower_only = np.setdiff1d(self.lower, self.upper)
+        eq, up, lo = self.equality, self.upper, self.lower
+        self.select_equality = sp.csr_matrix((np.ones(eq.size), (np.arange(eq.size), eq)), shape=(eq.size, self.m))
+        self.select_inequality = sp.csr_matrix((np.concatenate([np.ones(up.size), -np.ones(lo.size)]),
+                                                (np.arange(up.size + lo.size), np.concatenate([up, lo]))),
+                                               shape=(up.size + lo.size, self.m))
+        """Row selections: the QP's A and G as products with the Jacobian, far cheaper than fancy indexing."""
         self.bounded = bool(np.isfinite(nlp.lbx).any() or np.isfinite(nlp.ubx).any())
 
     @property
@@ -272,9 +287,9 @@ class _Linearization:
                 ub: np.ndarray | None, dense: bool) -> qpsolvers.Problem:
         """min ½dᵀPd + qᵀd s.t. lbg ≤ g + jacobian·d ≤ ubg, lb ≤ d ≤ ub, in ``qpsolvers`` form."""
         eq, up, lo = self.equality, self.upper, self.lower
-        A = jacobian[eq] if eq.size else None
+        A = (self.select_equality @ jacobian).tocsc() if eq.size else None
         b = self.lbg[eq] - g[eq] if eq.size else None
-        G = sp.vstack([jacobian[up], -jacobian[lo]], format="csc") if up.size + lo.size else None
+        G = (self.select_inequality @ jacobian).tocsc() if up.size + lo.size else None
         h = np.concatenate([self.ubg[up] - g[up], g[lo] - self.lbg[lo]]) if G is not None else None
         if dense:
             P = P.toarray() if sp.issparse(P) else P
@@ -282,7 +297,6 @@ class _Linearization:
             G = None if G is None else G.toarray()
         else:
             P = sp.csc_matrix(P)
-            A = None if A is None else sp.csc_matrix(A)
         return qpsolvers.Problem(P, q, G, h, A, b, lb, ub)
 
     def bounds(self, x: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -303,9 +317,12 @@ class _Linearization:
 
 
 def _complementarity(multipliers: np.ndarray, values: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
-    """max_i min(|μ_i|, distance to the bound μ_i's sign says is active): zero iff signs and complementarity hold."""
+    """max_i |μ_i|·min(1, d_i), d_i the distance to the bound μ_i's sign says is active: zero iff signs and
+    complementarity hold. Near a bound it is IPOPT's complementarity product; a multiplier with no bound to hold it
+    (d_i = ∞) counts in full, as stationarity. The product, not min(|μ_i|, d_i): on the gait steps (gradients
+    ~1e-5) the latter is ~1e-5 at IPOPT's own converged points, and would demand far more than IPOPT does."""
     distance = np.where(multipliers > 0, np.abs(upper - values), np.abs(values - lower))
-    return float(np.max(np.minimum(np.abs(multipliers), distance), initial=0.0))
+    return float(np.max(np.abs(multipliers) * np.minimum(distance, 1.0), initial=0.0))
 
 
 class _Run:
@@ -321,8 +338,6 @@ class _Run:
         self.lin = _Linearization(nlp)
         self.n, self.m = nlp.n_variables, nlp.n_constraints
         self.dense = options.qp_solver not in qpsolvers.sparse_solvers
-        self.qp_options = dict(_BACKEND_OPTIONS.get(options.qp_solver, {}))
-        self.qp_options.update({key: options.qp_tolerance for key in _TOLERANCE_KEYWORDS.get(options.qp_solver, ())})
         self.iteration = 0
         self.qp_time = 0.0
         self.lam = np.zeros(self.m)
@@ -460,15 +475,30 @@ class _Run:
     # --- QP subproblems ----------------------------------------------------------------------------------------
 
     def _solve_qp(self, problem: qpsolvers.Problem, warm: _QPOutcome | None) -> _QPOutcome:
+        """The QP by the chosen backend, and by the fallback backend (cold) when the first one fails."""
+        outcome = self._backend_call(self.o.qp_solver, problem, warm)
+        fallback = self.o.fallback_qp_solver
+        if outcome.solved or fallback is None or fallback == self.o.qp_solver:
+            return outcome
+        if fallback not in qpsolvers.sparse_solvers and sp.issparse(problem.P):
+            problem = qpsolvers.Problem(*(part.toarray() if sp.issparse(part) else part for part in problem.unpack()))
+        second = self._backend_call(fallback, problem, None)
+        if second.solved:
+            self.log["flags"] += "f"
+            return second
+        return _QPOutcome(False, f"{outcome.status}; {fallback}: {second.status}")
+
+    def _backend_call(self, solver: str, problem: qpsolvers.Problem, warm: _QPOutcome | None) -> _QPOutcome:
         """One backend call, counted in ``evaluations["qp"]`` and timed; backend warnings and exceptions are
         turned into an unsolved outcome with the backend's status."""
-        options = dict(self.qp_options)
-        if self.deadline.time_limit_s is not None and self.o.qp_solver in _TIME_LIMITED:
+        options = dict(_BACKEND_OPTIONS.get(solver, {}))
+        options.update({key: self.o.qp_tolerance for key in _TOLERANCE_KEYWORDS.get(solver, ())})
+        if self.deadline.time_limit_s is not None and solver in _TIME_LIMITED:
             options["time_limit"] = max(self.deadline.time_limit_s - self.deadline.elapsed_s, 1e-3)
         initvals = None
-        if warm is not None and self.o.qp_solver in _PRIMAL_WARM_START:
+        if warm is not None and solver in _PRIMAL_WARM_START:
             initvals = warm.x
-        if warm is not None and self.o.qp_solver in _DUAL_WARM_START:
+        if warm is not None and solver in _DUAL_WARM_START:
             if warm.y is not None and warm.y.size:
                 options["y"] = warm.y
             z = [part for part in (warm.z, warm.z_box) if part is not None and part.size]
@@ -478,7 +508,7 @@ class _Run:
         try:
             with warnings.catch_warnings(), quiet_stdout():
                 warnings.simplefilter("ignore")
-                solution = qpsolvers.solve_problem(problem, solver=self.o.qp_solver, initvals=initvals, **options)
+                solution = qpsolvers.solve_problem(problem, solver=solver, initvals=initvals, **options)
         except Exception as error:  # a backend that rejects the problem: reported like any failed QP
             return _QPOutcome(False, f"{type(error).__name__}: {error}")
         finally:
@@ -500,31 +530,33 @@ class _Run:
         """This iteration's QP matrix; see the module docstring for the convexification."""
         if self.bfgs is not None:
             return _Model(self.bfgs, self.bfgs, np.zeros(0, dtype=int), np.zeros(0), 0.0)
-        H = self.evaluator.hessian_lagrangian(self.x, 1.0, self.lam).toarray()
-        if not np.all(np.isfinite(H)):
+        H = sp.csc_matrix(self.evaluator.hessian_lagrangian(self.x, 1.0, self.lam))
+        if not np.all(np.isfinite(H.data)):
             raise FloatingPointError("the Hessian of the Lagrangian is not finite")
-        scale = max(1.0, float(np.max(np.abs(H), initial=0.0)))
+        scale = max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
         floor = 1e-10 * scale
-        identity = np.eye(self.n)
-        regularised = H + floor * identity
+        identity = sp.eye(self.n, format="csc")
+        regularised = (H + floor * identity).tocsc()
         if _positive_definite(regularised):
             return _Model(regularised, regularised, np.zeros(0, dtype=int), np.zeros(0), floor)
         rows, bounds = self._working_set()
-        normals = self.jac[rows].toarray()
-        inverse_norms = 1.0 / np.maximum(np.sum(normals ** 2, axis=1), 1e-300)
-        gram = normals.T @ (inverse_norms[:, None] * normals)
-        gram[bounds, bounds] += 1.0
+        normals = self.jac[rows]
+        inverse_norms = 1.0 / np.maximum(np.asarray(normals.multiply(normals).sum(axis=1)).ravel(), 1e-300)
+        at_bound = np.zeros(self.n)
+        at_bound[bounds] = 1.0
+        gram = (normals.T @ sp.diags(inverse_norms) @ normals + sp.diags(at_bound)).tocsc()
         for rho in (1.0, 1e1, 1e2, 1e3, 1e4):  # the least that works: a large ρ makes the QP ill-conditioned
-            P = regularised + rho * scale * gram
+            P = (regularised + rho * scale * gram).tocsc()
             if _positive_definite(P):
                 return _Model(P, regularised, rows, rho * scale * inverse_norms, floor)
         augmentation = 1e2 * scale * gram
         shift = max(floor, self.shift / 4) if self.shift > 0 else 1e-8 * scale
         while shift <= 1e10 * scale:
-            curvature = H + shift * identity
-            if _positive_definite(curvature + augmentation):
+            curvature = (H + shift * identity).tocsc()
+            P = (curvature + augmentation).tocsc()
+            if _positive_definite(P):
                 self.shift = shift
-                return _Model(curvature + augmentation, curvature, rows, 1e2 * scale * inverse_norms, shift)
+                return _Model(P, curvature, rows, 1e2 * scale * inverse_norms, shift)
             shift *= 4
         raise FloatingPointError("no shift up to 1e10·max|H| makes the Hessian of the Lagrangian positive definite")
 
@@ -546,7 +578,9 @@ class _Run:
     def _qp(self, model: _Model, g: np.ndarray, warm: _QPOutcome | None) -> _QPOutcome:
         """The SQP subproblem with the constraints' constant term ``g`` (g(x), or g(x+d) − J d for a correction)."""
         if self.lin.unconstrained:  # the Newton system itself: no backend needed
-            step = scipy.linalg.cho_solve(scipy.linalg.cho_factor(model.P), -self.grad)
+            P = model.P
+            step = (scipy.sparse.linalg.spsolve(sp.csc_matrix(P), -self.grad) if sp.issparse(P)
+                    else scipy.linalg.cho_solve(scipy.linalg.cho_factor(P), -self.grad))
             return _QPOutcome(True, "unconstrained", step, np.zeros(0), np.zeros(0), None)
         lb, ub = self.lin.bounds(self.x)
         return self._solve_qp(self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense), warm)
@@ -653,6 +687,10 @@ class _Run:
             tolerance = 1e-7 * (1.0 + np.abs(value))
             active = (np.abs(value - lin.ubg[rows]) <= tolerance) | (np.abs(value - lin.lbg[rows]) <= tolerance)
             lam[rows[active]] += model.weights[active] * (value - self.g[rows])[active]
+            # A one-sided row the augmented QP holds active where H's own QP would not comes back with a multiplier
+            # of the wrong sign (on the gait steps, clearance rows at 1e-2): it is not active for H, so zero.
+            lam[lin.upper_only] = np.maximum(lam[lin.upper_only], 0.0)
+            lam[lin.lower_only] = np.minimum(lam[lin.lower_only], 0.0)
         return lam
 
     def _correction(self, model: _Model, d: np.ndarray, trial: _Trial | None) -> tuple[_Trial, _QPOutcome] | None:
@@ -775,11 +813,20 @@ class _Run:
         return None
 
 
-def _positive_definite(matrix: np.ndarray) -> bool:
-    """Whether a Cholesky factorisation succeeds (LAPACK's directly: ten times faster than NumPy's wrapper, and a
-    failed attempt stops at the first non-positive pivot)."""
-    _, info = scipy.linalg.lapack.dpotrf(matrix, lower=1, clean=0)
-    return info == 0
+def _positive_definite(matrix) -> bool:
+    """Whether a symmetric matrix is positive definite: by Sylvester's law, iff its LDLᵀ factorisation without
+    pivoting has a positive D. SuperLU gives that factorisation when told to pivot on the diagonal only
+    (``diag_pivot_thresh=0``) in symmetric mode, U's diagonal being D; if it pivoted off the diagonal anyway the
+    test says no. Sparse: 1 ms at HS N = 100 (n = 999) against 14–30 ms for a dense Cholesky. A dense matrix (the
+    BFGS one) gets LAPACK's Cholesky."""
+    if not sp.issparse(matrix):
+        return scipy.linalg.lapack.dpotrf(matrix, lower=1, clean=0)[1] == 0
+    try:
+        factor = scipy.sparse.linalg.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                          options={"SymmetricMode": True})
+    except RuntimeError:  # exactly singular
+        return False
+    return bool(np.array_equal(factor.perm_r, factor.perm_c) and np.all(factor.U.diagonal() > 0))
 
 
 def _backend_status(solution: qpsolvers.Solution) -> str:
