@@ -392,13 +392,15 @@ class _Run:
                 return outcome
         raise AssertionError("unreachable")
 
-    def _kkt(self) -> tuple[float, float, float]:
-        """(max constraint violation, stationarity/complementarity residual, IPOPT's dual scaling s_d)."""
+    def _kkt(self, lam: np.ndarray | None = None) -> tuple[float, float, float]:
+        """(max constraint violation, stationarity/complementarity residual, IPOPT's dual scaling s_d) at x, with
+        the multipliers ``lam`` (the current ones by default)."""
         lin = self.lin
-        bound_multipliers = -(self.grad + self.jac.T @ self.lam)
+        lam = self.lam if lam is None else lam
+        bound_multipliers = -(self.grad + self.jac.T @ lam)
         dual = max(_complementarity(bound_multipliers, self.x, lin.lbx, lin.ubx),
-                   _complementarity(self.lam, self.g, lin.lbg, lin.ubg))
-        total = np.sum(np.abs(self.lam)) + np.sum(np.abs(bound_multipliers))
+                   _complementarity(lam, self.g, lin.lbg, lin.ubg))
+        total = np.sum(np.abs(lam)) + np.sum(np.abs(bound_multipliers))
         scale = max(100.0, total / max(1, self.n + self.m)) / 100.0
         return lin.max_violation(self.g), dual, scale
 
@@ -550,7 +552,7 @@ class _Run:
             if _positive_definite(P):
                 return _Model(P, regularised, rows, rho * scale * inverse_norms, floor)
         augmentation = 1e2 * scale * gram
-        shift = max(floor, self.shift / 4) if self.shift > 0 else 1e-8 * scale
+        shift = max(floor, self.shift / 2) if self.shift > 0 else 1e-8 * scale
         while shift <= 1e10 * scale:
             curvature = (H + shift * identity).tocsc()
             P = (curvature + augmentation).tocsc()
@@ -618,6 +620,13 @@ class _Run:
             if self.o.merit == "filter":
                 return self._start_restoration(reason)
             return self._elastic_step(model, reason)
+        violation, dual, scale = self._kkt(lam)
+        if violation <= self.o.tolerance and dual <= self.o.tolerance * scale:
+            # x with the QP's fresh multipliers is a KKT point: on the flat gait costs the line search may find
+            # nothing better than rounding at such a point, and the previous multipliers need not show it
+            self.lam = lam
+            return self._result(SolverStatus.CONVERGED, f"KKT residual {dual:.1e} with the last QP's multipliers, "
+                                                        f"violation {violation:.1e}")
         self.warm = outcome
         d = outcome.x
         if self.o.merit == "l1":
@@ -715,7 +724,8 @@ class _Run:
         merit = phi(self)
         derivative = self.grad @ d - self.weights @ (self.lin.violations(self.g)
                                                      - self.lin.violations(self.g + self.jac @ d))
-        slack = 10 * np.finfo(float).eps * max(1.0, abs(merit))  # rounding in φ itself
+        # rounding in φ itself: in f, and in each g_i (relative to its magnitude) times its weight
+        slack = 10 * np.finfo(float).eps * (max(1.0, abs(self.f)) + self.weights @ (1.0 + np.abs(self.g)))
         alpha = 1.0
         while alpha >= _MIN_STEP:
             trial = self._trial(self._clip(self.x + alpha * d))
