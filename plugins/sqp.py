@@ -17,8 +17,8 @@ Newton system, solved without a backend. The QP duals are the multiplier estimat
 ∇f + Jᵀλ_g + λ_x = 0; the first ones are IPOPT's least-squares estimate for the equality rows.
 
 P must be positive definite for every backend (strictly for quadprog and DAQP). With ``hessian="exact"`` it is the
-Hessian H of the Lagrangian, convexified without an eigen-decomposition, each candidate tested by a dense Cholesky
-factorisation (cheap at the hundreds of variables of a gait step):
+Hessian H of the Lagrangian, convexified without an eigen-decomposition, each candidate tested by a sparse LDLᵀ
+factorisation (``_positive_definite``; the whole model stays sparse, as the Hessian and Jacobian come from CasADi):
 
 1. H + δ₀I, δ₀ = 1e-10·max(1, max|H|), which only lifts exactly singular directions;
 2. H + δ₀I + ρ·max(1, max|H|)·Σ_W a_i a_iᵀ/‖a_i‖², ρ = 1, 10, …, 10⁴, the least that factorises, over a working
@@ -26,9 +26,14 @@ factorisation (cheap at the hundreds of variables of a gait step):
    bound or carry a multiplier, and the variables at a bound. For a row active in the QP, a_iᵀd is fixed, so the
    added term is constant on the QP's feasible set: once W is the active set the step is the exact Newton step,
    and by Debreu's lemma such a ρ exists when H is positive definite on the null space of the active constraints.
-   The multipliers of rows active in the QP are corrected by ρ·a_iᵀd/‖a_i‖², so they are those of H itself;
-3. failing that, the ρ = 100 augmentation plus δI, with δ from 1e-8·max(1, max|H|) (or a quarter of the last
-   successful δ) growing ×4 until Cholesky succeeds, like IPOPT's inertia correction.
+   The multipliers of rows active in the QP are corrected by ρ·a_iᵀd/‖a_i‖², so they are those of H itself
+   (a one-sided row whose corrected multiplier has the wrong sign is not active for H: its multiplier is zero);
+3. failing that, the ρ = 100 augmentation plus δI, with δ from 1e-8·max(1, max|H|) (or half the last successful
+   δ) growing ×4 until the factorisation is positive definite, like IPOPT's inertia correction. Half, not IPOPT's
+   third or the quarter this had before: on the gait steps the Lagrangian is indefinite along the flat valleys of
+   the thesis cost, and a shift that falls fast cycles, down to a step far too long, then back up ×1000. On forward
+   step 1 (DMOC at N = 20, 50, 100, HS at N = 50, 100) a quarter converged on 3 of the 5, a half on 4, 1/1.2 on
+   all 5 but up to 3× slower.
 
 With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
 the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.
@@ -61,8 +66,13 @@ stationary point of the violation) or no step along its direction reduces the me
 message names the backend status of the QP that failed.
 
 Convergence: the violation (max-norm) below ``tolerance`` and the stationarity/complementarity residual below
-``tolerance`` times IPOPT's dual scaling s_d; or, as IPOPT's "acceptable" level, both below
-``acceptable_tolerance`` for 15 consecutive iterations or when the iteration cannot continue from such a point.
+``tolerance`` times IPOPT's dual scaling s_d, with the current multipliers or with the ones the QP at x has just
+returned; or, as IPOPT's "acceptable" level, both below ``acceptable_tolerance`` for 15 consecutive iterations or
+when the iteration cannot continue from such a point. Complementarity is IPOPT's product |μ_i|·d_i near a bound.
+
+QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as
+failed. PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to
+5e4 at DMOC, N = 50), which Clarabel solves, if only to its reduced accuracy.
 
 Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
 interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords).
@@ -345,6 +355,8 @@ class _Run:
         """The ℓ1 merit's weight per row of g."""
         self.filter: list[tuple[float, float]] = []
         self.shift = 0.0
+        self.shift_growth = 0.5
+        """Factor from the last shift to the first one tried next (``_l1_search``; the filter always halves)."""
         self.bfgs: np.ndarray | None = np.eye(self.n) if options.hessian == "bfgs" else None
         self.bfgs_scaled = False
         self.warm: _QPOutcome | None = None
@@ -537,6 +549,11 @@ class _Run:
             raise FloatingPointError("the Hessian of the Lagrangian is not finite")
         scale = max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
         floor = 1e-10 * scale
+        damping = self.shift * self.shift_growth  # the Levenberg–Marquardt part (``_l1_search``)
+        if self.shift_growth > 1:
+            damping = max(damping, 1e-8 * scale)
+        floor = max(floor, damping)
+        self.shift = damping if damping > 1e-10 * scale else 0.0
         identity = sp.eye(self.n, format="csc")
         regularised = (H + floor * identity).tocsc()
         if _positive_definite(regularised):
@@ -552,7 +569,7 @@ class _Run:
             if _positive_definite(P):
                 return _Model(P, regularised, rows, rho * scale * inverse_norms, floor)
         augmentation = 1e2 * scale * gram
-        shift = max(floor, self.shift / 2) if self.shift > 0 else 1e-8 * scale
+        shift = max(floor, 1e-8 * scale)
         while shift <= 1e10 * scale:
             curvature = (H + shift * identity).tocsc()
             P = (curvature + augmentation).tocsc()
@@ -650,7 +667,9 @@ class _Run:
         if not outcome.solved:  # the restoration's QP, with P = I, is far better conditioned
             return self._start_restoration(f"{reason}, and so did its elastic version ({outcome.status})")
         d = outcome.x
-        infeasible = self.theta > self.o.tolerance
+        # Only a clear violation can be a local infeasibility: below the acceptable level a degenerate QP's failure
+        # to predict a decrease is rounding (forward HS N = 50, step 2: "infeasible" at θ = 2e-7)
+        infeasible = self.lin.max_violation(self.g) > self.o.acceptable_tolerance
         if infeasible and self.theta - self.lin.theta(self.g + self.jac @ d) <= 1e-6 * self.theta:
             return self._infeasible(reason, "its elastic version predicts no decrease of the violation")
         self._update_weights(model, d, self._multipliers(outcome, model))
@@ -726,9 +745,16 @@ class _Run:
                                                      - self.lin.violations(self.g + self.jac @ d))
         # rounding in φ itself: in f, and in each g_i (relative to its magnitude) times its weight
         slack = 10 * np.finfo(float).eps * (max(1.0, abs(self.f)) + self.weights @ (1.0 + np.abs(self.g)))
+        # Levenberg–Marquardt control of the shift: the ratio of φ's actual to its model's decrease for the full
+        # step says whether the shifted model was trusted too much (a ratio below ¼ doubles the next shift) or not
+        predicted = -derivative - 0.5 * (d @ (model.curvature @ d))
         alpha = 1.0
         while alpha >= _MIN_STEP:
             trial = self._trial(self._clip(self.x + alpha * d))
+            if alpha == 1.0:
+                ratio = ((merit - phi(trial)) / predicted if trial is not None and predicted > 100 * slack
+                         else 1.0 if trial is not None else -np.inf)  # a decrease at rounding level tells nothing
+                self.shift_growth = 0.25 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
             if trial is not None and phi(trial) <= merit + _ARMIJO * alpha * derivative + slack:
                 self.log["alpha"] = alpha
                 return trial, None
@@ -804,6 +830,8 @@ class _Run:
         d = outcome.x
         theta_linear = self.lin.theta(self.g + self.jac @ d)
         if self.theta - theta_linear <= 1e-6 * self.theta:
+            if self.lin.max_violation(self.g) <= self.o.acceptable_tolerance:  # rounding, as in _elastic_step
+                return self._failure(f"{reason}, and the restoration QP predicts no decrease of the violation")
             return self._infeasible(reason, "the restoration QP predicts no decrease of the violation")
         alpha = 1.0
         while alpha >= _MIN_STEP:
