@@ -751,11 +751,11 @@ class _Run:
         alpha = 1.0
         while alpha >= _MIN_STEP:
             trial = self._trial(self._clip(self.x + alpha * d))
-            if alpha == 1.0:
-                ratio = ((merit - phi(trial)) / predicted if trial is not None and predicted > 100 * slack
-                         else 1.0 if trial is not None else -np.inf)  # a decrease at rounding level tells nothing
-                self.shift_growth = 0.25 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
-            if trial is not None and phi(trial) <= merit + _ARMIJO * alpha * derivative + slack:
+            accepted = trial is not None and phi(trial) <= merit + _ARMIJO * alpha * derivative + slack
+            if alpha == 1.0:  # a rejected full step was trusted too much, whatever the ratio at rounding level
+                ratio = (merit - phi(trial)) / predicted if accepted and predicted > 100 * slack else float(accepted)
+                self.shift_growth = 0.5 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
+            if accepted:
                 self.log["alpha"] = alpha
                 return trial, None
             if alpha == 1.0:
