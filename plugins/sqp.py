@@ -20,20 +20,25 @@ P must be positive definite for every backend (strictly for quadprog and DAQP). 
 Hessian H of the Lagrangian, convexified without an eigen-decomposition, each candidate tested by a sparse LDLᵀ
 factorisation (``_positive_definite``; the whole model stays sparse, as the Hessian and Jacobian come from CasADi):
 
-1. H + δ₀I, δ₀ = 1e-10·max(1, max|H|), which only lifts exactly singular directions;
-2. H + δ₀I + ρ·max(1, max|H|)·Σ_W a_i a_iᵀ/‖a_i‖², ρ = 1, 10, …, 10⁴, the least that factorises, over a working
+1. H + δI, δ = max(δ₀, δ_LM), δ₀ = 1e-10·max(1, max|H|) lifting only exactly singular directions, and δ_LM the
+   Levenberg–Marquardt damping below;
+2. H + δI + ρ·max(1, max|H|)·Σ_W a_i a_iᵀ/‖a_i‖², ρ = 1, 10, …, 10⁴, the least that factorises, over a working
    set W of constraint normals a_i: the equality rows, the inequality rows that are violated, within 1e-6 of a
    bound or carry a multiplier, and the variables at a bound. For a row active in the QP, a_iᵀd is fixed, so the
    added term is constant on the QP's feasible set: once W is the active set the step is the exact Newton step,
    and by Debreu's lemma such a ρ exists when H is positive definite on the null space of the active constraints.
    The multipliers of rows active in the QP are corrected by ρ·a_iᵀd/‖a_i‖², so they are those of H itself
    (a one-sided row whose corrected multiplier has the wrong sign is not active for H: its multiplier is zero);
-3. failing that, the ρ = 100 augmentation plus δI, with δ from 1e-8·max(1, max|H|) (or half the last successful
-   δ) growing ×4 until the factorisation is positive definite, like IPOPT's inertia correction. Half, not IPOPT's
-   third or the quarter this had before: on the gait steps the Lagrangian is indefinite along the flat valleys of
-   the thesis cost, and a shift that falls fast cycles, down to a step far too long, then back up ×1000. On forward
-   step 1 (DMOC at N = 20, 50, 100, HS at N = 50, 100) a quarter converged on 3 of the 5, a half on 4, 1/1.2 on
-   all 5 but up to 3× slower.
+3. failing that, the ρ = 100 augmentation plus a shift from max(δ, 1e-8·max(1, max|H|)) growing ×4 until the
+   factorisation is positive definite, like IPOPT's inertia correction.
+
+δ_LM, with the ℓ1 merit: the shift of the last iteration times ½ when the full step's actual decrease of φ was at
+least ¾ of its model's (−Dφ(d) − ½dᵀ(H + δI)d), times 1 down to ¼, times 4 below ¼ or when the full step was
+rejected (from at least 1e-8·max(1, max|H|)). On the gait steps the Lagrangian is indefinite along the flat valleys
+of the thesis cost. IPOPT's rule alone (start from a fraction of the last shift) cycled there: the shift fell until
+a step was far too long, the violation rose to 1e-2–1, and the next Hessian needed a shift 1000× larger, for
+hundreds of iterations (forward HS N = 20, step 3: iteration limit; DMOC N = 100: time limit). The ratio control
+converged on all five first steps measured (HS and DMOC, N = 50 and 100; DMOC N = 20) and on 3-step walks.
 
 With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
 the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.
@@ -205,6 +210,22 @@ class SQP:
         self.merit = merit
         self.second_order_correction = bool(second_order_correction)
         self.acceptable_tolerance = max(float(acceptable_tolerance), self.tolerance)
+        self._arguments = {"max_iterations": max_iterations, "time_limit_s": time_limit_s, "tolerance": tolerance,
+                           "print_level": print_level, "qp_solver": qp_solver, "qp_tolerance": qp_tolerance,
+                           "hessian": hessian, "merit": merit, "second_order_correction": second_order_correction,
+                           "acceptable_tolerance": acceptable_tolerance, "fallback_qp_solver": fallback_qp_solver}
+
+    def remedies(self) -> list[tuple[str, SQP]]:
+        """Variants for the walk's retry ladder, each another path through the same NLP: the filter instead of the
+        ℓ1 merit, and Clarabel's QPs instead of PIQP's. On forward walks they solve steps the default stops on
+        (HS N = 20, step 2: the filter; DMOC N = 50, step 2: Clarabel; both at the iteration limit by default)."""
+        variants = []
+        if self.merit != "filter":
+            variants.append(("filter", SQP(**{**self._arguments, "merit": "filter"})))
+        if self.qp_solver != "clarabel":
+            variants.append(("clarabel", SQP(**{**self._arguments, "qp_solver": "clarabel",
+                                                "fallback_qp_solver": self.qp_solver})))
+        return variants
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Solve from ``initial_guess``; every failure, including exceptions, becomes a status."""
@@ -550,8 +571,8 @@ class _Run:
         scale = max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
         floor = 1e-10 * scale
         damping = self.shift * self.shift_growth  # the Levenberg–Marquardt part (``_l1_search``)
-        if self.shift_growth > 1:
-            damping = max(damping, 1e-8 * scale)
+        if self.shift_growth > 1:  # at most max|H|: beyond, a gradient step that only gets shorter
+            damping = min(max(damping, 1e-8 * scale), scale)
         floor = max(floor, damping)
         self.shift = damping if damping > 1e-10 * scale else 0.0
         identity = sp.eye(self.n, format="csc")
@@ -678,7 +699,10 @@ class _Run:
             return self._infeasible(reason, "no step along its elastic version's direction reduces the merit")
         if accepted is None:
             return self._failure(f"{reason}, and no step along its elastic version's direction reduces the merit")
+        # The multipliers restart from least squares, as after restoration: kept, the ones that made the QP fail
+        # would shape every next Hessian (forward HS N = 50, step 2: 500 elastic steps at multipliers ~1e5)
         self._move(accepted, self.lam, model)
+        self.lam = self._least_squares_multipliers()
         return None
 
     def _infeasible(self, reason: str, why: str) -> SolverResult:
