@@ -57,6 +57,11 @@ Globalisation (``merit``):
   Armijo condition on f for f-type steps and filter augmentation for h-type steps. A failed QP, multipliers above
   1e6 or a step length below the filter's minimum start the restoration phase.
 
+After an elastic step the multipliers restart from least squares: the ones that made the QP fail would shape the
+next Hessians. At a stationary point (KKT residual below ``tolerance``) that is only slightly infeasible (below
+``acceptable_tolerance``), one Gauss–Newton projection onto the constraints (the restoration's QP below) is taken
+whole when it halves θ.
+
 Restoration phase (the filter's, and the ℓ1 merit's when even the elastic QP fails): Gauss–Newton steps on θ (the
 elastic QP with P = I, no objective and W = 1e4, so the least-norm step that reduces the linearised violation most
 — a well-conditioned QP whatever the Hessian), each with Armijo backtracking on θ, until θ is below 0.9 times its
