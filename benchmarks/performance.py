@@ -75,9 +75,9 @@ SCALINGS = {"default": {}, "objective": OBJECTIVE_SCALING, "nominal": {"scaling"
 (:mod:`gaitbench.scaling`)."""
 SUITE_SAMPLE_NODES = (10, 20, 30)
 SUITE_SAMPLE_TIME_LIMIT_S = 600
-"""The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver, can spend the
-whole limit in one step's solve (stairs, N = 20: over 13 minutes), which would make the sample take hours. A case
-that reaches it makes the extrapolation a lower bound, and the summary says how many did."""
+"""The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver until 2026-12,
+could spend the whole limit in one step's solve (stairs, N = 20: over 13 minutes), which would make the sample take
+hours. A case that reaches it makes the extrapolation a lower bound, and the summary says how many did."""
 LARGE_SAMPLE_NODES = (50, 100, 150, 200)
 FULL_NODES = tuple(range(10, 201, 10))
 EXECUTOR_SAMPLE_NODES = (20, 40)

@@ -98,7 +98,7 @@ def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path)
     assert set(solvers) == {"OP-DC", "OP-DM", "D&C-DC", "D&C-DM", "reference"}
     for method, solver in solvers.items():
         if method == "reference":
-            assert solver.options == {"executable": "ripopt"}
+            assert solver.name == "sqp" and solver.options == {}
         else:
             assert solver.name == "ipopt" and solver.options == performance.OBJECTIVE_SCALING
 
