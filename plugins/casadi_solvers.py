@@ -7,10 +7,11 @@ Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and o
 - ``fatrop``: FATROP, an interior-point method for optimal control (IPOPT's algorithm on a stage-wise Riccati
   factorization), here on the NLP as one dense stage (see :class:`Fatrop`).
 
-Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC (docs/solvers.md has the
-measurements). CasADi's ``sqpmethod`` and ``feasiblesqpmethod`` were plugins here too and were removed (issue 22):
-measured on that step, neither reaches a solution with any QP solver or Hessian option CasADi 3.8 offers
-(docs/solvers.md, "Removed").
+Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC, 20–150× slower than IPOPT; on the
+harder upward-slope step 1, without the torque tie-break, both fail (docs/solvers.md has the measurements).
+CasADi's ``sqpmethod`` and ``feasiblesqpmethod`` were plugins here too and were removed (issue 22): on forward
+step 1 neither reaches a solution with any QP solver or Hessian option CasADi 3.8 offers (docs/solvers.md,
+"Removed").
 
 At ``print_level`` 0 standard output is discarded during build and solve (at the file-descriptor level, so for
 the whole process while it lasts): blockSQP's qpOASES prints its banner whatever its print options say.
