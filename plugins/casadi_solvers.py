@@ -3,24 +3,18 @@
 Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and options and kept in
 ``nlp.solver_cache`` like the ``ipopt`` plugin:
 
-- ``casadi-sqp``: ``sqpmethod``, line-search SQP on an ℓ1 merit function with the exact Hessian;
-- ``casadi-fsqp``: ``feasiblesqpmethod``, trust-region SQP that keeps every iterate feasible;
 - ``blocksqp``: blockSQP, filter line-search SQP with block-wise quasi-Newton Hessians;
 - ``fatrop``: FATROP, an interior-point method for optimal control (IPOPT's algorithm on a stage-wise Riccati
-  factorization).
+  factorization), here on the NLP as one dense stage (see :class:`Fatrop`).
 
-They are weaker than IPOPT on the gait NLPs, for reasons of method rather than configuration, measured on the
-upward-slope step (N = 20): ``casadi-sqp`` converges, but to other local minima than IPOPT's (its first QP steps
-from the transcriptions' guess lead into other basins; IPOPT started there stays); ``casadi-fsqp`` needs a
-feasible initial guess and the transcriptions' guesses are not (even from a feasible start of HS071 its QP gets
-inconsistent bounds, an error in how CasADi combines its trust region with variable bounds); ``blocksqp`` meets
-an infeasible QP whose remedy, its feasibility restoration phase, needs HSL MA27, which is not installed;
-``fatrop`` cannot use its OCP structure on these NLPs (see :class:`Fatrop`) and solves them as one dense stage,
-reaching IPOPT's optimum to its acceptable tolerance.
+Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC, 20–150× slower than IPOPT; on the
+harder upward-slope step 1, without the torque tie-break, both fail (docs/solvers.md has the measurements).
+CasADi's ``sqpmethod`` and ``feasiblesqpmethod`` were plugins here too and were removed (issue 22): on forward
+step 1 neither reaches a solution with any QP solver or Hessian option CasADi 3.8 offers (docs/solvers.md,
+"Removed").
 
 At ``print_level`` 0 standard output is discarded during build and solve (at the file-descriptor level, so for
-the whole process while it lasts): qpOASES prints its banner and ``feasiblesqpmethod`` prints debugging lines
-whatever their print options say.
+the whole process while it lasts): blockSQP's qpOASES prints its banner whatever its print options say.
 """
 
 from __future__ import annotations
@@ -28,7 +22,6 @@ from __future__ import annotations
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -42,56 +35,14 @@ from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus, options_key
 
 
-class _IterationWatch(ca.Callback):
-    """An ``iteration_callback`` that asks the method to stop once the current solve's deadline has passed.
-
-    CasADi calls it at every iteration with the iterate (ignored here); a nonzero return ends the solve with
-    ``User_Requested_Stop``. It lives as long as the built solver, and each solve sets its :attr:`deadline`.
-    """
-
-    def __init__(self, nlp: NLP) -> None:
-        ca.Callback.__init__(self)
-        n, m = nlp.n_variables, nlp.n_constraints
-        self._sparsity = {"x": n, "f": 1, "g": m, "lam_x": n, "lam_g": m, "lam_p": nlp.p.numel()}
-        self.deadline: Deadline | None = None
-        self.stopped = False
-        self.construct("iteration_watch", {})
-
-    def get_n_in(self) -> int:
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self) -> int:
-        return 1
-
-    def get_name_in(self, i: int) -> str:
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i: int) -> str:
-        return "stop"
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(self._sparsity[ca.nlpsol_out(i)], 1)
-
-    def eval(self, arg):
-        self.stopped = self.deadline is not None and self.deadline.expired()
-        return [int(self.stopped)]
-
-
-@dataclass
-class _Built:
-    solver: ca.Function
-    watch: _IterationWatch | None
-
-
 class CasadiMethod(ABC):
     """One ``casadi.nlpsol`` method; subclasses name it and map the shared options and its statuses.
 
     ``max_iterations``, ``time_limit_s`` (``None``: no limit), ``tolerance`` and ``print_level`` are the options
     every gaitbench solver shares; each subclass says which of the method's own options they become. Other
-    keywords are the method's own options, passed unchanged. A method that calls CasADi's ``iteration_callback``
-    is stopped there once per iteration when the time limit has passed (TIME_LIMIT, message
-    ``... User_Requested_Stop (time limit ...)``); one that does not cannot be stopped during a solve, and a solve
-    that ends after the limit is reported as TIME_LIMIT with its point. A claimed convergence at a point where the
+    keywords are the method's own options, passed unchanged. Neither method calls CasADi's
+    ``iteration_callback`` nor has a time option, so neither can be stopped during a solve: a solve that ends after
+    the time limit is reported as TIME_LIMIT with its point. A claimed convergence at a point where the
     NLP is not finite is an ERROR (FATROP reports success from a start where the objective is NaN).
     ``multipliers`` are CasADi's ``lam_g``.
     """
@@ -99,8 +50,6 @@ class CasadiMethod(ABC):
     name: str
     plugin: str
     """The ``casadi.nlpsol`` plugin."""
-    interruptible = True
-    """Whether the method calls ``iteration_callback``, once per iteration."""
     statuses: dict[str, SolverStatus] = {}
     """The method's return statuses with a shared meaning; every other one is an error."""
     explanations: dict[str, str] = {}
@@ -140,7 +89,7 @@ class CasadiMethod(ABC):
         self.options: dict = {"error_on_fail": False, "record_time": True, "print_time": self.print_level > 0,
                               **self._method_options(int(max_iterations), float(tolerance), self.print_level,
                                                      method_options)}
-        """The ``casadi.nlpsol`` options (without the iteration callback, which each build adds)."""
+        """The ``casadi.nlpsol`` options."""
 
     @abstractmethod
     def _method_options(self, max_iterations: int, tolerance: float, print_level: int, extra: dict) -> dict:
@@ -158,40 +107,33 @@ class CasadiMethod(ABC):
         x0 = np.asarray(initial_guess, dtype=float).ravel()
         deadline = Deadline(self.time_limit_s)
         try:
-            built = self._built(nlp)
+            solver = self._built(nlp)
             deadline = Deadline(self.time_limit_s)  # the limit covers the solve, as IPOPT's max_wall_time does
-            if built.watch is not None:
-                built.watch.deadline, built.watch.stopped = deadline, False
             with quiet_stdout(self.print_level == 0):
-                solution = built.solver(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+                solution = solver(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
         except Exception as error:  # the Solver protocol reports failures, it never raises them
             return self._result(SolverStatus.ERROR, _casadi_message(error), nlp, p, x0, deadline)
         x = np.asarray(solution["x"], dtype=float).ravel()
         multipliers = np.asarray(solution["lam_g"], dtype=float).ravel()
         try:
-            stats = built.solver.stats()
-        except RuntimeError:  # the SQP methods leave their return status unset when they abort mid-iteration
-            return self._result(SolverStatus.ERROR, "stopped without a return status (a function evaluation or the "
-                                "Hessian convexification failed)", nlp, p, x, deadline, multipliers=multipliers)
+            stats = solver.stats()
+        except RuntimeError:  # CasADi leaves the return status unset when a method aborts mid-iteration
+            return self._result(SolverStatus.ERROR, "stopped without a return status", nlp, p, x, deadline,
+                                multipliers=multipliers)
         return_status = self._return_status(stats)
         status = self.statuses.get(return_status, SolverStatus.ERROR)
         message = return_status + self.explanations.get(return_status, "")
-        if built.watch is not None and built.watch.stopped:
-            status, message = SolverStatus.TIME_LIMIT, f"{message} (time limit of {self.time_limit_s:g} s)"
-        elif built.watch is None and deadline.expired():
+        if deadline.expired():
             status = SolverStatus.TIME_LIMIT
             message += (f" after {deadline.elapsed_s:.3g} s, past the time limit of {self.time_limit_s:g} s "
                         f"({self.plugin} cannot be stopped during a solve)")
         return self._result(status, message, nlp, p, x, deadline, stats, multipliers)
 
-    def _built(self, nlp: NLP) -> _Built:
+    def _built(self, nlp: NLP) -> ca.Function:
         key = options_key(self.name, self.options)
         if key not in nlp.solver_cache:
-            watch = _IterationWatch(nlp) if self.interruptible else None
-            options = self.options if watch is None else {**self.options, "iteration_callback": watch}
             with quiet_stdout(self.print_level == 0):
-                solver = self._nlpsol(nlp, options)
-            nlp.solver_cache[key] = _Built(solver, watch)
+                nlp.solver_cache[key] = self._nlpsol(nlp, self.options)
         return nlp.solver_cache[key]
 
     def _nlpsol(self, nlp: NLP, options: dict) -> ca.Function:
@@ -233,78 +175,11 @@ def _signature_options(cls: type) -> list[str]:
 _LOCATION = re.compile(r"^\S+\.(?:cpp|hpp):\d+:\s*")
 
 
-_REPHRASED = {
-    "conic process failed. Set 'error_on_fail' option to false to ignore this error.":
-        "the QP solver failed on a subproblem (conic process failed)",
-}
-"""CasADi's wording where it addresses the caller of ``nlpsol`` rather than the user of this plugin."""
-
-
 def _casadi_message(error: BaseException) -> str:
     """A CasADi exception without its call trace: the lines that say what failed, without source locations."""
     lines = [_LOCATION.sub("", line.strip()) for line in str(error).splitlines()]
     kept = " ".join(line for line in lines if line and not line.startswith("Error in Function::")) or str(error)
-    for wording, meaning in _REPHRASED.items():
-        kept = kept.replace(wording, meaning)
     return f"{type(error).__name__}: {kept}"
-
-
-_QPOASES = {"printLevel": "none", "enableRegularisation": True}
-"""qpOASES, silent and regularizing singular reduced Hessians: of the QP solvers CasADi ships (qrqp, osqp, proxqp,
-daqp, highs, hpipm, qpoases), the one with which ``sqpmethod`` gets furthest on the gait steps. The convex solvers
-need ``convexify_strategy``, whose eigen-* strategies fail on the gait Hessians and whose ``regularize`` stalls;
-qrqp and qpOASES without regularization fail on singular QPs; hpipm needs an OCP structure."""
-
-
-class CasadiSqp(CasadiMethod):
-    """CasADi's ``sqpmethod``: SQP with the exact Hessian, a QP per iteration and an ℓ1-merit line search.
-
-    ``max_iterations`` is ``max_iter``; ``tolerance`` is both ``tol_pr`` (primal) and ``tol_du`` (dual
-    infeasibility); ``print_level`` ≥ 1 prints the header, iterations and status. The time limit is checked once
-    per iteration (a QP is not interrupted). ``qpsol`` defaults to ``"qpoases"`` with ``qpsol_options``
-    ``{"printLevel": "none", "enableRegularisation": True}``; any other keyword is an ``sqpmethod`` option, e.g.
-    ``qpsol="osqp"`` with ``convexify_strategy="regularize"``, ``hessian_approximation="limited-memory"`` or
-    ``max_iter_ls=0`` (see ``casadi.doc_nlpsol("sqpmethod")``). It does not detect infeasibility.
-    """
-
-    name = "casadi-sqp"
-    plugin = "sqpmethod"
-    statuses = {"Solve_Succeeded": SolverStatus.CONVERGED,
-                "Maximum_Iterations_Exceeded": SolverStatus.ITERATION_LIMIT}
-    explanations = {"Search_Direction_Becomes_Too_Small": " (the step vanished before convergence)"}
-
-    def _method_options(self, max_iterations: int, tolerance: float, print_level: int, extra: dict) -> dict:
-        verbose = print_level > 0
-        return {"max_iter": max_iterations, "tol_pr": tolerance, "tol_du": tolerance, "qpsol": "qpoases",
-                "qpsol_options": _QPOASES, "print_header": verbose, "print_iteration": verbose,
-                "print_status": verbose, **extra}
-
-
-class CasadiFeasibleSqp(CasadiMethod):
-    """CasADi's ``feasiblesqpmethod`` (FSLP/FSQP): trust-region SQP whose iterates all satisfy the constraints.
-
-    It starts only from a point that satisfies the constraints to ``feas_tol``; from any other it stops at once
-    with ``No_Feasible_Initialization`` (an ERROR: the method cannot start, the problem may well be feasible).
-    In CasADi 3.8 its QP can get lower step bounds above upper ones where the trust region meets variable bounds
-    (HS071 from a feasible start), which is an ERROR naming the QP's ill-posed bounds.
-    ``max_iterations`` is ``max_iter``; ``tolerance`` is ``optim_tol`` and ``feas_tol``; ``print_level`` ≥ 1
-    prints the header, iterations and status. The time limit is checked once per iteration. The QP solver is
-    qpOASES as for ``casadi-sqp``; other keywords are ``feasiblesqpmethod`` options (e.g. ``tr_rad0``,
-    ``solve_type="SLP"``; see ``casadi.doc_nlpsol("feasiblesqpmethod")``).
-    """
-
-    name = "casadi-fsqp"
-    plugin = "feasiblesqpmethod"
-    statuses = CasadiSqp.statuses
-    explanations = {"No_Feasible_Initialization": " (feasiblesqpmethod needs an initial guess that satisfies the "
-                                                  "constraints)",
-                    "Trust_Region_Radius_Becomes_Too_Small": " (no acceptable step in the trust region)"}
-
-    def _method_options(self, max_iterations: int, tolerance: float, print_level: int, extra: dict) -> dict:
-        verbose = print_level > 0
-        return {"max_iter": max_iterations, "optim_tol": tolerance, "feas_tol": tolerance, "qpsol": "qpoases",
-                "qpsol_options": _QPOASES, "print_header": verbose, "print_iteration": verbose,
-                "print_status": verbose, **extra}
 
 
 class BlockSqp(CasadiMethod):
@@ -325,7 +200,6 @@ class BlockSqp(CasadiMethod):
 
     name = "blocksqp"
     plugin = "blocksqp"
-    interruptible = False
     statuses = {"SOLVER_RET_SUCCESS": SolverStatus.CONVERGED, "SOLVER_RET_LIMITED": SolverStatus.ITERATION_LIMIT}
     explanations = {"SOLVER_RET_UNKNOWN": " (blockSQP stopped without converging: an infeasible or failed QP, or "
                                           "a failed line search)"}
@@ -374,7 +248,6 @@ class Fatrop(CasadiMethod):
 
     name = "fatrop"
     plugin = "fatrop"
-    interruptible = False
     statuses = {"Success": SolverStatus.CONVERGED, "StopAtAcceptablePoint": SolverStatus.CONVERGED,
                 "MaxIterExceeded": SolverStatus.ITERATION_LIMIT, "LocalInfeasibility": SolverStatus.INFEASIBLE}
     _INTERFACE_OPTIONS = ("N", "nx", "nu", "ng", "convexify_strategy", "convexify_margin", "debug")
@@ -409,9 +282,6 @@ class Fatrop(CasadiMethod):
 @hookimpl
 def register_solvers():
     return [
-        Registration("casadi-sqp", "CasADi sqpmethod: line-search SQP, exact Hessian, qpOASES", CasadiSqp),
-        Registration("casadi-fsqp", "CasADi feasiblesqpmethod: feasible trust-region SQP (needs a feasible guess)",
-                     CasadiFeasibleSqp),
         Registration("blocksqp", "blockSQP through CasADi: filter SQP, block-wise BFGS Hessians", BlockSqp),
         Registration("fatrop", "FATROP through CasADi: interior point for OCPs (dense on general NLPs)", Fatrop),
     ]

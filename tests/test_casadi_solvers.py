@@ -13,9 +13,7 @@ from gait_steps import gait_step
 from nlp_problems import (
     ReferenceProblem,
     extended_rosenbrock,
-    hs039,
     hs071,
-    hs076,
     nonnegative_projection,
     projection_optimum,
     undefined_at_start,
@@ -23,19 +21,17 @@ from nlp_problems import (
 
 from gaitbench.nlp import NLP, NLPBuilder
 from gaitbench.solver import SolverStatus
-from plugins.casadi_solvers import BlockSqp, CasadiFeasibleSqp, CasadiMethod, CasadiSqp, Fatrop, register_solvers
+from plugins.casadi_solvers import BlockSqp, CasadiMethod, Fatrop, register_solvers
 from plugins.ipopt import Ipopt
 
-METHODS = [CasadiSqp, CasadiFeasibleSqp, BlockSqp, Fatrop]
-HS071_FEASIBLE_START = np.array([1.5, np.sqrt(17.75), np.sqrt(17.75), 1.5])
-"""A point of HS071's feasible set (x₁x₄ = 2.25, x₂ = x₃, x₁x₂x₃x₄ = 39.9 ≥ 25, ‖x‖² = 40), not its optimum."""
+METHODS = [BlockSqp, Fatrop]
 
 
 def _solve(method: type[CasadiMethod], problem: ReferenceProblem, x0: np.ndarray | None = None, **options):
     return method(**options).solve(problem.nlp, problem.parameters, problem.x0 if x0 is None else x0)
 
 
-@pytest.mark.parametrize("method", [CasadiSqp, BlockSqp, Fatrop], ids=lambda method: method.name)
+@pytest.mark.parametrize("method", METHODS, ids=lambda method: method.name)
 def test_solves_hs071_to_its_published_optimum(method: type[CasadiMethod]):
     problem = hs071()
     result = _solve(method, problem)
@@ -46,34 +42,9 @@ def test_solves_hs071_to_its_published_optimum(method: type[CasadiMethod]):
     np.testing.assert_allclose(result.multipliers, Ipopt().solve(problem.nlp, [], problem.x0).multipliers, atol=1e-6)
 
 
-def test_feasible_sqp_reports_that_it_cannot_start_from_an_infeasible_guess():
-    result = _solve(CasadiFeasibleSqp, hs071())
-    assert result.status is SolverStatus.ERROR
-    assert result.message == ("casadi-fsqp: No_Feasible_Initialization (feasiblesqpmethod needs an initial guess "
-                              "that satisfies the constraints)")
-    assert result.iterations == 0
-
-
-def test_feasible_sqp_fails_on_hs071_even_from_a_feasible_start():
-    """A shortfall of CasADi 3.8's feasiblesqpmethod, pinned so that a fixed CasADi shows up here."""
-    problem = hs071()
-    assert problem.nlp.violation(HS071_FEASIBLE_START, problem.parameters) == 0.0
-    result = _solve(CasadiFeasibleSqp, problem, HS071_FEASIBLE_START)
-    assert result.status is SolverStatus.ERROR
-    assert "Ill-posed problem detected: LBX[1] <= UBX[1] was violated" in result.message
-
-
-def test_feasible_sqp_solves_a_problem_whose_guess_is_feasible():
-    problem = hs076()
-    result = _solve(CasadiFeasibleSqp, problem)
-    assert result.status is SolverStatus.CONVERGED, result.message
-    assert result.objective == pytest.approx(problem.f_star, abs=1e-7)
-    np.testing.assert_allclose(result.x, problem.x_star, atol=1e-6)
-
-
 @pytest.mark.parametrize(("method", "return_status"), [
-    (CasadiSqp, "Maximum_Iterations_Exceeded"), (BlockSqp, "SOLVER_RET_LIMITED"), (Fatrop, "MaxIterExceeded"),
-], ids=["casadi-sqp", "blocksqp", "fatrop"])
+    (BlockSqp, "SOLVER_RET_LIMITED"), (Fatrop, "MaxIterExceeded"),
+], ids=["blocksqp", "fatrop"])
 def test_iteration_limit(method: type[CasadiMethod], return_status: str):
     """HS071 takes 5-8 iterations with each; FATROP is given max_iter one lower, as it takes one more."""
     result = _solve(method, hs071(), max_iterations=2)
@@ -82,30 +53,16 @@ def test_iteration_limit(method: type[CasadiMethod], return_status: str):
     assert result.iterations == 2
 
 
-def test_iteration_limit_of_the_feasible_sqp():
-    result = _solve(CasadiFeasibleSqp, extended_rosenbrock(2), max_iterations=2)
-    assert (result.status, result.message, result.iterations) == (
-        SolverStatus.ITERATION_LIMIT, "casadi-fsqp: Maximum_Iterations_Exceeded", 2)
-
-
 @pytest.mark.parametrize("method", METHODS, ids=lambda method: method.name)
 def test_tolerance_is_the_methods_convergence_tolerance(method: type[CasadiMethod]):
-    problem = extended_rosenbrock(2)  # unconstrained, so that casadi-fsqp starts too
+    problem = extended_rosenbrock(2)
     loose, tight = _solve(method, problem, tolerance=1e-2), _solve(method, problem, tolerance=1e-10)
     assert loose.converged and tight.converged
     assert loose.iterations < tight.iterations
     assert tight.objective < 1e-12 < loose.objective
 
 
-@pytest.mark.parametrize("method", [CasadiSqp, CasadiFeasibleSqp], ids=lambda method: method.name)
-def test_time_limit_stops_an_interruptible_method_at_its_first_iteration(method: type[CasadiMethod]):
-    result = _solve(method, extended_rosenbrock(500), time_limit_s=1e-6)
-    assert result.status is SolverStatus.TIME_LIMIT
-    assert result.message == f"{method.name}: User_Requested_Stop (time limit of 1e-06 s)"
-    assert result.iterations == 0
-
-
-@pytest.mark.parametrize("method", [BlockSqp, Fatrop], ids=lambda method: method.name)
+@pytest.mark.parametrize("method", METHODS, ids=lambda method: method.name)
 def test_time_limit_of_a_method_that_cannot_be_stopped_is_reported_with_its_point(method: type[CasadiMethod]):
     problem = hs071()
     result = _solve(method, problem, time_limit_s=1e-9)
@@ -116,9 +73,6 @@ def test_time_limit_of_a_method_that_cannot_be_stopped_is_reported_with_its_poin
 
 
 @pytest.mark.parametrize(("method", "message"), [
-    (CasadiSqp, "casadi-sqp: Non_Regular_Sensitivities"),
-    (CasadiFeasibleSqp, "casadi-fsqp: stopped without a return status (a function evaluation or the Hessian "
-                        "convexification failed)"),
     (BlockSqp, "blocksqp: SOLVER_RET_NAN"),
     (Fatrop, "fatrop: Success, at a point where the NLP is not finite"),
 ], ids=[method.name for method in METHODS])
@@ -134,13 +88,6 @@ def test_bad_input_is_an_error_not_an_exception(method: type[CasadiMethod]):
     result = method().solve(problem.nlp, problem.parameters, np.zeros(3))
     assert result.status is SolverStatus.ERROR
     assert result.message.startswith(f"{method.name}: RuntimeError: Input 0 (x0) has mismatching shape.")
-
-
-def test_a_qp_failure_is_named():
-    """HS039's objective is linear, so its first QP (Hessian 0 at zero multipliers) is singular for qpOASES."""
-    result = _solve(CasadiSqp, hs039())
-    assert result.status is SolverStatus.ERROR
-    assert result.message == "casadi-sqp: RuntimeError: the QP solver failed on a subproblem (conic process failed)"
 
 
 @pytest.mark.parametrize("method", METHODS, ids=lambda method: method.name)
@@ -164,17 +111,13 @@ def test_built_once_per_nlp_and_options(method: type[CasadiMethod], monkeypatch:
 
 
 def test_shared_options_map_to_each_methods_own():
-    assert {key: CasadiSqp(max_iterations=7, tolerance=1e-5).options[key] for key in ("max_iter", "tol_pr", "tol_du")} \
-        == {"max_iter": 7, "tol_pr": 1e-5, "tol_du": 1e-5}
-    assert {key: CasadiFeasibleSqp(tolerance=1e-5).options[key] for key in ("optim_tol", "feas_tol")} \
-        == {"optim_tol": 1e-5, "feas_tol": 1e-5}
     assert {key: BlockSqp(max_iterations=7, tolerance=1e-5).options[key] for key in ("max_iter", "opttol",
                                                                                       "nlinfeastol")} \
         == {"max_iter": 7, "opttol": 1e-5, "nlinfeastol": 1e-5}
     fatrop = Fatrop(max_iterations=7, tolerance=1e-5, mu_init=0.01, convexify_strategy="regularize").options
     assert fatrop["fatrop"] == {"max_iter": 6, "tol": 1e-5, "print_level": 0, "mu_init": 0.01}
     assert fatrop["convexify_strategy"] == "regularize"
-    assert CasadiSqp(qpsol="osqp", max_iter_ls=0).options["qpsol"] == "osqp"
+    assert BlockSqp(max_line_search=3).options["max_line_search"] == 3
 
 
 def _stage_wise_ocp(n_stages: int = 10) -> NLP:
@@ -204,7 +147,7 @@ def test_fatrop_detects_the_stages_of_an_ocp_built_stage_wise():
         result = Fatrop(structure_detection=structure_detection).solve(nlp, p, x0)
         assert result.status is SolverStatus.CONVERGED, result.message
         assert result.objective == pytest.approx(reference.objective, rel=1e-8)
-    stages = [built.solver.stats()["N"] for built in nlp.solver_cache.values()]
+    stages = [solver.stats()["N"] for solver in nlp.solver_cache.values()]
     assert stages == [10, 0]  # ten stages found, against one dense stage
 
 
@@ -218,19 +161,16 @@ def test_fatrop_structure_detection_on_a_gait_step_fails_with_the_reason():
 
 
 def test_print_level_zero_is_silent_on_standard_output():
-    """qpOASES prints its banner and feasiblesqpmethod debugging lines whatever their options say; both are cut."""
-    script = ("import numpy as np; from nlp_problems import hs071, hs076; "
-              "from plugins.casadi_solvers import CasadiSqp, CasadiFeasibleSqp, BlockSqp, Fatrop; p = hs071(); "
-              "assert all(m().solve(p.nlp, p.parameters, p.x0).converged for m in (CasadiSqp, BlockSqp, Fatrop)); "
-              "q = hs076(); assert CasadiFeasibleSqp().solve(q.nlp, q.parameters, q.x0).converged; "
+    """blockSQP's qpOASES prints its banner whatever its options say; it is cut."""
+    script = ("import numpy as np; from nlp_problems import hs071; "
+              "from plugins.casadi_solvers import BlockSqp, Fatrop; p = hs071(); "
+              "assert all(m().solve(p.nlp, p.parameters, p.x0).converged for m in (BlockSqp, Fatrop)); "
               "print('done')")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
     assert (run.returncode, run.stdout, run.stderr) == (0, "done\n", "")
 
 
 @pytest.mark.parametrize(("method", "problem", "log_line"), [
-    (CasadiSqp, hs071(), "MESSAGE(sqpmethod): Convergence achieved after 5 iterations"),
-    (CasadiFeasibleSqp, hs076(), "MESSAGE(feasiblesqpmethod): Optimal Point Found?"),
     (BlockSqp, hs071(), "***CONVERGENCE ACHIEVED!***"),
     (Fatrop, hs071(), "iter    objective   inf_pr   inf_du"),
 ], ids=[method.name for method in METHODS])
@@ -242,4 +182,16 @@ def test_print_level_one_prints_the_iteration_log(method: type[CasadiMethod], pr
 
 def test_registers_each_method_under_its_name():
     assert {registration.name: registration.factory for registration in register_solvers()} == {
-        "casadi-sqp": CasadiSqp, "casadi-fsqp": CasadiFeasibleSqp, "blocksqp": BlockSqp, "fatrop": Fatrop}
+        "blocksqp": BlockSqp, "fatrop": Fatrop}
+
+
+@pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
+@pytest.mark.parametrize("method", METHODS, ids=lambda method: method.name)
+def test_solves_the_forward_gait_step_to_ipopts_optimum(method: type[CasadiMethod], transcription: str):
+    """Forward step 1 (4-DOF, N = 10, torque tie-break) from the transcription's standard guess; ``f_star`` is
+    IPOPT's optimum from the same guess. Measured: within 4e-4 of it, blockSQP a little below (docs/solvers.md)."""
+    problem = gait_step(transcription, 10, "forward")
+    result = _solve(method, problem)
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.constraint_violation <= 1e-7
+    assert abs(result.objective - problem.f_star) <= 1e-3 * problem.f_star

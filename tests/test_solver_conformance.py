@@ -19,9 +19,6 @@ REGISTRY = load_registry()
 SOLVERS = REGISTRY.names("solver")
 GAIT_STEPS = [("dmoc", 20), ("hermite-simpson", 20)]
 
-_FEASIBLE_START = "CasADi's feasiblesqpmethod needs a feasible starting point, and this one is not"
-_OTHER_MINIMUM = ("converges to another local minimum (IPOPT started there stays there); measured "
-                  "|f - f*| = 4e-2 (dmoc), 2e-2 (hermite-simpson)")
 _MA27 = "blockSQP stops on an infeasible QP; its restoration phase needs HSL MA27, which is not installed"
 _EQUALITY_QP = ("the thesis's FSQP takes equality-QP steps on a near-active set; from the standard guess the "
                 "linearized equalities ask for steps ~900 long that cross bounds outside that set, and it stalls "
@@ -31,15 +28,6 @@ KNOWN_SHORTFALLS: dict[tuple[str, str], str] = {
     ("sqp", "gait-hermite-simpson-20"): "converges to another local minimum, |f - f*|/f* = 4.8e-3",
     ("fsqp", "gait-dmoc-20"): _EQUALITY_QP,
     ("fsqp", "gait-hermite-simpson-20"): _EQUALITY_QP,
-    ("casadi-sqp", "hs039"): "the first QP is singular (linear objective, zero Hessian): 'QP solver failed'",
-    ("casadi-sqp", "gait-dmoc-20"): _OTHER_MINIMUM,
-    ("casadi-sqp", "gait-hermite-simpson-20"): _OTHER_MINIMUM,
-    ("casadi-fsqp", "hs071"): _FEASIBLE_START,
-    ("casadi-fsqp", "hs039"): _FEASIBLE_START,
-    ("casadi-fsqp", "hs040"): _FEASIBLE_START,
-    ("casadi-fsqp", "iteration-limit"): _FEASIBLE_START + " (HS071's start): an error before any iteration",
-    ("casadi-fsqp", "gait-dmoc-20"): _FEASIBLE_START,
-    ("casadi-fsqp", "gait-hermite-simpson-20"): _FEASIBLE_START,
     ("blocksqp", "gait-dmoc-20"): _MA27,
     ("blocksqp", "gait-hermite-simpson-20"): _MA27,
 }
