@@ -297,7 +297,7 @@ class FSQP:
     name = "fsqp"
 
     def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, hessian: str = "bfgs", alpha: float = 0.1, beta: float = 0.5,
+                 print_level: int = 0, hessian: str = "exact", alpha: float = 0.1, beta: float = 0.5,
                  nu: float = 2.5, delta: float = 2.2, tau: float = 2.5, theta: float = 0.8, xi: float = 1e-3,
                  epsilon0: float = 1.0, epsilon: float = 1.0, rho: float = 1.0, max_halvings: int = 50,
                  rank_tolerance: float = 1e-6, equality_margin: float = 0.1, h0_scaling: str | float = "auto",
@@ -606,20 +606,20 @@ class FSQP:
         if not (np.isfinite(f) and np.all(np.isfinite(c))):
             return _Outcome(SolverStatus.ERROR, "NaN or infinite f or g at the starting point", x, iteration, None)
         bfgs = _BFGS(n, self.h0_scaling) if self.hessian == "bfgs" else None
-        penalty, damping, d_norm, u, streak = self.rho, 0.0, np.nan, np.zeros(m), 0
+        weights, damping, d_norm, u, streak = np.zeros(equal.size), 0.0, np.nan, np.zeros(m), 0
         working = equal  # the rows whose normals may convexify H: the equalities and the last QP's active rows
         x_old = lagrangian_gradient = None
 
         def merit(f_value: float, c_value: np.ndarray) -> float:
-            """f + c Σ_E |c_j|: the ℓ1 exact penalty (Mayne–Polak's F_c on oriented rows)."""
-            return f_value + penalty * np.sum(np.abs(c_value[equal]))
+            """f + Σ_E w_j |c_j|: the ℓ1 exact penalty, Mayne–Polak's F_c with a weight per row."""
+            return f_value + weights @ np.abs(c_value[equal])
 
         def outcome(status: SolverStatus, message: str) -> _Outcome:
             return _Outcome(status, message, x, iteration, u)
 
         def record(step: float, direction: str) -> None:
-            self._record("main", iteration, merit(f, c), d_norm, step, penalty, working.size, form.max_violation(c),
-                         direction, x)
+            self._record("main", iteration, merit(f, c), d_norm, step, np.max(weights, initial=0.0), working.size,
+                         form.max_violation(c), direction, x)
 
         try:
             while True:
@@ -630,40 +630,57 @@ class FSQP:
                 gradient, jacobian = form.gradient(x), form.jacobian(x)
                 if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
                     return outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}")
-                if bfgs is not None:
-                    if x_old is not None:
-                        bfgs.update(x - x_old, gradient + jacobian.T @ u - lagrangian_gradient)
-                    hessian, augmentation = sp.csc_matrix(bfgs.matrix), 0.0
-                else:
-                    hessian, augmentation = self._qp_hessian(form, x, u, jacobian[working], damping)
-
+                if bfgs is not None and x_old is not None:
+                    bfgs.update(x - x_old, gradient + jacobian.T @ u - lagrangian_gradient)
+                multipliers = u
                 # d0: the QP over every linearised row; equalities as equalities, which gives the same step as
                 # Mayne–Polak's inequalities with ∇F_c (the penalty term is constant on their linearisation).
                 rows_g, rows_e = jacobian[general], jacobian[equal]
                 lower = np.where(form.free, form.lbx - x, 0.0)
                 upper = np.where(form.free, form.ubx - x, 0.0)
-                qp = qpsolvers.Problem(hessian, gradient, rows_g.tocsc() if general.size else None,
-                                       -c[general] if general.size else None, rows_e.tocsc() if equal.size else None,
-                                       -c[equal] if equal.size else None, lower, upper)
-                solution = _solve_qp(qp)
-                d = np.clip(x + solution.x, form.lbx, form.ubx) - x  # the QP's bounds hold to its tolerance only
+                for _ in range(2):  # once more, convexified over the rows the QP holds, if rows it left were in W
+                    if bfgs is not None:
+                        hessian, augmentation = sp.csc_matrix(bfgs.matrix), 0.0
+                        base = hessian
+                    else:
+                        hessian, augmentation, base = self._qp_hessian(form, x, multipliers, jacobian[working],
+                                                                       damping)
+                    qp = qpsolvers.Problem(hessian, gradient, rows_g.tocsc() if general.size else None,
+                                           -c[general] if general.size else None,
+                                           rows_e.tocsc() if equal.size else None, -c[equal] if equal.size else None,
+                                           lower, upper)
+                    solution = _solve_qp(qp)
+                    d = np.clip(x + solution.x, form.lbx, form.ubx) - x  # the QP's bounds hold to its tolerance
+                    linear = c + jacobian @ d
+                    held = np.intersect1d(working, np.flatnonzero(linear >= -_ACTIVE))  # kept at their bound
+                    held = np.union1d(held, np.intersect1d(working, equal))
+                    loose = np.setdiff1d(working, held)
+                    if not (augmentation and loose.size):
+                        break
+                    working = held
                 u = np.zeros(m)
                 u[general] = solution.z if general.size else 0.0
                 u[equal] = solution.y if equal.size else 0.0
                 bound_multipliers = solution.z_box
-                linear = c[general] + rows_g @ d
-                active = general[linear >= -_ACTIVE]
                 if augmentation:  # the multipliers of ∇²L rather than of the augmented H (rows held in the QP)
-                    held = np.intersect1d(working, np.concatenate([active, equal]))
-                    u[held] += augmentation * (jacobian[held] @ d) / _row_norms(jacobian[held]) ** 2
+                    rows_held = jacobian[held]
+                    u[held] += augmentation * (rows_held @ d) / _row_norms(rows_held) ** 2
                     u[general] = np.maximum(u[general], 0.0)
-                largest = np.max(np.abs(u[equal]), initial=0.0)
-                if penalty < largest + self.rho:
-                    penalty = max(largest + self.rho, penalty + self.epsilon)
+                # Powell's weights (``sqp``'s): one per equality row, following its multiplier, raised together when
+                # d would not decrease the merit by ½dᵀHd. A single c ≥ max|u_E| + ρ dwarfed the objective (f ~ 1e-5
+                # on the forward step), so every equality's curvature error cut the arc search.
+                weights = np.maximum(np.abs(u[equal]), (weights + np.abs(u[equal])) / 2)
+                residual = np.sum(np.abs(c[equal]))
+                excess = gradient @ d + 0.5 * d @ (hessian @ d) - weights @ np.abs(c[equal])
+                if excess > 0 and residual > 0:
+                    weights = weights + 2 * excess / residual
                 d_norm = float(np.linalg.norm(d))
 
                 # Convergence: IPOPT's scaled KKT test with the QP's multipliers, or its acceptable level.
-                stationarity = np.max(np.abs(gradient + jacobian.T @ u + bound_multipliers), initial=0.0)
+                # ∇f + Jᵀu + z = −(H_base d + ρ Σ_loose â âᵀd) by the QP's stationarity, with the corrected u
+                normals = sp.diags(1 / _row_norms(jacobian[loose])) @ jacobian[loose] if loose.size else None
+                curvature = base @ d + (augmentation * (normals.T @ (normals @ d)) if normals is not None else 0.0)
+                stationarity = np.max(np.abs(curvature), initial=0.0)
                 complementarity = np.max(np.abs(u[general]) * np.minimum(1.0, -c[general]), initial=0.0)
                 scale = max(1.0, (np.sum(np.abs(u)) + np.sum(np.abs(bound_multipliers))) / (100 * (m + n)))
                 violation = max(np.max(c[general], initial=0.0), np.max(np.abs(c[equal]), initial=0.0))
@@ -684,7 +701,7 @@ class FSQP:
 
                 # Arc search on x + t d + t² d̃: inequality rows stay ≤ tolerance, Armijo on the ℓ1 merit.
                 current = merit(f, c)
-                slope = gradient @ d - penalty * np.sum(np.abs(c[equal]))
+                slope = gradient @ d - weights @ np.abs(c[equal])
                 step = 1.0
                 while True:
                     if deadline.expired():
@@ -709,17 +726,19 @@ class FSQP:
                     damping = damping / 4 if step == 1 else min(max(2 * damping, _SHIFT_RANGE[0] * size), size)
                 x_old, lagrangian_gradient = x, gradient + jacobian.T @ u
                 x, f, c = trial, f_trial, c_trial
-                working = np.concatenate([general[u[general] > 0], equal])
+                bounds_near = np.arange(form.n_general, n_ineq)[c[form.n_general:n_ineq] >= -_ACTIVE]
+                working = np.concatenate([general[u[general] > 0], bounds_near, equal])
                 iteration += 1
         except _Breakdown as breakdown:
             return outcome(SolverStatus.ERROR, str(breakdown))
 
     @staticmethod
     def _qp_hessian(form: _NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
-                    damping: float) -> tuple[sp.csc_matrix, float]:
+                    damping: float) -> tuple[sp.csc_matrix, float, sp.csc_matrix]:
         """∇²L(x, u⁺) + δI made positive definite as ``sqp`` does: δ = max(damping, 1e-10 max|H|), then the least
         ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with a
-        shift growing ×4. Returns H and the augmentation's factor, for the multiplier correction."""
+        shift growing ×4. Returns H, the augmentation's factor (for the multiplier correction) and H without the
+        augmentation (for the KKT test)."""
         multipliers = u.copy()
         multipliers[: form.n_inequalities] = np.maximum(multipliers[: form.n_inequalities], 0.0)
         lagrangian = form.hessian(x, multipliers)
@@ -729,18 +748,19 @@ class FSQP:
         shift = max(damping, 1e-10 * size)
         shifted = (lagrangian + shift * sp.eye(form.n)).tocsc()
         if _positive_definite(shifted):
-            return shifted, 0.0
+            return shifted, 0.0, shifted
         normals = sp.diags(1 / _row_norms(rows)) @ rows
         gram = (normals.T @ normals).tocsc()
         for rho in (1.0, 10.0, 100.0, 1e3, 1e4):
             augmented = (shifted + rho * size * gram).tocsc()
             if _positive_definite(augmented):
-                return augmented, rho * size
+                return augmented, rho * size, shifted
         augmentation, shift = 100.0 * size, max(shift, 1e-8 * size)
         while shift <= _SHIFT_RANGE[1] * size:
-            candidate = (lagrangian + shift * sp.eye(form.n) + augmentation * gram).tocsc()
+            base = (lagrangian + shift * sp.eye(form.n)).tocsc()
+            candidate = (base + augmentation * gram).tocsc()
             if _positive_definite(candidate):
-                return candidate, augmentation
+                return candidate, augmentation, base
             shift *= 4
         raise _Breakdown("the Hessian of the Lagrangian cannot be made positive definite")
 
