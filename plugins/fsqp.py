@@ -721,9 +721,15 @@ class FSQP:
                         raise _Breakdown(f"arc search found no acceptable step at iteration {iteration} "
                                          f"(‖d‖ = {d_norm:.2e}, slope {slope:.2e}, KKT error {error:.2e})")
                 record(step, "qp" if not correction.any() else "qp+soc")
-                if bfgs is None:  # Levenberg–Marquardt damping, as ``sqp``'s: a cut step says H is too weak
-                    size = max(1.0, float(np.max(np.abs(hessian.diagonal()), initial=0.0)))
-                    damping = damping / 4 if step == 1 else min(max(2 * damping, _SHIFT_RANGE[0] * size), size)
+                if bfgs is None:  # Levenberg–Marquardt damping, as ``sqp``'s: set by the merit's actual against
+                    # predicted decrease; a cut step or a poor ratio says the model is too long-sighted
+                    size = max(1.0, float(np.max(np.abs(base.diagonal()), initial=0.0)))
+                    predicted = -slope - 0.5 * d @ (base @ d)
+                    ratio = (current - merit(f_trial, c_trial)) / predicted if predicted > 0 else 1.0
+                    if step < 1 or ratio < 0.25:
+                        damping = min(max(4 * damping, _SHIFT_RANGE[0] * size), size)
+                    elif ratio >= 0.75:
+                        damping /= 2
                 x_old, lagrangian_gradient = x, gradient + jacobian.T @ u
                 x, f, c = trial, f_trial, c_trial
                 bounds_near = np.arange(form.n_general, n_ineq)[c[form.n_general:n_ineq] >= -_ACTIVE]
