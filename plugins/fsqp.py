@@ -306,6 +306,8 @@ class FSQP:
             raise ValueError(f"subproblem must be 'qp' or 'equality', not {subproblem!r}")
         if hessian not in ("bfgs", "exact"):
             raise ValueError(f"hessian must be 'bfgs' or 'exact', not {hessian!r}")
+        if subproblem == "qp" and hessian != "exact":
+            raise ValueError("the 'qp' subproblem takes the exact Hessian; BFGS needs subproblem='equality'")
         if scaling not in ("gradient", "none"):
             raise ValueError(f"scaling must be 'gradient' or 'none', not {scaling!r}")
         if h0_scaling != "auto" and not (isinstance(h0_scaling, int | float) and h0_scaling > 0):
@@ -605,10 +607,8 @@ class FSQP:
         f, c = form.objective(x), form.constraints(x)
         if not (np.isfinite(f) and np.all(np.isfinite(c))):
             return _Outcome(SolverStatus.ERROR, "NaN or infinite f or g at the starting point", x, iteration, None)
-        bfgs = _BFGS(n, self.h0_scaling) if self.hessian == "bfgs" else None
         weights, damping, d_norm, u, streak = np.zeros(equal.size), 0.0, np.nan, np.zeros(m), 0
         working = equal  # the rows whose normals may convexify H: the equalities and the last QP's active rows
-        x_old = lagrangian_gradient = None
 
         def merit(f_value: float, c_value: np.ndarray) -> float:
             """f + Σ_E w_j |c_j|: the ℓ1 exact penalty, Mayne–Polak's F_c with a weight per row."""
@@ -630,8 +630,6 @@ class FSQP:
                 gradient, jacobian = form.gradient(x), form.jacobian(x)
                 if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
                     return outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}")
-                if bfgs is not None and x_old is not None:
-                    bfgs.update(x - x_old, gradient + jacobian.T @ u - lagrangian_gradient)
                 multipliers = u
                 # d0: the QP over every linearised row; equalities as equalities, which gives the same step as
                 # Mayne–Polak's inequalities with ∇F_c (the penalty term is constant on their linearisation).
@@ -639,12 +637,7 @@ class FSQP:
                 lower = np.where(form.free, form.lbx - x, 0.0)
                 upper = np.where(form.free, form.ubx - x, 0.0)
                 for _ in range(2):  # once more, convexified over the rows the QP holds, if rows it left were in W
-                    if bfgs is not None:
-                        hessian, augmentation = sp.csc_matrix(bfgs.matrix), 0.0
-                        base = hessian
-                    else:
-                        hessian, augmentation, base = self._qp_hessian(form, x, multipliers, jacobian[working],
-                                                                       damping)
+                    hessian, augmentation, base = self._qp_hessian(form, x, multipliers, jacobian[working], damping)
                     qp = qpsolvers.Problem(hessian, gradient, rows_g.tocsc() if general.size else None,
                                            -c[general] if general.size else None,
                                            rows_e.tocsc() if equal.size else None, -c[equal] if equal.size else None,
@@ -721,16 +714,15 @@ class FSQP:
                         raise _Breakdown(f"arc search found no acceptable step at iteration {iteration} "
                                          f"(‖d‖ = {d_norm:.2e}, slope {slope:.2e}, KKT error {error:.2e})")
                 record(step, "qp" if not correction.any() else "qp+soc")
-                if bfgs is None:  # Levenberg–Marquardt damping, as ``sqp``'s: set by the merit's actual against
-                    # predicted decrease; a cut step or a poor ratio says the model is too long-sighted
-                    size = max(1.0, float(np.max(np.abs(base.diagonal()), initial=0.0)))
-                    predicted = -slope - 0.5 * d @ (base @ d)
-                    ratio = (current - merit(f_trial, c_trial)) / predicted if predicted > 0 else 1.0
-                    if step < 1 or ratio < 0.25:
-                        damping = min(max(4 * damping, _SHIFT_RANGE[0] * size), size)
-                    elif ratio >= 0.75:
-                        damping /= 2
-                x_old, lagrangian_gradient = x, gradient + jacobian.T @ u
+                # Levenberg–Marquardt damping, as ``sqp``'s: set by the merit's actual against predicted decrease;
+                # a cut step or a poor ratio says the model reaches too far.
+                size = max(1.0, float(np.max(np.abs(base.diagonal()), initial=0.0)))
+                predicted = -slope - 0.5 * d @ (base @ d)
+                ratio = (current - merit(f_trial, c_trial)) / predicted if predicted > 0 else 1.0
+                if step < 1 or ratio < 0.25:
+                    damping = min(max(4 * damping, _SHIFT_RANGE[0] * size), size)
+                elif ratio >= 0.75:
+                    damping /= 2
                 x, f, c = trial, f_trial, c_trial
                 bounds_near = np.arange(form.n_general, n_ineq)[c[form.n_general:n_ineq] >= -_ACTIVE]
                 working = np.concatenate([general[u[general] > 0], bounds_near, equal])
