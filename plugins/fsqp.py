@@ -72,12 +72,6 @@ _MAX_BEND = 1e-3
 """Largest inward margin of d̃ (scaled units): ‖d‖^τ is meant for ‖d‖ < 1; far from the solution a larger bend
 would push the active rows off their boundary by a step's length."""
 
-_ELASTIC_WEIGHT = 1e4
-"""Price of a unit of slack in phase 1's elastic projection (``sqp``'s restoration weight)."""
-
-_SLACK_CURVATURE = 1e-8
-"""A small curvature on phase 1's slacks, so that its QP matrix is positive definite for every backend."""
-
 _EQUALITY_START = 1e-6
 """Phase 1 of the ``qp`` subproblem ends when the equality rows are within this of 0 (scaled units)."""
 
@@ -366,16 +360,14 @@ class FSQP:
 
     def _feasibility(self, form: _NLPForm, x: np.ndarray, deadline: Deadline) -> _Outcome:
         """Phase 1: damped Gauss–Newton on ½‖max(c_I, 0)‖² until every inequality row holds (see the class); with
-        the ``qp`` subproblem on ‖max(c_I, 0)‖₁ + ‖c_E‖₁ by elastic projections, until the equalities are within ``_EQUALITY_START``
+        the ``qp`` subproblem on ½‖max(c_I, 0)‖² + ½‖c_E‖², until the equalities are within ``_EQUALITY_START``
         too, so that the first QP's linearisation is consistent."""
         n_ineq = form.n_inequalities
         with_equalities = self.subproblem == "qp"
 
         def violation_of(c_all: np.ndarray) -> float:
-            """½‖max(c_I, 0)‖², or with the equalities the ℓ1 violation the elastic projection reduces."""
-            if with_equalities:
-                return float(np.sum(np.maximum(c_all[:n_ineq], 0.0)) + np.sum(np.abs(c_all[n_ineq:])))
-            return 0.5 * np.sum(np.maximum(c_all[:n_ineq], 0.0) ** 2)
+            value = 0.5 * np.sum(np.maximum(c_all[:n_ineq], 0.0) ** 2)
+            return value + (0.5 * np.sum(c_all[n_ineq:] ** 2) if with_equalities else 0.0)
 
         def unfinished(c_all: np.ndarray) -> bool:
             return bool(np.any(c_all[:n_ineq] > 0) or
@@ -436,27 +428,21 @@ class FSQP:
 
     @staticmethod
     def _projection(form: _NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
-        """The least-norm step onto every linearised row within the bounds, elastic as ``sqp``'s restoration QP
-        (each row relaxed by a slack priced at ``_ELASTIC_WEIGHT``), so it exists even where the linearisation is
-        inconsistent: Newton's method for the feasibility problem, where the clipped Gauss–Newton step crept along
-        the bounds for hundreds of iterations on HS, N = 20. None when the QP fails."""
+        """The least-norm step onto every linearised row within the bounds (a QP: Newton's method for the
+        feasibility problem, where the clipped Gauss–Newton step crept along the bounds for hundreds of iterations
+        on HS, N = 20); None when the linearisation is inconsistent."""
         jacobian = form.jacobian(x)
         general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
-        n, n_e, n_i = form.n, equal.size, general.size
-        slacks = 2 * n_e + n_i
-        P = sp.block_diag([sp.eye(n), _SLACK_CURVATURE * sp.eye(slacks)], format="csc")
-        q = np.concatenate([np.zeros(n), np.full(slacks, _ELASTIC_WEIGHT)])
-        A = sp.hstack([jacobian[equal], -sp.eye(n_e), sp.eye(n_e), sp.csr_matrix((n_e, n_i))], format="csc")
-        G = sp.hstack([jacobian[general], sp.csr_matrix((n_i, 2 * n_e)), -sp.eye(n_i)], format="csc")
-        lower = np.concatenate([np.where(form.free, form.lbx - x, 0.0), np.zeros(slacks)])
-        upper = np.concatenate([np.where(form.free, form.ubx - x, 0.0), np.full(slacks, np.inf)])
         try:
-            solution = _solve_qp(qpsolvers.Problem(P, q, G if n_i else None,
-                                                   -c_all[general] - _FEASIBILITY_MARGIN if n_i else None,
-                                                   A if n_e else None, -c_all[equal] if n_e else None, lower, upper))
+            solution = _solve_qp(qpsolvers.Problem(
+                sp.eye(form.n, format="csc"), np.zeros(form.n),
+                jacobian[general].tocsc() if general.size else None,
+                -c_all[general] - _FEASIBILITY_MARGIN if general.size else None,
+                jacobian[equal].tocsc() if equal.size else None, -c_all[equal] if equal.size else None,
+                np.where(form.free, form.lbx - x, 0.0), np.where(form.free, form.ubx - x, 0.0)))
         except _Breakdown:
             return None
-        return solution.x[:n]
+        return solution.x
 
     @staticmethod
     def _infeasible(form: _NLPForm, x: np.ndarray, c: np.ndarray, iteration: int, reason: str) -> _Outcome:
