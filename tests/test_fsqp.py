@@ -241,15 +241,6 @@ def test_qp_subproblem_solves_a_forward_gait_step_to_ipopts_optimum():
     assert all(_inequality_excess(problem, record.x) <= 1e-6 for record in solver.log if record.phase == "main")
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("transcription", ["dmoc", "hermite-simpson"])
-def test_qp_subproblem_reaches_ipopts_optimum_on_the_upward_slope(transcription: str):
-    problem = gait_step(transcription, 20)
-    _, result = _solve(problem, subproblem="qp", time_limit_s=120)
-    assert result.status is SolverStatus.CONVERGED, result.message
-    assert result.objective <= problem.f_star * (1 + 1e-3)
-
-
 def test_registered_as_a_solver_plugin():
     (registration,) = fsqp.register_solvers()
     assert registration.name == "fsqp" == FSQP.name
