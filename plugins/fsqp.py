@@ -16,6 +16,13 @@ equality row, sign-oriented at the starting point. The deviations from the thesi
 converge at all are listed in :class:`FSQP`; each was found on the Hock–Schittkowski problems of the test suite.
 All linear algebra is sparse, except the BFGS matrix, dense n × n as in the thesis (a KKT matrix that is then mostly
 dense is factorized densely).
+
+That literal form (``subproblem="equality"``) stalls on the gait NLPs: its near-active set leaves out far bounds that
+its steps then cross, and the arc search cuts every step to ~1e-9 (forward step 1, HS, N = 20: "no feasible descent
+direction" at iteration 97, the equalities never below 1.09). The default ``subproblem="qp"`` keeps the family's
+structure — a feasible start, feasible iterates, an exact penalty on the equalities, an arc search with a
+second-order correction — with a QP over every linearised row (sparse, through ``qpsolvers``) for d0 and ``sqp``'s
+convexified exact Hessian; see :class:`FSQP`.
 """
 
 from __future__ import annotations
@@ -239,10 +246,10 @@ class FSQP:
     - ``rank_tolerance`` = 1e-6: a normalized active gradient closer than this to the span of the others counts as
       dependent in the Step-1 rank test.
     - ``equality_margin`` = 0.1: κ_E, see deviation 4.
-    - ``hessian`` = "bfgs": damped (Powell) BFGS on the Lagrangian gradient ∇f + Σ u_j ∇c_j, u the multipliers of d0
-      (the thesis's undamped update on ∇F_c can lose positive definiteness and ignores the constraints' curvature);
-      or "exact": ∇²L(x, π⁺) from the evaluator at the Step-2 multipliers π (inequality entries clipped at 0),
-      convexified as below.
+    - ``hessian`` = "exact": ∇²L(x, π⁺) from the evaluator at the Step-2 multipliers π (inequality entries clipped
+      at 0), convexified as below; or, with ``subproblem="equality"`` only, "bfgs": damped (Powell) BFGS on the
+      Lagrangian gradient ∇f + Σ u_j ∇c_j, u the multipliers of d0 (the thesis's undamped update on ∇F_c can lose
+      positive definiteness and ignores the constraints' curvature).
     - ``h0_scaling`` = "auto": H0 = I, rescaled to (yᵀy / yᵀs) I before the first update (Shanno–Phua), since the
       NLP's curvature is far from 1; a number γ gives H0 = γ I and no rescaling.
     - ``scaling`` = "gradient": every row (and f) whose gradient max-norm at the start exceeds 100 is scaled down to
@@ -272,6 +279,27 @@ class FSQP:
     6. A row that blocked the last arc search (violated at the last rejected trial) joins J at the next iteration,
        unless it makes J rank deficient, as an active-set method adds blocking constraints (HS076: 15 instead of
        23 iterations with BFGS, 7 instead of 26 with the exact Hessian).
+
+    ``subproblem`` = "qp" (the default) or "equality" (the thesis's Steps 1–5 as above). With "qp", each iteration:
+
+    - d0 solves min ½dᵀHd + ∇fᵀd over every linearised row and the bounds (PIQP, Clarabel when PIQP fails). The
+      equalities are QP equalities: on their linearisation Mayne–Polak's penalty term is constant, so the step is the
+      one their inequality form with ∇F_c gives. H = ∇²L + δI made positive definite as ``sqp`` does it (sparse LDLᵀ
+      tests; the least ρ·max|H|·Σ âᵢâᵢᵀ over a working set of equalities, rows with multipliers and bounds within
+      1e-6, then a shift), convexified once more over the rows the QP held if it left some of that working set; δ is
+      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease.
+    - The merit is f + Σ_E w_j|c_j| with Powell's per-row weights (``sqp``'s), raised together when d would not
+      decrease it by ½dᵀHd: one penalty c ≥ max|π| + ρ dwarfed the gait objective (f ~ 1e-5) and every curvature
+      error in the equalities cut the step.
+    - d̃ = s − d, s the QP again with the rows linearised at x + d (second-order correction); the arc x + t d + t²d̃
+      is searched with every inequality row ≤ ``tolerance`` (scaled units) and Armijo on the merit.
+    - Converged when IPOPT's scaled KKT error, with the QP's multipliers, is below ``tolerance``, or below 1e-6 for
+      15 iterations (IPOPT's acceptable level).
+    - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; the
+      Gauss–Newton step when that QP is inconsistent), until the inequalities hold and the equalities are within
+      1e-6, so that the first QP is consistent.
+
+    The "qp" subproblem takes the exact Hessian only.
 
     Exact-Hessian convexification: the theory needs H_k ≻ 0. The method tries H = ∇²L, then H + ρ̄ ÂᵀÂ (Â the
     active gradients with rows normalized; ρ̄ = 100 × the largest diagonal entry), then H + ρ̄ ÂᵀÂ + δI with δ growing
