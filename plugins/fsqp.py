@@ -73,11 +73,8 @@ _QP_SOLVERS = ("piqp", "clarabel")
 Clarabel, which solves the convexified QPs PIQP stops on."""
 
 _ACTIVE = 1e-6
-"""A general inequality row is active in a QP step when c_j + ∇c_jᵀd ≥ −this (scaled units): the rows d̃ bends."""
-
-_MAX_BEND = 1e-3
-"""Largest inward margin of d̃ (scaled units): ‖d‖^τ is meant for ‖d‖ < 1; far from the solution a larger bend
-would push the active rows off their boundary by a step's length."""
+"""A row is held by a QP step when c_j + ∇c_jᵀd ≥ −this (scaled units), and a bound row is near when c_j ≥ −this:
+the rows whose augmentation is constant on the QP's feasible set, and the working set's bounds."""
 
 _EQUALITY_START = 1e-6
 """Phase 1 of the ``qp`` subproblem ends when the equality rows are within this of 0 (scaled units)."""
@@ -716,9 +713,8 @@ class FSQP:
                     return outcome(SolverStatus.CONVERGED, f"acceptable level: KKT error {error:.2e} for "
                                    f"{streak} iterations")
 
-                # Second-order correction: bend the active rows back onto their linearisation, and the inequalities
-                # among them inside by min(‖d‖^τ, _MAX_BEND), so that the arc is feasible for small t.
-                correction = self._bend(form, x, d, c, qp, general, equal, d_norm)
+                # Second-order correction against the Maratos effect (the equalities' curvature).
+                correction = self._bend(form, x, d, qp, general, equal, d_norm)
 
                 # Arc search on x + t d + t² d̃: inequality rows stay ≤ tolerance, Armijo on the ℓ1 merit.
                 current = merit(f, c)
@@ -790,16 +786,16 @@ class FSQP:
             shift *= 4
         raise _Breakdown("the Hessian of the Lagrangian cannot be made positive definite")
 
-    def _bend(self, form: _NLPForm, x: np.ndarray, d: np.ndarray, c: np.ndarray, qp: qpsolvers.Problem,
-              general: np.ndarray, equal: np.ndarray, d_norm: float) -> np.ndarray:
+    @staticmethod
+    def _bend(form: _NLPForm, x: np.ndarray, d: np.ndarray, qp: qpsolvers.Problem, general: np.ndarray,
+              equal: np.ndarray, d_norm: float) -> np.ndarray:
         """The second-order correction d̃ = s − d, s the QP again with every row linearised at x + d
-        (c(x + d) − ∇c d + ∇c s) and the inequalities held min(‖d‖^τ, ``_MAX_BEND``) inside, so that the arc
-        x + t d + t² d̃ is x + s at t = 1; zero when that QP fails or d̃ is longer than d."""
+        (c(x + d) − ∇c d + ∇c s), so that the arc x + t d + t² d̃ is x + s at t = 1; zero when that QP fails or d̃
+        is longer than d. (Holding the inequalities ‖d‖^τ inside, as the thesis's d̃ does, made this QP jump.)"""
         ahead = form.constraints(x + d)
         if not np.all(np.isfinite(ahead)):
             return np.zeros(form.n)
-        margin = 0.0
-        h = None if qp.G is None else -(ahead[general] - qp.G @ d) - margin
+        h = None if qp.G is None else -(ahead[general] - qp.G @ d)
         b = None if qp.A is None else -(ahead[equal] - qp.A @ d)
         try:
             s = _solve_qp(qpsolvers.Problem(qp.P, qp.q, qp.G, h, qp.A, b, qp.lb, qp.ub)).x
