@@ -16,13 +16,22 @@ equality row, sign-oriented at the starting point. The deviations from the thesi
 converge at all are listed in :class:`FSQP`; each was found on the Hock–Schittkowski problems of the test suite.
 All linear algebra is sparse, except the BFGS matrix, dense n × n as in the thesis (a KKT matrix that is then mostly
 dense is factorized densely).
+
+That literal form (``subproblem="equality"``) stalls on the gait NLPs: its near-active set leaves out far bounds that
+its steps then cross, and the arc search cuts every step to ~1e-9 (forward step 1, HS, N = 20: "no feasible descent
+direction" at iteration 97, the equalities never below 1.09). The default ``subproblem="qp"`` keeps the family's
+structure — a feasible start, feasible iterates, an exact penalty on the equalities, an arc search with a
+second-order correction — with a QP over every linearised row (sparse, through ``qpsolvers``) for d0 and ``sqp``'s
+convexified exact Hessian; see :class:`FSQP`.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+import qpsolvers
 import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -30,7 +39,9 @@ import scipy.sparse.linalg as spla
 from gaitbench import Registration, hookimpl
 from gaitbench.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.nlp import NLP
+from gaitbench.silence import quiet_stdout
 from gaitbench.solver import SolverResult, SolverStatus
+from plugins.sqp import _INACCURATE, _backend_status
 
 _MAX_GRADIENT = 100.0
 """Gradient-based scaling target (IPOPT's ``nlp_scaling_max_gradient``): rows whose gradient at the start exceeds
@@ -55,6 +66,23 @@ purpose: on a DMOC gait step, a margin of 1e-4 moved the positions enough to rai
 
 _ROUNDING = 1e-15
 """The arc search gives up when t‖d‖∞ ≤ this × (1 + ‖x‖∞): the trial no longer differs from x but for rounding."""
+
+
+_QP_SOLVERS = ("piqp", "clarabel")
+"""Backends of the ``qp`` subproblem, in turn: PIQP, the fastest on the gait QPs (docs/solvers.md, ``sqp``), then
+Clarabel, which solves the convexified QPs PIQP stops on."""
+
+_ACTIVE = 1e-6
+"""A row is held by a QP step when c_j + ∇c_jᵀd ≥ −this (scaled units), and a bound row is near when c_j ≥ −this:
+the rows whose augmentation is constant on the QP's feasible set, and the working set's bounds."""
+
+_EQUALITY_START = 1e-6
+"""Phase 1 of the ``qp`` subproblem ends when the equality rows are within this of 0 (scaled units)."""
+
+_ACCEPTABLE_TOLERANCE = 1e-6
+_ACCEPTABLE_ITERATIONS = 15
+"""IPOPT's acceptable level: a KKT error below ``_ACCEPTABLE_TOLERANCE`` for this many iterations in a row is
+converged; on the flat valleys of the thesis cost the last digits of the tolerance cost hundreds of iterations."""
 
 
 class _Breakdown(Exception):
@@ -117,6 +145,7 @@ class _NLPForm:
         blocks = [("g", *block) for block in g_blocks] + [("x", *block) for block in x_blocks]
         blocks += [("g", np.flatnonzero(equal), 1.0, lbg), ("x", np.flatnonzero(fixed), 1.0, lbx)]
         self.n_general = sum(index.size for index, _, _ in g_blocks)
+        self.n_equal_g = int(np.count_nonzero(equal))
         self.n_inequalities = self.n_general + sum(index.size for index, _, _ in x_blocks)
         self.m = sum(index.size for _, index, _, _ in blocks)
         rows, start = {"g": ([], [], []), "x": ([], [], [])}, 0
@@ -214,10 +243,10 @@ class FSQP:
     - ``rank_tolerance`` = 1e-6: a normalized active gradient closer than this to the span of the others counts as
       dependent in the Step-1 rank test.
     - ``equality_margin`` = 0.1: κ_E, see deviation 4.
-    - ``hessian`` = "bfgs": damped (Powell) BFGS on the Lagrangian gradient ∇f + Σ u_j ∇c_j, u the multipliers of d0
-      (the thesis's undamped update on ∇F_c can lose positive definiteness and ignores the constraints' curvature);
-      or "exact": ∇²L(x, π⁺) from the evaluator at the Step-2 multipliers π (inequality entries clipped at 0),
-      convexified as below.
+    - ``hessian`` = "exact": ∇²L(x, π⁺) from the evaluator at the Step-2 multipliers π (inequality entries clipped
+      at 0), convexified as below; or, with ``subproblem="equality"`` only, "bfgs": damped (Powell) BFGS on the
+      Lagrangian gradient ∇f + Σ u_j ∇c_j, u the multipliers of d0 (the thesis's undamped update on ∇F_c can lose
+      positive definiteness and ignores the constraints' curvature).
     - ``h0_scaling`` = "auto": H0 = I, rescaled to (yᵀy / yᵀs) I before the first update (Shanno–Phua), since the
       NLP's curvature is far from 1; a number γ gives H0 = γ I and no rescaling.
     - ``scaling`` = "gradient": every row (and f) whose gradient max-norm at the start exceeds 100 is scaled down to
@@ -248,6 +277,27 @@ class FSQP:
        unless it makes J rank deficient, as an active-set method adds blocking constraints (HS076: 15 instead of
        23 iterations with BFGS, 7 instead of 26 with the exact Hessian).
 
+    ``subproblem`` = "qp" (the default) or "equality" (the thesis's Steps 1–5 as above). With "qp", each iteration:
+
+    - d0 solves min ½dᵀHd + ∇fᵀd over every linearised row and the bounds (PIQP, Clarabel when PIQP fails). The
+      equalities are QP equalities: on their linearisation Mayne–Polak's penalty term is constant, so the step is the
+      one their inequality form with ∇F_c gives. H = ∇²L + δI made positive definite as ``sqp`` does it (sparse LDLᵀ
+      tests; the least ρ·max|H|·Σ âᵢâᵢᵀ over a working set of equalities, rows with multipliers and bounds within
+      1e-6, then a shift), convexified once more over the rows the QP held if it left some of that working set; δ is
+      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease.
+    - The merit is f + Σ_E w_j|c_j| with Powell's per-row weights (``sqp``'s), raised together when d would not
+      decrease it by ½dᵀHd: one penalty c ≥ max|π| + ρ dwarfed the gait objective (f ~ 1e-5) and every curvature
+      error in the equalities cut the step.
+    - d̃ = s − d, s the QP again with the rows linearised at x + d (second-order correction); the arc x + t d + t²d̃
+      is searched with every inequality row ≤ ``tolerance`` (scaled units) and Armijo on the merit.
+    - Converged when IPOPT's scaled KKT error, with the QP's multipliers, is below ``tolerance``, or below 1e-6 for
+      15 iterations (IPOPT's acceptable level).
+    - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; the
+      Gauss–Newton step when that QP is inconsistent), until the inequalities hold and the equalities are within
+      1e-6, so that the first QP is consistent.
+
+    The "qp" subproblem takes the exact Hessian only.
+
     Exact-Hessian convexification: the theory needs H_k ≻ 0. The method tries H = ∇²L, then H + ρ̄ ÂᵀÂ (Â the
     active gradients with rows normalized; ρ̄ = 100 × the largest diagonal entry), then H + ρ̄ ÂᵀÂ + δI with δ growing
     8× from a quarter of the last δ (at least 1e-8, at most 1e10 × the largest diagonal entry). The ÂᵀÂ term is
@@ -272,13 +322,17 @@ class FSQP:
     name = "fsqp"
 
     def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, hessian: str = "bfgs", alpha: float = 0.1, beta: float = 0.5,
+                 print_level: int = 0, hessian: str = "exact", alpha: float = 0.1, beta: float = 0.5,
                  nu: float = 2.5, delta: float = 2.2, tau: float = 2.5, theta: float = 0.8, xi: float = 1e-3,
                  epsilon0: float = 1.0, epsilon: float = 1.0, rho: float = 1.0, max_halvings: int = 50,
                  rank_tolerance: float = 1e-6, equality_margin: float = 0.1, h0_scaling: str | float = "auto",
-                 scaling: str = "gradient") -> None:
+                 scaling: str = "gradient", subproblem: str = "qp") -> None:
+        if subproblem not in ("qp", "equality"):
+            raise ValueError(f"subproblem must be 'qp' or 'equality', not {subproblem!r}")
         if hessian not in ("bfgs", "exact"):
             raise ValueError(f"hessian must be 'bfgs' or 'exact', not {hessian!r}")
+        if subproblem == "qp" and hessian != "exact":
+            raise ValueError("the 'qp' subproblem takes the exact Hessian; BFGS needs subproblem='equality'")
         if scaling not in ("gradient", "none"):
             raise ValueError(f"scaling must be 'gradient' or 'none', not {scaling!r}")
         if h0_scaling != "auto" and not (isinstance(h0_scaling, int | float) and h0_scaling > 0):
@@ -299,6 +353,7 @@ class FSQP:
         self.equality_margin = float(equality_margin)
         self.h0_scaling = h0_scaling
         self.scaling = scaling
+        self.subproblem = subproblem
         self.log: list[IterationRecord] = []
         """The iterates of the last solve, both phases, in order."""
 
@@ -322,52 +377,97 @@ class FSQP:
             return solver_result(outcome.status, f"FSQP feasibility phase: {outcome.message}", outcome.x, evaluator,
                                  outcome.iterations, deadline)
         form.orient(outcome.x)
-        outcome = self._minimize(form, outcome.x, deadline, outcome.iterations)
+        minimize = self._minimize_qp if self.subproblem == "qp" else self._minimize
+        outcome = minimize(form, outcome.x, deadline, outcome.iterations)
         multipliers = None if outcome.multipliers is None else form.nlp_multipliers(outcome.multipliers)
         return solver_result(outcome.status, f"FSQP: {outcome.message}", outcome.x, evaluator, outcome.iterations,
                              deadline, multipliers)
 
     def _feasibility(self, form: _NLPForm, x: np.ndarray, deadline: Deadline) -> _Outcome:
-        """Phase 1: damped Gauss–Newton on ½‖max(c_I, 0)‖² until every inequality row holds (see the class)."""
+        """Phase 1: damped Gauss–Newton on ½‖max(c_I, 0)‖² until every inequality row holds (see the class); with
+        the ``qp`` subproblem on ½‖max(c_I, 0)‖² + ½‖c_E‖², until the equalities are within ``_EQUALITY_START``
+        too, so that the first QP's linearisation is consistent."""
         n_ineq = form.n_inequalities
+        with_equalities = self.subproblem == "qp"
+
+        def violation_of(c_all: np.ndarray) -> float:
+            value = 0.5 * np.sum(np.maximum(c_all[:n_ineq], 0.0) ** 2)
+            return value + (0.5 * np.sum(c_all[n_ineq:] ** 2) if with_equalities else 0.0)
+
+        def unfinished(c_all: np.ndarray) -> bool:
+            return bool(np.any(c_all[:n_ineq] > 0) or
+                        (with_equalities and np.max(np.abs(c_all[n_ineq:]), initial=0.0) > _EQUALITY_START))
+
         c_all = form.constraints(x)
-        c = c_all[:n_ineq]
         iteration = 0
-        while np.all(np.isfinite(c)) and np.any(c > 0):
+        while np.all(np.isfinite(c_all)) and unfinished(c_all):
+            c = c_all[:n_ineq]
             if deadline.expired():
                 return _Outcome(SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached", x,
                                 iteration, None)
             if iteration >= self.max_iterations:
                 return _Outcome(SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached",
                                 x, iteration, None)
-            violation = 0.5 * np.sum(np.maximum(c, 0.0) ** 2)
+            violation = violation_of(c_all)
             rows = np.flatnonzero(c > -_FEASIBILITY_MARGIN)
+            target = c[rows] + _FEASIBILITY_MARGIN
+            residual = np.maximum(c[rows], 0.0)
+            if with_equalities:
+                rows = np.concatenate([rows, np.arange(n_ineq, form.m)])
+                target = np.concatenate([target, c_all[n_ineq:]])
+                residual = np.concatenate([residual, c_all[n_ineq:]])
             jacobian = form.jacobian(x)[rows]
             if not np.all(np.isfinite(jacobian.data)):
                 return _Outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}", x,
                                 iteration, None)
-            if np.linalg.norm(jacobian.T @ np.maximum(c[rows], 0.0)) <= 1e-10 * max(1.0, np.sqrt(2 * violation)):
-                return self._infeasible(form, x, c, iteration, "the violation is stationary")
-            normal = (jacobian @ jacobian.T).tocsc()
-            normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
-            direction = -jacobian.T @ spla.splu(normal).solve(c[rows] + _FEASIBILITY_MARGIN)
-            step = 1.0
-            while True:
-                trial = np.clip(x + step * direction, form.lbx, form.ubx)
-                c_trial = form.constraints(trial)
-                if 0.5 * np.sum(np.maximum(c_trial[:n_ineq], 0.0) ** 2) <= (1 - 1e-4 * step) * violation:
+            stalled = None
+            if np.linalg.norm(jacobian.T @ residual) <= 1e-10 * max(1.0, np.sqrt(2 * violation)):
+                stalled = "the violation is stationary"
+            else:
+                direction = self._projection(form, x, c_all) if with_equalities else None
+                if direction is None:
+                    normal = (jacobian @ jacobian.T).tocsc()
+                    normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
+                    direction = -jacobian.T @ spla.splu(normal).solve(target)
+                step = 1.0
+                while True:
+                    trial = np.clip(x + step * direction, form.lbx, form.ubx)
+                    c_trial = form.constraints(trial)
+                    if violation_of(c_trial) <= (1 - 1e-4 * step) * violation:
+                        break
+                    step *= 0.5
+                    if step < 1e-10:
+                        stalled = "no step reduces the violation"
+                        break
+            if stalled is not None:
+                if np.all(c <= 0):  # only the equalities are left: the main phase drives them to 0
                     break
-                step *= 0.5
-                if step < 1e-10:
-                    return self._infeasible(form, x, c, iteration, "no step reduces the violation")
+                return self._infeasible(form, x, c, iteration, stalled)
             self._record("feasibility", iteration, violation, float(np.linalg.norm(direction)), step, np.nan,
                          rows.size, form.max_violation(c_all), "gn", x)
             x, c_all = trial, c_trial
-            c = c_all[:n_ineq]
             iteration += 1
-        if not np.all(np.isfinite(c)):
+        if not np.all(np.isfinite(c_all)):
             return _Outcome(SolverStatus.ERROR, "NaN or infinite g at the starting point", x, iteration, None)
         return _Outcome(SolverStatus.CONVERGED, "feasible", x, iteration, None)
+
+    @staticmethod
+    def _projection(form: _NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
+        """The least-norm step onto every linearised row within the bounds (a QP: Newton's method for the
+        feasibility problem, where the clipped Gauss–Newton step crept along the bounds for hundreds of iterations
+        on HS, N = 20); None when the linearisation is inconsistent."""
+        jacobian = form.jacobian(x)
+        general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
+        try:
+            solution = _solve_qp(qpsolvers.Problem(
+                sp.eye(form.n, format="csc"), np.zeros(form.n),
+                jacobian[general].tocsc() if general.size else None,
+                -c_all[general] - _FEASIBILITY_MARGIN if general.size else None,
+                jacobian[equal].tocsc() if equal.size else None, -c_all[equal] if equal.size else None,
+                np.where(form.free, form.lbx - x, 0.0), np.where(form.free, form.ubx - x, 0.0)))
+        except _Breakdown:
+            return None
+        return solution.x
 
     @staticmethod
     def _infeasible(form: _NLPForm, x: np.ndarray, c: np.ndarray, iteration: int, reason: str) -> _Outcome:
@@ -525,6 +625,187 @@ class FSQP:
         except _Breakdown as breakdown:
             return outcome(SolverStatus.ERROR, str(breakdown))
 
+    def _minimize_qp(self, form: _NLPForm, x: np.ndarray, deadline: Deadline, iteration: int) -> _Outcome:
+        """FSQP with the ``qp`` subproblem (see the class docstring), from x with every inequality row ≤ 0."""
+        n, m, n_ineq = form.n, form.m, form.n_inequalities
+        general, equal = np.arange(form.n_general), n_ineq + np.arange(form.n_equal_g)
+        f, c = form.objective(x), form.constraints(x)
+        if not (np.isfinite(f) and np.all(np.isfinite(c))):
+            return _Outcome(SolverStatus.ERROR, "NaN or infinite f or g at the starting point", x, iteration, None)
+        weights, damping, d_norm, u, streak = np.zeros(equal.size), 0.0, np.nan, np.zeros(m), 0
+        working = equal  # the rows whose normals may convexify H: the equalities and the last QP's active rows
+
+        def merit(f_value: float, c_value: np.ndarray) -> float:
+            """f + Σ_E w_j |c_j|: the ℓ1 exact penalty, Mayne–Polak's F_c with a weight per row."""
+            return f_value + weights @ np.abs(c_value[equal])
+
+        def outcome(status: SolverStatus, message: str) -> _Outcome:
+            return _Outcome(status, message, x, iteration, u)
+
+        def record(step: float, direction: str) -> None:
+            self._record("main", iteration, merit(f, c), d_norm, step, np.max(weights, initial=0.0), working.size,
+                         form.max_violation(c), direction, x)
+
+        try:
+            while True:
+                if deadline.expired():
+                    return outcome(SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached")
+                if iteration >= self.max_iterations:
+                    return outcome(SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached")
+                gradient, jacobian = form.gradient(x), form.jacobian(x)
+                if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
+                    return outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}")
+                multipliers = u
+                # d0: the QP over every linearised row; equalities as equalities, which gives the same step as
+                # Mayne–Polak's inequalities with ∇F_c (the penalty term is constant on their linearisation).
+                rows_g, rows_e = jacobian[general], jacobian[equal]
+                lower = np.where(form.free, form.lbx - x, 0.0)
+                upper = np.where(form.free, form.ubx - x, 0.0)
+                for _ in range(2):  # once more, convexified over the rows the QP holds, if rows it left were in W
+                    hessian, augmentation, base = self._qp_hessian(form, x, multipliers, jacobian[working], damping)
+                    qp = qpsolvers.Problem(hessian, gradient, rows_g.tocsc() if general.size else None,
+                                           -c[general] if general.size else None,
+                                           rows_e.tocsc() if equal.size else None, -c[equal] if equal.size else None,
+                                           lower, upper)
+                    solution = _solve_qp(qp)
+                    d = np.clip(x + solution.x, form.lbx, form.ubx) - x  # the QP's bounds hold to its tolerance
+                    linear = c + jacobian @ d
+                    held = np.intersect1d(working, np.flatnonzero(linear >= -_ACTIVE))  # kept at their bound
+                    held = np.union1d(held, np.intersect1d(working, equal))
+                    loose = np.setdiff1d(working, held)
+                    if not (augmentation and loose.size):
+                        break
+                    working = held
+                u = np.zeros(m)
+                u[general] = solution.z if general.size else 0.0
+                u[equal] = solution.y if equal.size else 0.0
+                bound_multipliers = solution.z_box
+                if augmentation:  # the multipliers of ∇²L rather than of the augmented H (rows held in the QP)
+                    rows_held = jacobian[held]
+                    u[held] += augmentation * (rows_held @ d) / _row_norms(rows_held) ** 2
+                    u[general] = np.maximum(u[general], 0.0)
+                # Powell's weights (``sqp``'s): one per equality row, following its multiplier, raised together when
+                # d would not decrease the merit by ½dᵀHd. A single c ≥ max|u_E| + ρ dwarfed the objective (f ~ 1e-5
+                # on the forward step), so every equality's curvature error cut the arc search.
+                weights = np.maximum(np.abs(u[equal]), (weights + np.abs(u[equal])) / 2)
+                residual = np.sum(np.abs(c[equal]))
+                excess = gradient @ d + 0.5 * d @ (hessian @ d) - weights @ np.abs(c[equal])
+                if excess > 0 and residual > 0:
+                    weights = weights + 2 * excess / residual
+                d_norm = float(np.linalg.norm(d))
+
+                # Convergence: IPOPT's scaled KKT test with the QP's multipliers, or its acceptable level.
+                # ∇f + Jᵀu + z = −(H_base d + ρ Σ_loose â âᵀd) by the QP's stationarity, with the corrected u
+                normals = sp.diags(1 / _row_norms(jacobian[loose])) @ jacobian[loose] if loose.size else None
+                curvature = base @ d + (augmentation * (normals.T @ (normals @ d)) if normals is not None else 0.0)
+                stationarity = np.max(np.abs(curvature), initial=0.0)
+                complementarity = np.max(np.abs(u[general]) * np.minimum(1.0, -c[general]), initial=0.0)
+                scale = max(1.0, (np.sum(np.abs(u)) + np.sum(np.abs(bound_multipliers))) / (100 * (m + n)))
+                violation = max(np.max(c[general], initial=0.0), np.max(np.abs(c[equal]), initial=0.0))
+                error = max(stationarity / scale, complementarity / scale, violation)
+                streak = streak + 1 if error <= _ACCEPTABLE_TOLERANCE else 0
+                if error <= self.tolerance or (d_norm <= self.tolerance and violation <= self.tolerance):
+                    record(np.nan, "-")
+                    return outcome(SolverStatus.CONVERGED, f"KKT error {error:.2e} ≤ {self.tolerance:g} after "
+                                   f"{iteration} iterations")
+                if streak >= _ACCEPTABLE_ITERATIONS:
+                    record(np.nan, "-")
+                    return outcome(SolverStatus.CONVERGED, f"acceptable level: KKT error {error:.2e} for "
+                                   f"{streak} iterations")
+
+                # Second-order correction against the Maratos effect (the equalities' curvature).
+                correction = self._bend(form, x, d, qp, general, equal, d_norm)
+
+                # Arc search on x + t d + t² d̃: inequality rows stay ≤ tolerance, Armijo on the ℓ1 merit.
+                current = merit(f, c)
+                slope = gradient @ d - weights @ np.abs(c[equal])
+                step = 1.0
+                while True:
+                    if deadline.expired():
+                        return outcome(SolverStatus.TIME_LIMIT,
+                                       f"time limit of {self.time_limit_s} s reached in the arc search")
+                    trial = np.clip(x + step * d + step ** 2 * correction, form.lbx, form.ubx)
+                    c_trial = form.constraints(trial)
+                    if np.all(np.isfinite(c_trial)) and np.all(c_trial[:n_ineq] <= self.tolerance):
+                        f_trial = form.objective(trial)
+                        if merit(f_trial, c_trial) <= current + self.alpha * step * min(slope, 0.0):
+                            break
+                    step *= self.beta
+                    if step * np.max(np.abs(d)) <= _ROUNDING * (1 + np.max(np.abs(x))):
+                        if error <= _ACCEPTABLE_TOLERANCE:
+                            return outcome(SolverStatus.CONVERGED, f"acceptable level: KKT error {error:.2e}, no "
+                                           "further progress")
+                        raise _Breakdown(f"arc search found no acceptable step at iteration {iteration} "
+                                         f"(‖d‖ = {d_norm:.2e}, slope {slope:.2e}, KKT error {error:.2e})")
+                record(step, "qp" if not correction.any() else "qp+soc")
+                # Levenberg–Marquardt damping, as ``sqp``'s: set by the merit's actual against predicted decrease;
+                # a cut step or a poor ratio says the model reaches too far.
+                size = max(1.0, float(np.max(np.abs(base.diagonal()), initial=0.0)))
+                predicted = -slope - 0.5 * d @ (base @ d)
+                ratio = (current - merit(f_trial, c_trial)) / predicted if predicted > 0 else 1.0
+                if step < 1 or ratio < 0.25:
+                    damping = min(max(4 * damping, _SHIFT_RANGE[0] * size), size)
+                elif ratio >= 0.75:
+                    damping /= 2
+                x, f, c = trial, f_trial, c_trial
+                bounds_near = np.arange(form.n_general, n_ineq)[c[form.n_general:n_ineq] >= -_ACTIVE]
+                working = np.concatenate([general[u[general] > 0], bounds_near, equal])
+                iteration += 1
+        except _Breakdown as breakdown:
+            return outcome(SolverStatus.ERROR, str(breakdown))
+
+    @staticmethod
+    def _qp_hessian(form: _NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
+                    damping: float) -> tuple[sp.csc_matrix, float, sp.csc_matrix]:
+        """∇²L(x, u⁺) + δI made positive definite as ``sqp`` does: δ = max(damping, 1e-10 max|H|), then the least
+        ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with a
+        shift growing ×4. Returns H, the augmentation's factor (for the multiplier correction) and H without the
+        augmentation (for the KKT test)."""
+        multipliers = u.copy()
+        multipliers[: form.n_inequalities] = np.maximum(multipliers[: form.n_inequalities], 0.0)
+        lagrangian = form.hessian(x, multipliers)
+        if not np.all(np.isfinite(lagrangian.data)):
+            raise _Breakdown("NaN or infinite Hessian of the Lagrangian")
+        size = max(1.0, float(np.max(np.abs(lagrangian.data), initial=0.0)))
+        shift = max(damping, 1e-10 * size)
+        shifted = (lagrangian + shift * sp.eye(form.n)).tocsc()
+        if _positive_definite(shifted):
+            return shifted, 0.0, shifted
+        normals = sp.diags(1 / _row_norms(rows)) @ rows
+        gram = (normals.T @ normals).tocsc()
+        for rho in (1.0, 10.0, 100.0, 1e3, 1e4):
+            augmented = (shifted + rho * size * gram).tocsc()
+            if _positive_definite(augmented):
+                return augmented, rho * size, shifted
+        augmentation, shift = 100.0 * size, max(shift, 1e-8 * size)
+        while shift <= _SHIFT_RANGE[1] * size:
+            base = (lagrangian + shift * sp.eye(form.n)).tocsc()
+            candidate = (base + augmentation * gram).tocsc()
+            if _positive_definite(candidate):
+                return candidate, augmentation, base
+            shift *= 4
+        raise _Breakdown("the Hessian of the Lagrangian cannot be made positive definite")
+
+    @staticmethod
+    def _bend(form: _NLPForm, x: np.ndarray, d: np.ndarray, qp: qpsolvers.Problem, general: np.ndarray,
+              equal: np.ndarray, d_norm: float) -> np.ndarray:
+        """The second-order correction d̃ = s − d, s the QP again with every row linearised at x + d
+        (c(x + d) − ∇c d + ∇c s), so that the arc x + t d + t² d̃ is x + s at t = 1; zero when that QP fails or d̃
+        is longer than d. (Holding the inequalities ‖d‖^τ inside, as the thesis's d̃ does, made this QP jump.)"""
+        ahead = form.constraints(x + d)
+        if not np.all(np.isfinite(ahead)):
+            return np.zeros(form.n)
+        h = None if qp.G is None else -(ahead[general] - qp.G @ d)
+        b = None if qp.A is None else -(ahead[equal] - qp.A @ d)
+        try:
+            s = _solve_qp(qpsolvers.Problem(qp.P, qp.q, qp.G, h, qp.A, b, qp.lb, qp.ub)).x
+        except _Breakdown:
+            return np.zeros(form.n)
+        correction = np.clip(x + s, form.lbx, form.ubx) - x - d
+        if np.linalg.norm(correction) > d_norm:
+            return np.zeros(form.n)
+        return correction
+
     def _margins(self, norm: float, power: float, c_active: np.ndarray, equality: np.ndarray) -> np.ndarray:
         """The interior margin ‖·‖^power of d1 and d̃ per active row (deviation 4)."""
         margin = _power(norm, power)
@@ -618,6 +899,26 @@ class _Factorization:
         if not np.all(np.isfinite(solution)):
             raise _Breakdown("singular KKT matrix (non-finite solution)")
         return solution
+
+
+def _solve_qp(problem: qpsolvers.Problem) -> qpsolvers.Solution:
+    """The QP by each of ``_QP_SOLVERS`` in turn until one solves it (or returns a reduced-accuracy optimum)."""
+    statuses = []
+    for solver in _QP_SOLVERS:
+        try:
+            with warnings.catch_warnings(), quiet_stdout():
+                warnings.simplefilter("ignore")
+                solution = qpsolvers.solve_problem(problem, solver=solver)
+        except Exception as error:  # a backend that rejects the problem counts as a failed QP
+            statuses.append(f"{solver}: {type(error).__name__}")
+            continue
+        status = _backend_status(solution)
+        if (solution.found or status in _INACCURATE) and solution.x is not None and np.all(np.isfinite(solution.x)):
+            if solution.z_box is None:
+                solution.z_box = np.zeros(problem.P.shape[0])
+            return solution
+        statuses.append(f"{solver}: {status}")
+    raise _Breakdown(f"the QP subproblem failed ({'; '.join(statuses)})")
 
 
 def _power(norm: float, power: float) -> float:
