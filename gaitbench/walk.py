@@ -201,8 +201,10 @@ class WalkProblem:
         return self.experiment.n_steps if self.steps is None else self.steps
 
     def structure(self, phase: str, n_nodes: int | None = None, walked: bool = False) -> StepStructure:
-        """The step NLP's shape; ``walked``: a First-Phase step the walk goes on from (see StepStructure)."""
-        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective, walked)
+        """The step NLP's shape; ``walked``: a First-Phase step the walk goes on from (see StepStructure). Only the
+        First Phase tells the two apart, so a 4-DOF step is one structure, and one build, for every strategy."""
+        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective,
+                             walked and phase == "first")
 
     def step_data(self, index: int, state: np.ndarray) -> StepData:
         """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""

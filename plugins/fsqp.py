@@ -383,6 +383,14 @@ class FSQP:
         return solver_result(outcome.status, f"FSQP: {outcome.message}", outcome.x, evaluator, outcome.iterations,
                              deadline, multipliers)
 
+    def _limit_reached(self, deadline: Deadline, iteration: int) -> tuple[SolverStatus, str] | None:
+        """The time or iteration limit with its message, once reached: checked first by every loop of the method."""
+        if deadline.expired():
+            return SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached"
+        if iteration >= self.max_iterations:
+            return SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached"
+        return None
+
     def _feasibility(self, form: _NLPForm, x: np.ndarray, deadline: Deadline) -> _Outcome:
         """Phase 1: damped Gauss–Newton on ½‖max(c_I, 0)‖² until every inequality row holds (see the class); with
         the ``qp`` subproblem on ½‖max(c_I, 0)‖² + ½‖c_E‖², until the equalities are within ``_EQUALITY_START``
@@ -402,12 +410,8 @@ class FSQP:
         iteration = 0
         while np.all(np.isfinite(c_all)) and unfinished(c_all):
             c = c_all[:n_ineq]
-            if deadline.expired():
-                return _Outcome(SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached", x,
-                                iteration, None)
-            if iteration >= self.max_iterations:
-                return _Outcome(SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached",
-                                x, iteration, None)
+            if limit := self._limit_reached(deadline, iteration):
+                return _Outcome(*limit, x, iteration, None)
             violation = violation_of(c_all)
             rows = np.flatnonzero(c > -_FEASIBILITY_MARGIN)
             target = c[rows] + _FEASIBILITY_MARGIN
@@ -511,10 +515,8 @@ class FSQP:
 
         try:
             while True:
-                if deadline.expired():
-                    return outcome(SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached")
-                if iteration >= self.max_iterations:
-                    return outcome(SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached")
+                if limit := self._limit_reached(deadline, iteration):
+                    return outcome(*limit)
                 gradient, jacobian = form.gradient(x), form.jacobian(x)
                 if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
                     return outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}")
@@ -648,10 +650,8 @@ class FSQP:
 
         try:
             while True:
-                if deadline.expired():
-                    return outcome(SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached")
-                if iteration >= self.max_iterations:
-                    return outcome(SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached")
+                if limit := self._limit_reached(deadline, iteration):
+                    return outcome(*limit)
                 gradient, jacobian = form.gradient(x), form.jacobian(x)
                 if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
                     return outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}")
