@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gaitbench.provenance import provenance
-from gaitbench.runner import run_case
-from gaitbench.suite import load_suite
-from gaitbench.transcription import TranscribedStep
+from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.run.provenance import provenance
+from gaitbench.run.runner import run_case
+from gaitbench.run.suite import load_suite
 
 HERE = Path(__file__).parent
 SUITE = HERE / "suites" / "regression.toml"

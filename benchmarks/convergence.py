@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from gaitbench.plugins import load_registry
-from gaitbench.provenance import provenance
-from gaitbench.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL
-from gaitbench.walk import WalkProblem
+from gaitbench.run.provenance import provenance
+from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL
+from gaitbench.solve.walk import WalkProblem
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "convergence.json"

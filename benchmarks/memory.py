@@ -1,4 +1,4 @@
-"""Resident memory of one case against N: the measurements behind ``gaitbench.memory``'s laws.
+"""Resident memory of one case against N: the measurements behind ``gaitbench.run.memory``'s laws.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/memory.py [TRANSCRIPTION:STRATEGY:N[:STEPS] ...]
         OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/memory.py --fit
@@ -9,7 +9,7 @@ resident memory after the walk (``peak_mb``, ``ru_maxrss``). Rows are appended t
 ``benchmarks/results/memory.jsonl`` with the commit measured (``+dirty`` as a rule: the results file itself is being
 appended); without arguments the grid :data:`FIT_NODES` is measured. ``--fit`` fits the
 laws to the grid's rows (see :func:`fit`) and compares every other row (larger N, other strategies, several steps)
-with what ``gaitbench.memory`` estimates for it.
+with what ``gaitbench.run.memory`` estimates for it.
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ def measure(transcription: str, strategy: str, n_nodes: int, steps: int = 1) -> 
     import resource
 
     from gaitbench.plugins import load_registry
-    from gaitbench.provenance import git_commit
-    from gaitbench.walk import WalkProblem
+    from gaitbench.run.provenance import git_commit
+    from gaitbench.solve.walk import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")
@@ -113,7 +113,7 @@ def main(argv: list[str]) -> None:
         print(json.dumps(measure(transcription, strategy, int(n_nodes), *map(int, steps))))
         return
     if argv[:1] == ["--fit"]:
-        from gaitbench.memory import estimate_case_memory
+        from gaitbench.run.memory import estimate_case_memory
 
         rows = [json.loads(line) for line in RESULTS.read_text().splitlines() if line.strip()]
         for (transcription, strategy), law in fit(rows).items():

@@ -45,16 +45,16 @@ from pathlib import Path
 
 import numpy as np
 
-from gaitbench.case import Case
-from gaitbench.gait_problem import StepData, sectional_structure
 from gaitbench.plugins import load_registry
-from gaitbench.provenance import provenance
-from gaitbench.runner import largest_first
-from gaitbench.solver import prepare
-from gaitbench.store import load_results
-from gaitbench.suite import load_suite
-from gaitbench.walk import WalkProblem, solve_and_verify
-from plugins.decrease_and_conquer import release_sections
+from gaitbench.problem.gait_problem import StepData, sectional_structure
+from gaitbench.run.case import Case
+from gaitbench.run.provenance import provenance
+from gaitbench.run.runner import largest_first
+from gaitbench.run.store import load_results
+from gaitbench.run.suite import load_suite
+from gaitbench.solve.solver import prepare
+from gaitbench.solve.walk import WalkProblem, solve_and_verify
+from plugins.strategies.decrease_and_conquer import release_sections
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "performance.json"
@@ -72,7 +72,7 @@ of 1e-8 … 0.5, their gradients as small, so unscaled the barrier and the const
 SCALINGS = {"default": {}, "objective": OBJECTIVE_SCALING, "nominal": {"scaling": "nominal"},
             "nominal + objective": {"scaling": "nominal"} | OBJECTIVE_SCALING}
 """IPOPT's defaults and the scalings compared with them. ``nominal`` scales the variables and the constraint rows
-(:mod:`gaitbench.scaling`)."""
+(:mod:`gaitbench.problem.scaling`)."""
 SUITE_SAMPLE_NODES = (10, 20, 30)
 SUITE_SAMPLE_TIME_LIMIT_S = 600
 """The sample's case time limit (the suites' own is 3600 s): ripopt, the reference method's solver until 2026-12,
@@ -431,7 +431,8 @@ def write_summary(results: dict) -> None:
     if "scaling" in results:
         lines += ["## Scalings against IPOPT's defaults", "",
                   "Same problems, same guesses (forward, step 1). objective: IPOPT's `nlp_scaling_obj_target_gradient "
-                  "= 1`; nominal: variables and constraint rows (`scaling = \"nominal\"`, gaitbench/scaling.py). "
+                  "= 1`; nominal: variables and constraint rows (`scaling = \"nominal\"`, "
+                  "gaitbench/problem/scaling.py). "
                   "Objective: the cold step's, or the median over the sections; \"lower\" counts the sections whose "
                   "objective the scaled solve brought below the default's by more than 1e-9 (relative).", "",
                   "| transcription | N | problem | IPOPT | converged | mean (ms) | mean iterations | objective | "

@@ -20,9 +20,9 @@ from pathlib import Path
 
 from pebble import ProcessPool
 
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.plugins import load_registry
-from gaitbench.provenance import provenance
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.run.provenance import provenance
 
 EXPERIMENT = "upward-slope"
 TRANSCRIPTIONS = ("hermite-simpson", "dmoc")

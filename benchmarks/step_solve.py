@@ -15,9 +15,9 @@ import casadi
 import numpy as np
 
 from gaitbench import __version__
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.plugins import load_registry
-from gaitbench.walk import WalkProblem
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.solve.walk import WalkProblem
 
 TRANSCRIPTIONS = ("hermite-simpson", "trapezoidal", "dmoc")
 NODES = (25, 50, 100, 200)

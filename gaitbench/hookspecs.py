@@ -21,7 +21,7 @@ hookspec = pluggy.HookspecMarker("gaitbench")
 def register_experiments():
     """Walking experiments: a robot, a terrain, an initial state and per-step timing.
 
-    ``factory(**options)`` returns a :class:`gaitbench.experiment.Experiment`; options (from a suite's
+    ``factory(**options)`` returns a :class:`gaitbench.model.experiment.Experiment`; options (from a suite's
     ``options``/``grid``) parametrize a family of experiments, and invalid ones raise ``ValueError``. The
     built-in experiments are ``forward``, ``downward-slope``, ``upward-slope``, ``stairs`` (the thesis's
     chapter 5, no options), ``energetics`` (the §5.6 study's bipeds, with options) and ``compass-gait`` (the
@@ -33,8 +33,8 @@ def register_experiments():
 def register_models():
     """Biped dynamic models.
 
-    ``factory(robot)`` takes :class:`gaitbench.robot.RobotParameters` and returns a
-    :class:`gaitbench.mechanics.BipedModel`-compatible object (mass matrix, Coriolis and gravity terms,
+    ``factory(robot)`` takes :class:`gaitbench.model.robot.RobotParameters` and returns a
+    :class:`gaitbench.model.mechanics.BipedModel`-compatible object (mass matrix, Coriolis and gravity terms,
     input map, ground reaction, push-off and heel-strike maps, both stance cases). Built-in: ``biped-2dof``
     (stance foot pinned, the First Phase model) and ``biped-4dof`` (stance-foot coordinates q3, q4, the Second
     Phase model).
@@ -55,7 +55,8 @@ def register_transcriptions():
 def register_objectives():
     """Objectives: what a step costs, the NLP's running and event costs and the COT verification recomputes.
 
-    ``factory(**options)`` returns a :class:`gaitbench.objective.Objective` (a frozen dataclass, since built NLPs
+    ``factory(**options)`` returns a :class:`gaitbench.problem.objective.Objective` (a frozen dataclass, since
+    built NLPs
     are cached under it): its charged powers and smooth rate, in role order, serve the NLP and the fine-grid check
     alike. Built-in: ``net-power`` (the thesis's cost, the default), ``actuator-work`` and ``torque-squared``.
     """

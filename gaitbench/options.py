@@ -91,7 +91,7 @@ def check_common_solver_options(options: Mapping[str, Any]) -> None:
 
 def describe(value: Any) -> str:
     """``a string 'x'``, ``an integer (3)``, ``a table``: what was given where something else was expected."""
-    from gaitbench.suite_schema import _found
+    from gaitbench.run.suite_schema import _found
 
     return _found(value)
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import pluggy
 
-from gaitbench import hookspecs
+import gaitbench.hookspecs as hookspecs
 from gaitbench.registration import Registration
 
 PLUGINS_DIR_ENV = "GAITBENCH_PLUGINS_DIR"

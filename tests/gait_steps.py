@@ -12,9 +12,9 @@ from functools import cache
 
 from nlp_problems import ReferenceProblem
 
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.plugins import load_registry
-from plugins.ipopt import Ipopt
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from plugins.solvers.ipopt import Ipopt
 
 TIE_BREAK = 1e-3
 """Weight of ∫τ² next to the cost of transport: enough to make the optimum unique, small against the COT."""

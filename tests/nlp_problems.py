@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from gaitbench.nlp import NLP, NLPBuilder
+from gaitbench.problem.nlp import NLP, NLPBuilder
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,9 @@ import importlib.util
 import json
 from pathlib import Path
 
-from gaitbench.case import Case, PluginChoice
-from gaitbench.runner import largest_first
-from gaitbench.suite import load_suite
+from gaitbench.run.case import Case, PluginChoice
+from gaitbench.run.runner import largest_first
+from gaitbench.run.suite import load_suite
 
 BENCHMARKS = Path(__file__).parents[1] / "benchmarks"
 

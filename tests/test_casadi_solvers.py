@@ -19,10 +19,10 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-from gaitbench.nlp import NLP, NLPBuilder
-from gaitbench.solver import SolverStatus
-from plugins.casadi_solvers import BlockSqp, CasadiMethod, Fatrop, register_solvers
-from plugins.ipopt import Ipopt
+from gaitbench.problem.nlp import NLP, NLPBuilder
+from gaitbench.solve.solver import SolverStatus
+from plugins.solvers.casadi_solvers import BlockSqp, CasadiMethod, Fatrop, register_solvers
+from plugins.solvers.ipopt import Ipopt
 
 METHODS = [BlockSqp, Fatrop]
 
@@ -163,7 +163,7 @@ def test_fatrop_structure_detection_on_a_gait_step_fails_with_the_reason():
 def test_print_level_zero_is_silent_on_standard_output():
     """blockSQP's qpOASES prints its banner whatever its options say; it is cut."""
     script = ("import numpy as np; from nlp_problems import hs071; "
-              "from plugins.casadi_solvers import BlockSqp, Fatrop; p = hs071(); "
+              "from plugins.solvers.casadi_solvers import BlockSqp, Fatrop; p = hs071(); "
               "assert all(m().solve(p.nlp, p.parameters, p.x0).converged for m in (BlockSqp, Fatrop)); "
               "print('done')")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)

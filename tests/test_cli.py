@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from rich.console import Console
 
 from gaitbench import __version__
-from gaitbench.cli import main
+from gaitbench.cli.main import main
 
 BROKEN_PLUGIN = "raise ImportError('half-finished plugin')\n"
 
@@ -104,9 +104,9 @@ def test_show_renders_the_experiment_built_by_the_plugin(
 ):
     path = plugin_file("walks", experiment_plugin("flat"))
     rendered = []
-    fake_module = types.ModuleType("gaitbench.experiment")
+    fake_module = types.ModuleType("gaitbench.model.experiment")
     fake_module.render_experiment = lambda experiment, console: rendered.append((experiment, console))
-    monkeypatch.setitem(sys.modules, "gaitbench.experiment", fake_module)
+    monkeypatch.setitem(sys.modules, "gaitbench.model.experiment", fake_module)
 
     result = invoke("--plugins-dir", str(path.parent), "experiments", "show", "flat")
 
@@ -121,7 +121,7 @@ def test_invalid_experiment_exits_1_with_the_message(invoke, fake_entry_points, 
         "bad",
         """
         from gaitbench import Registration, hookimpl
-        from gaitbench.robot import RobotParameters
+        from gaitbench.model.robot import RobotParameters
 
         @hookimpl
         def register_experiments():
@@ -154,8 +154,8 @@ def test_help_and_version_do_not_load_plugins(invoke, fake_entry_points):
 
 
 def test_solve_help_lists_every_problem_option_and_its_values(invoke):
-    from gaitbench.gait_problem import OPTION_CHOICES
-    from gaitbench.suite_schema import problem_option_kinds
+    from gaitbench.problem.gait_problem import OPTION_CHOICES
+    from gaitbench.run.suite_schema import problem_option_kinds
 
     result = invoke("solve", "--help")
     assert result.exit_code == 0
@@ -223,12 +223,12 @@ def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_si
     """HS with the thesis's Simpson rule sees the power only at nodes and midpoints: the optimizer ends at torques whose
     power vanishes there (objective COT ~1e-4, verified 0.0045). Boole's rule on the interpolant's power finds the
     passive gait (measured 1.9e-9)."""
-    from gaitbench.gait_problem import ProblemOptions
     from gaitbench.plugins import load_registry
-    from gaitbench.walk import WalkProblem
-    from plugins.hermite_simpson import HermiteSimpson
-    from plugins.ipopt import Ipopt
-    from plugins.one_phase import OnePhase
+    from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.walk import WalkProblem
+    from plugins.solvers.ipopt import Ipopt
+    from plugins.strategies.one_phase import OnePhase
+    from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
     experiment = load_registry().create("experiment", "compass-gait")
     options = ProblemOptions(limits=experiment.limits, clearance="off")
@@ -245,7 +245,7 @@ def test_the_solve_spinner_counts_the_steps_and_ends_on_the_walk(invoke, monkeyp
     """It used to end on "solving step 4 of 3": the step after the last."""
     from contextlib import contextmanager
 
-    from gaitbench import cli
+    from gaitbench.cli import main as cli
 
     shown = []
 
@@ -272,7 +272,7 @@ def test_the_solve_spinner_counts_the_steps_and_ends_on_the_walk(invoke, monkeyp
 @pytest.fixture
 def long_labelled_store(tmp_path):
     """Cases with the long default method labels, every kind of ending and a long message."""
-    from gaitbench.store import ResultStore
+    from gaitbench.run.store import ResultStore
 
     base = {"suite": "s", "run_id": "r1", "experiment_options": {}, "steps": 11, "transcription": "hermite-simpson",
             "solver": "ipopt", "strategy": "decrease-and-conquer", "repetition": 0, "wall_time_s": 123.4,

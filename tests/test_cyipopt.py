@@ -21,10 +21,10 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-from gaitbench.evaluation import NLPEvaluator
-from gaitbench.solver import SolverStatus
-from plugins.cyipopt_solver import CyIpopt, register_solvers
-from plugins.ipopt import Ipopt
+from gaitbench.solve.evaluation import NLPEvaluator
+from gaitbench.solve.solver import SolverStatus
+from plugins.solvers.cyipopt_solver import CyIpopt, register_solvers
+from plugins.solvers.ipopt import Ipopt
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -157,7 +157,7 @@ def test_evaluations_and_timings_are_reported():
 
 
 def _run(print_level: int) -> subprocess.CompletedProcess:
-    script = ("from nlp_problems import hs071; from plugins.cyipopt_solver import CyIpopt; p = hs071(); "
+    script = ("from nlp_problems import hs071; from plugins.solvers.cyipopt_solver import CyIpopt; p = hs071(); "
               f"assert CyIpopt(print_level={print_level}).solve(p.nlp, p.parameters, p.x0).converged")
     return subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
 

@@ -4,7 +4,7 @@ import casadi
 import numpy as np
 import pytest
 
-from gaitbench.energetics import (
+from gaitbench.model.energetics import (
     average_cot,
     candidate_cot,
     cost_of_transport,
@@ -13,7 +13,7 @@ from gaitbench.energetics import (
     simpson_weights,
     smooth_abs,
 )
-from gaitbench.objective import NET_POWER
+from gaitbench.problem.objective import NET_POWER
 
 
 @pytest.mark.parametrize("n", range(3, 13))

@@ -9,9 +9,9 @@ import pytest
 from click.testing import CliRunner
 from gait_steps import FORMER_QUADRATURE, gait_step
 
-from gaitbench.cli import main
+from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
-from gaitbench.solver import SolverStatus
+from gaitbench.solve.solver import SolverStatus
 
 EXAMPLES = Path(__file__).parents[1] / "examples" / "plugins"
 

@@ -5,16 +5,16 @@ import pytest
 from rich.console import Console
 
 from gaitbench import Registration
-from gaitbench.experiment import (
+from gaitbench.model.experiment import (
     Experiment,
     FrictionParameters,
     Limits,
     feasibility_summary,
     render_experiment,
 )
-from gaitbench.robot import InvalidParameterError, RobotParameters
-from gaitbench.terrain import Terrain
-from plugins import thesis_experiments
+from gaitbench.model.robot import InvalidParameterError, RobotParameters
+from gaitbench.model.terrain import Terrain
+from plugins.experiments import thesis_experiments
 
 THESIS_NAMES = ("forward", "downward-slope", "upward-slope", "stairs")
 

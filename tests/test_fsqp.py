@@ -12,12 +12,12 @@ import pytest
 from gait_steps import gait_step
 from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative_projection, undefined_at_start
 
-import plugins.fsqp as fsqp
-from gaitbench.evaluation import Deadline
-from gaitbench.nlp import NLPBuilder
-from gaitbench.solver import SolverStatus
-from plugins.fsqp import FSQP
-from plugins.ipopt import Ipopt
+import plugins.solvers.fsqp as fsqp
+from gaitbench.problem.nlp import NLPBuilder
+from gaitbench.solve.evaluation import Deadline
+from gaitbench.solve.solver import SolverStatus
+from plugins.solvers.fsqp import FSQP
+from plugins.solvers.ipopt import Ipopt
 
 
 def _solve(problem: ReferenceProblem, x0=None, **options):

@@ -7,10 +7,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from gaitbench import compiled as compiled_module
-from gaitbench.gait_problem import ProblemOptions, StepStructure
-from gaitbench.nlp import NLPBuilder
+from gaitbench.problem import compiled as compiled_module
 from gaitbench.plugins import load_registry
+from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
+from gaitbench.problem.nlp import NLPBuilder
 
 
 def _dense(matrix) -> np.ndarray:
@@ -133,7 +133,7 @@ def test_a_block_declared_again_after_another_is_refused():
 def test_an_interval_function_declared_anew_reuses_its_derivatives():
     """Each structure (each sectional problem of a walk) declares its interval function anew; its compiled
     derivatives must come from the first declaration, not be derived and hashed again."""
-    from gaitbench.nlp import _derived, _interval_hessian
+    from gaitbench.problem.nlp import _derived, _interval_hessian
 
     def declare():
         z, p = ca.SX.sym("z", 2), ca.SX.sym("p", 1)
@@ -157,7 +157,7 @@ def test_ipopt_on_the_compiled_oracle_takes_the_flat_problem_s_iterates(transcri
     IPOPT must walk the same path as on the flat SX problem's g, to the same solution."""
     import casadi as ca
 
-    from gaitbench.walk import WalkProblem
+    from gaitbench.solve.walk import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")

@@ -21,8 +21,8 @@ from nlp_problems import (
 )
 
 from gaitbench.plugins import load_registry
-from gaitbench.solver import SolverStatus
-from plugins.ipopt import Ipopt
+from gaitbench.solve.solver import SolverStatus
+from plugins.solvers.ipopt import Ipopt
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -128,7 +128,7 @@ def test_evaluations_and_timings_are_reported():
 
 def test_print_level_zero_is_silent():
     """In a fresh process, since IPOPT prints its banner only on the first solve of a process."""
-    script = "from nlp_problems import hs071; from plugins.ipopt import Ipopt; p = hs071(); " \
+    script = "from nlp_problems import hs071; from plugins.solvers.ipopt import Ipopt; p = hs071(); " \
              "assert Ipopt().solve(p.nlp, p.parameters, p.x0).converged"
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
     assert (run.returncode, run.stdout, run.stderr) == (0, "", "")

@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.cli import main
+from gaitbench.cli.main import main
+from gaitbench.cli.report_command import default_report_dir
 from gaitbench.plugins import load_registry
-from gaitbench.report_command import default_report_dir
-from gaitbench.suite import load_suite
+from gaitbench.run.suite import load_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 TERRAINS = {"forward", "downward-slope", "upward-slope", "stairs"}

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from gaitbench.mechanics import BipedModel
-from gaitbench.robot import InvalidParameterError, RobotParameters
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.robot import InvalidParameterError, RobotParameters
 
 THESIS_FORWARD = RobotParameters(m1=20, m2=20, M=40, l=1.0, a=0.5)
 # Unequal legs and off-centre masses: symmetric robots can hide index mistakes.

@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.cli import main
-from gaitbench.memory import (
+from gaitbench.cli.main import main
+from gaitbench.plugins import load_registry
+from gaitbench.run.memory import (
     MEMORY_LIMIT_ENV,
     MemoryLimit,
     concurrent_problem,
@@ -20,8 +21,7 @@ from gaitbench.memory import (
     memory_problem,
     parse_size_mb,
 )
-from gaitbench.plugins import load_registry
-from gaitbench.suite import SuiteError, load_suite
+from gaitbench.run.suite import SuiteError, load_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 MEASURED = ROOT / "benchmarks" / "results" / "memory.jsonl"

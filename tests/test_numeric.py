@@ -4,8 +4,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from gaitbench.mechanics import biped_functions
-from gaitbench.numeric import NumericFunction
+from gaitbench.model.mechanics import biped_functions
+from gaitbench.model.numeric import NumericFunction
 
 
 @pytest.mark.parametrize("dof", [2, 4])

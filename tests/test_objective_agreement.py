@@ -11,15 +11,15 @@ from functools import cache
 import numpy as np
 import pytest
 
-from gaitbench.energetics import cost_of_transport
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.mechanics import BipedModel
-from gaitbench.objective import NET_POWER
+from gaitbench.model.energetics import cost_of_transport
+from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
-from gaitbench.transcription import Interpolant, StepTrajectory
-from gaitbench.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_running_cost, objective_gap, verify_step
-from gaitbench.walk import WalkProblem
-from plugins.ipopt import Ipopt
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.problem.objective import NET_POWER
+from gaitbench.problem.transcription import Interpolant, StepTrajectory
+from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_running_cost, objective_gap, verify_step
+from gaitbench.solve.walk import WalkProblem
+from plugins.solvers.ipopt import Ipopt
 
 N_NODES = 25
 

@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.cli import main
-from gaitbench.gait_problem import ProblemOptions, role_robot_vector
-from gaitbench.objective import NET_POWER
+from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
-from gaitbench.transcription import nodal_trajectory
-from gaitbench.verify import OBJECTIVE_RTOL, fine_grid_running_cost
-from gaitbench.walk import WalkProblem
-from plugins.objectives import ActuatorWork, TorqueSquared
-from plugins.one_phase import OnePhase
+from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.problem.objective import NET_POWER
+from gaitbench.problem.transcription import nodal_trajectory
+from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
+from gaitbench.solve.walk import WalkProblem
+from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
+from plugins.strategies.one_phase import OnePhase
 
 REGISTRY = load_registry()
 OBJECTIVES = {"net-power": NET_POWER, "actuator-work": ActuatorWork(), "actuator-work-margaria": ActuatorWork(True),

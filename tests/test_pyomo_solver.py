@@ -20,12 +20,12 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-import plugins.pyomo_solver as pyomo_solver
-from gaitbench.nlp import NLP
+import plugins.solvers.pyomo_solver as pyomo_solver
 from gaitbench.plugins import load_registry
-from gaitbench.solver import SolverStatus
-from plugins.ipopt import Ipopt
-from plugins.pyomo_solver import PyomoSolver, UnsupportedOperationError, translate
+from gaitbench.problem.nlp import NLP
+from gaitbench.solve.solver import SolverStatus
+from plugins.solvers.ipopt import Ipopt
+from plugins.solvers.pyomo_solver import PyomoSolver, UnsupportedOperationError, translate
 
 
 def _solve(problem: ReferenceProblem, **options):

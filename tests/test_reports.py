@@ -31,9 +31,9 @@ CHROMIUM_MISSING = "chromium is not installed (Debian package chromium; .ci/run 
 def store(tmp_path_factory) -> Path:
     """Forward experiment, 1 step, N = 8 and 10: OP-DC, OP-DM, D&C-DC, and a "reference" case that fails (an
     unknown IPOPT option). About 30 s."""
-    from gaitbench.case import Case, PluginChoice
-    from gaitbench.executors import InProcessExecutor
-    from gaitbench.runner import run_suite
+    from gaitbench.run.case import Case, PluginChoice
+    from gaitbench.run.executors import InProcessExecutor
+    from gaitbench.run.runner import run_suite
 
     methods = (("hermite-simpson", "one-phase", "OP-DC"), ("dmoc", "one-phase", "OP-DM"),
                ("hermite-simpson", "decrease-and-conquer", "D&C-DC"))
@@ -235,7 +235,7 @@ def test_a_dc_walk_stored_without_its_polished_trajectory_shows_the_patchwork(st
 
 
 def test_tracking_section_from_track_files(store, tmp_path):
-    """A synthetic track.json/npz in the format of gaitbench.tracking.TrackingResult.save."""
+    """A synthetic track.json/npz in the format of gaitbench.control.tracking.TrackingResult.save."""
     copy = tmp_path / "tracked"
     shutil.copytree(store, copy)
     with sqlite3.connect(copy / "results.sqlite") as db:
@@ -265,7 +265,7 @@ def test_tracking_section_from_track_files(store, tmp_path):
 def test_report_command(store, tmp_path):
     from click.testing import CliRunner
 
-    from gaitbench.cli import main
+    from gaitbench.cli.main import main
 
     result = CliRunner().invoke(main, ["report", str(store), "--out", str(tmp_path / "r"), "--reporter", "csv"])
     assert result.exit_code == 0, result.output
@@ -291,7 +291,7 @@ def test_the_report_command_shows_a_progress_bar(store, tmp_path):
 
     from rich.console import Console
 
-    from gaitbench.report_command import write_with_progress
+    from gaitbench.cli.report_command import write_with_progress
 
     screen = io.StringIO()
     index = write_with_progress(store, tmp_path / "out", Console(file=screen, force_terminal=True, width=100))
@@ -525,7 +525,7 @@ def test_report_opens_in_headless_chromium(report_dir, tmp_path):
 def _synthetic_store(directory: Path) -> Path:
     """Forward, OP-DC at N = 8 (a complete walk, ACOT 0.30, and a partial one whose solved step costs 0.01) and N = 10
     (only a partial walk), OP-DM complete at both; one row stored before stop causes were recorded."""
-    from gaitbench.store import ResultStore
+    from gaitbench.run.store import ResultStore
 
     base = {"suite": "synthetic", "run_id": "r1", "experiment": "forward", "experiment_options": {}, "steps": 2,
             "transcription": "hermite-simpson", "solver": "ipopt", "strategy": "one-phase", "repetition": 0,

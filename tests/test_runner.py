@@ -17,11 +17,11 @@ import pytest
 from click.testing import CliRunner
 
 import gaitbench
-from gaitbench.case import Case, PluginChoice
-from gaitbench.cli import main
-from gaitbench.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
-from gaitbench.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_case, run_suite
-from gaitbench.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
+from gaitbench.cli.main import main
+from gaitbench.run.case import Case, PluginChoice
+from gaitbench.run.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
+from gaitbench.run.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_case, run_suite
+from gaitbench.run.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
 COMPARED = ("case_key", "method", "N", "status", "acot", "cot_steps", "iterations", "steps_solved", "max_defect")
@@ -135,7 +135,7 @@ def test_local_pool_records_real_walks(local_store: Path) -> None:
 
 
 def test_crashed_and_hung_workers_fail_only_their_case(tmp_path, faulty_plugins, monkeypatch) -> None:
-    monkeypatch.setattr("gaitbench.executors.hard_limit", lambda case: 20.0)
+    monkeypatch.setattr("gaitbench.run.executors.hard_limit", lambda case: 20.0)
     dirs = (str(faulty_plugins),)
     cases = [walk_case(8, "crash", dirs), walk_case(8, "hang", dirs), walk_case(8, plugin_dirs=dirs)]
     summary = run_suite(suite_of(cases), tmp_path, LocalPoolExecutor(2))
@@ -173,7 +173,7 @@ def test_cases_reach_the_executor_largest_n_first(tmp_path: Path) -> None:
 
 
 def test_runs_started_within_one_second_get_distinct_ids(tmp_path: Path, monkeypatch) -> None:
-    import gaitbench.runner as runner
+    import gaitbench.run.runner as runner
 
     class Frozen(runner.datetime):
         @classmethod
@@ -323,7 +323,7 @@ def test_a_case_server_keeps_its_child_without_the_nanny_s_malloc_trimming(monke
 
 
 def test_a_case_server_replaces_a_child_that_crashed_or_hung(faulty_plugins, monkeypatch) -> None:
-    monkeypatch.setattr("gaitbench.executors.hard_limit", lambda case: 15.0)
+    monkeypatch.setattr("gaitbench.run.executors.hard_limit", lambda case: 15.0)
     dirs = (str(faulty_plugins),)
     server = CaseServer()
     try:
@@ -363,7 +363,7 @@ def test_every_store_column_is_documented() -> None:
 
 
 def test_tracking_stage_fills_the_tracking_columns(tmp_path: Path) -> None:
-    from gaitbench.case import TrackingStage
+    from gaitbench.run.case import TrackingStage
 
     tracked = Case(PluginChoice("forward"), 10, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
                    PluginChoice("one-phase"), steps=2, tracking=TrackingStage("thesis", "thesis", "friction"))
@@ -405,8 +405,8 @@ def test_stop_columns_record_geometry_solver_and_complete_walks(tmp_path: Path) 
 
 
 def _step(index: int, status: str, solved: bool, retries: list | None = None):
-    from gaitbench.verify import StepVerification
-    from gaitbench.walk import StepOutcome
+    from gaitbench.solve.verify import StepVerification
+    from gaitbench.solve.walk import StepOutcome
 
     check = StepVerification(1e-12, 1e-6, 1e-6, 1.0, 0.1, 0.02) if solved else None
     return StepOutcome(index, 1, status, status, verification=check,
@@ -418,8 +418,8 @@ def _step(index: int, status: str, solved: bool, retries: list | None = None):
                                                ("error", "solver"), ("time_limit", "time_limit"),
                                                ("converged", "verification"), ("infeasible_geometry", "geometry")])
 def test_stop_cause_of_the_failing_step_and_retries_summed_over_the_walk(status: str, cause: str) -> None:
-    from gaitbench.runner import walk_metrics
-    from gaitbench.walk import WalkResult
+    from gaitbench.run.runner import walk_metrics
+    from gaitbench.solve.walk import WalkResult
 
     retry = {"remedy": "adaptive-mu", "status": "infeasible"}
     walk = WalkResult("forward", "hermite-simpson", "ipopt", "one-phase", 8, "second", requested_steps=3,

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from nlp_problems import STANDARD_PROBLEMS, ReferenceProblem, hs071
 
-from gaitbench.gait_problem import ProblemOptions, StepStructure
 from gaitbench.plugins import load_registry
-from gaitbench.scaling import ScaledProblem, ScaleFactors, nominal_factors
-from plugins.ipopt import Ipopt
+from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
+from gaitbench.problem.scaling import ScaledProblem, ScaleFactors, nominal_factors
+from plugins.solvers.ipopt import Ipopt
 
 
 def _dense(matrix) -> np.ndarray:
@@ -52,7 +52,7 @@ def test_scaled_functions_are_the_original_ones_in_scaled_units(case):
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
 def test_nominal_factors_give_blocks_their_guess_magnitude_and_rows_a_unit_gradient(transcription):
     registry = load_registry()
-    from gaitbench.walk import WalkProblem
+    from gaitbench.solve.walk import WalkProblem
 
     experiment = registry.create("experiment", "forward")
     problem = WalkProblem(experiment, registry.create("transcription", transcription),

@@ -27,12 +27,12 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-from gaitbench.nlp import NLP, NLPBuilder
 from gaitbench.plugins import load_registry
-from gaitbench.solver import SolverStatus
-from gaitbench.walk import WalkProblem
-from plugins.ipopt import Ipopt
-from plugins.sqp import SQP
+from gaitbench.problem.nlp import NLP, NLPBuilder
+from gaitbench.solve.solver import SolverStatus
+from gaitbench.solve.walk import WalkProblem
+from plugins.solvers.ipopt import Ipopt
+from plugins.solvers.sqp import SQP
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -252,7 +252,7 @@ def test_iteration_log(capsys):
 def test_print_level_zero_is_silent_even_for_backends_that_print():
     """In a fresh process: HiGHS prints its banner from C on its first use in a process and OSQP notes about
     polishing, whatever their verbosity settings."""
-    script = ("from nlp_problems import hs071; from plugins.sqp import SQP; p = hs071(); "
+    script = ("from nlp_problems import hs071; from plugins.solvers.sqp import SQP; p = hs071(); "
               "assert all(SQP(qp_solver=b).solve(p.nlp, p.parameters, p.x0).converged "
               "for b in ('highs', 'osqp', 'clarabel'))")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)

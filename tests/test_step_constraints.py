@@ -6,16 +6,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from gaitbench.gait_problem import ProblemOptions, StepStructure
-from gaitbench.mechanics import BipedModel
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.terrain import terrain_clearance
 from gaitbench.plugins import load_registry
-from gaitbench.solver import SolverResult, SolverStatus
-from gaitbench.terrain import terrain_clearance
-from gaitbench.walk import WalkProblem, solve_with_retries
-from plugins.dmoc import DiscreteMechanics
-from plugins.hermite_simpson import HermiteSimpson
-from plugins.ipopt import Ipopt
-from plugins.one_phase import OnePhase
+from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
+from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solve.walk import WalkProblem, solve_with_retries
+from plugins.solvers.ipopt import Ipopt
+from plugins.strategies.one_phase import OnePhase
+from plugins.transcriptions.dmoc import DiscreteMechanics
+from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()
 

@@ -19,10 +19,10 @@ import pytest
 from click.testing import CliRunner
 
 import gaitbench
-from gaitbench.case import Case, PluginChoice
-from gaitbench.cli import main
-from gaitbench.runner import CaseOutcome, case_row, run_suite
-from gaitbench.store import DATABASE, ResultStore, StoreError
+from gaitbench.cli.main import main
+from gaitbench.run.case import Case, PluginChoice
+from gaitbench.run.runner import CaseOutcome, case_row, run_suite
+from gaitbench.run.store import DATABASE, ResultStore, StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
 ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "COLUMNS": "200"}
@@ -79,7 +79,7 @@ def dead_pid() -> int:
 
 def other_run(store: Path, run_id: str, claims: tuple[str, ...] = (), **values) -> None:
     """A run of another process (by default on this host, pid 1, heartbeat now), holding claims on ``claims``."""
-    from gaitbench.store import _now
+    from gaitbench.run.store import _now
 
     ResultStore.create(store).close()
     row = {"run_id": run_id, "suite": "test", "started_at": _now(), "heartbeat_at": _now(),
@@ -181,7 +181,7 @@ def test_claims_of_dead_runs_expire_and_live_ones_are_left(tmp_path: Path) -> No
 
 
 def test_a_second_run_after_a_finished_one_is_still_refused_without_resume(tmp_path: Path) -> None:
-    from gaitbench.runner import RunRefused
+    from gaitbench.run.runner import RunRefused
 
     cases = [fake_case(6), fake_case(7)]
     run_suite(suite_of(cases), tmp_path, Instant())
@@ -190,7 +190,7 @@ def test_a_second_run_after_a_finished_one_is_still_refused_without_resume(tmp_p
 
 
 def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
-    from gaitbench.store import run_alive
+    from gaitbench.run.store import run_alive
 
     here = socket.gethostname()
     now = "2999-01-01T00:00:00+00:00"  # a heartbeat from the future is fresh
@@ -419,7 +419,7 @@ multiprocessing.util.Finalize(None, slow_exit, exitpriority=10)  # runs before t
 
 
 def slow_forward():
-    from plugins.thesis_experiments import forward
+    from plugins.experiments.thesis_experiments import forward
 
     time.sleep(1.0)  # each of the two workers takes one case
     return forward()

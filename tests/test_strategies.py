@@ -11,19 +11,19 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.cli import main
-from gaitbench.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
-from gaitbench.verify import verify_step
-from gaitbench.walk import WalkProblem
-from plugins.decrease_and_conquer import (
+from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.solve.verify import verify_step
+from gaitbench.solve.walk import WalkProblem
+from plugins.strategies.decrease_and_conquer import (
     DYNAMICS_TOLERANCE,
     DecreaseAndConquer,
     NodeValues,
     PointCosts,
     release_sections,
 )
-from plugins.synthesis import complete_sections, relation_holds, synthesize
+from plugins.strategies.synthesis import complete_sections, relation_holds, synthesize
 
 NAN = np.nan
 REGISTRY = load_registry()
@@ -165,7 +165,7 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
 def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):
     """The verified trajectory, each step re-solved from the chosen patchwork, is in the outcome and in the walk's
     NPZ beside the patchwork, and comes back from it (what the report draws and tracking follows)."""
-    from gaitbench.tracking import load_walk
+    from gaitbench.control.tracking import load_walk
 
     for step in walk.steps:
         assert step.polished is not None and step.polished.solved and step.verified is step.polished
@@ -203,7 +203,7 @@ def test_parallel_sectional_solves_give_the_sequential_walk(forward):
 
 
 def test_later_walks_in_a_process_build_only_the_sections_not_built_yet(forward, monkeypatch):
-    from gaitbench.transcription import Transcription
+    from gaitbench.problem.transcription import Transcription
 
     release_sections()
     built, build = [], Transcription._build
@@ -299,9 +299,9 @@ def test_whole_walk_chains_its_steps_and_improves_on_one_phase(forward):
 
 
 def _short_slope(n_steps: int):
-    from gaitbench.experiment import Experiment
-    from gaitbench.robot import RobotParameters
-    from gaitbench.terrain import Terrain
+    from gaitbench.model.experiment import Experiment
+    from gaitbench.model.robot import RobotParameters
+    from gaitbench.model.terrain import Terrain
 
     return Experiment(name="short-slope", description=f"{n_steps} 0.5 m steps up a 0.1 rad slope",
                       robot=RobotParameters(m1=20.0, m2=20.0, M=40.0, l=1.0, a=0.5),
@@ -346,9 +346,9 @@ def test_whole_walk_solves_the_full_forward_walk(forward):
 def test_a_chain_starts_each_step_where_the_event_map_of_the_previous_one_ends():
     """The symbolic push-off and heel-strike map inside a chain is the numeric one the per-step walk uses, also for
     a Leg-2 stance step of a robot with unequal legs (whose role-ordered robot vector the chain turns back)."""
-    from gaitbench.robot import RobotParameters
-    from gaitbench.walk import next_step_state
-    from gaitbench.walk_chain import WalkChain
+    from gaitbench.model.robot import RobotParameters
+    from gaitbench.solve.walk import next_step_state
+    from gaitbench.solve.walk_chain import WalkChain
 
     experiment = dataclasses.replace(_short_slope(3), robot=RobotParameters(m1=15.0, m2=25.0, M=40.0, l=1.0, a=0.5))
     problem = WalkProblem(experiment, REGISTRY.create("transcription", "hermite-simpson"),
@@ -394,7 +394,7 @@ def test_look_ahead_and_back_up_walk_past_the_greedy_dead_end():
 def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
     """walk_step_by_step's back-up on made-up steps: step 3 is a dead end from the greedy step 2 only; step 5 from
     every step 4, so its back-up fails and the walk stops there, naming the back-up."""
-    from gaitbench.walk import StepOutcome, walk_step_by_step
+    from gaitbench.solve.walk import StepOutcome, walk_step_by_step
 
     experiment = _short_slope(6)
     problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)

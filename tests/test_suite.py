@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from gaitbench.case import TrackingStage
 from gaitbench.plugins import load_registry
-from gaitbench.suite import SuiteError, load_suite
-from plugins.energetics import energetics
+from gaitbench.run.case import TrackingStage
+from gaitbench.run.suite import SuiteError, load_suite
+from plugins.experiments.energetics import energetics
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITES = ROOT / "suites"
@@ -469,8 +469,8 @@ def test_n_range_is_inclusive(tmp_path):
 
 
 def test_every_problem_option_is_accepted_with_an_allowed_value(tmp_path):
-    from gaitbench.gait_problem import OPTION_CHOICES, ProblemOptions
-    from gaitbench.suite_schema import problem_option_kinds
+    from gaitbench.problem.gait_problem import OPTION_CHOICES, ProblemOptions
+    from gaitbench.run.suite_schema import problem_option_kinds
 
     assert set(problem_option_kinds()) == {f for f in ProblemOptions.__dataclass_fields__ if f != "limits"}
     for name, choices in OPTION_CHOICES.items():

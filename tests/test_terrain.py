@@ -4,8 +4,8 @@ import casadi
 import numpy as np
 import pytest
 
-from gaitbench.robot import InvalidParameterError
-from gaitbench.terrain import (
+from gaitbench.model.robot import InvalidParameterError
+from gaitbench.model.terrain import (
     THESIS_ANGLE_BOUNDS,
     StepGeometry,
     Terrain,

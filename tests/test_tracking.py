@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.cli import main
-from gaitbench.plugins import UnknownPluginError, load_registry
-from gaitbench.tracking import (
+from gaitbench.cli.main import main
+from gaitbench.control.tracking import (
     SERIES_KEYS,
     FallCriteria,
     Reference,
@@ -21,10 +20,11 @@ from gaitbench.tracking import (
     track,
     track_walk,
 )
-from gaitbench.walk import WalkProblem
-from plugins.hermite_simpson import HermiteSimpson
-from plugins.ipopt import Ipopt
-from plugins.one_phase import OnePhase
+from gaitbench.plugins import UnknownPluginError, load_registry
+from gaitbench.solve.walk import WalkProblem
+from plugins.solvers.ipopt import Ipopt
+from plugins.strategies.one_phase import OnePhase
+from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()
 
@@ -229,7 +229,7 @@ def test_track_command(saved, tmp_path):
 def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tmp_path):
     """Tracking follows the polished trajectory and compares with the verified ACOT, in memory and from the saved
     walk; without polish there is no verified trajectory, and the chosen one is tracked."""
-    from plugins.decrease_and_conquer import DecreaseAndConquer
+    from plugins.strategies.decrease_and_conquer import DecreaseAndConquer
 
     experiment = REGISTRY.create("experiment", "forward")
     problem = WalkProblem(experiment, HermiteSimpson(), Ipopt(), 8, steps=1)

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.mechanics import BipedModel
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import load_registry
-from gaitbench.robot import RobotParameters
-from gaitbench.transcription import TranscribedStep, locate_interval
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.problem.transcription import TranscribedStep, locate_interval
 
 ROBOT = RobotParameters(m1=20, m2=20, M=40, l=1, a=0.5)  # the forward experiment's robot
 MODEL = BipedModel(ROBOT, 2)

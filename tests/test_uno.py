@@ -21,12 +21,12 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-from gaitbench.evaluation import NLPEvaluator
 from gaitbench.plugins import load_registry
-from gaitbench.solver import SolverStatus
-from gaitbench.walk import WalkProblem, solve_and_verify
-from plugins.ipopt import Ipopt
-from plugins.uno_solver import Uno, gaitbench_status, register_solvers
+from gaitbench.solve.evaluation import NLPEvaluator
+from gaitbench.solve.solver import SolverStatus
+from gaitbench.solve.walk import WalkProblem, solve_and_verify
+from plugins.solvers.ipopt import Ipopt
+from plugins.solvers.uno_solver import Uno, gaitbench_status, register_solvers
 
 OPTIMIZATION, SOLUTION = unopy.OptimizationStatus, unopy.SolutionStatus
 
@@ -199,7 +199,7 @@ def test_evaluations_and_timings_are_reported():
 
 
 def _run(print_level: int) -> subprocess.CompletedProcess:
-    script = ("from nlp_problems import hs071; from plugins.uno_solver import Uno; p = hs071(); "
+    script = ("from nlp_problems import hs071; from plugins.solvers.uno_solver import Uno; p = hs071(); "
               f"assert Uno(print_level={print_level}).solve(p.nlp, p.parameters, p.x0).converged")
     return subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
 
@@ -214,8 +214,8 @@ def test_print_level_zero_is_silent_and_one_prints_the_log():
 def test_standard_error_written_by_compiled_code_during_a_quiet_solve_is_discarded():
     """BQPD's Fortran writes workspace warnings to standard error (on HS, N = 50 with ``preset=filtersqp``); at
     print_level 0 the solve discards file descriptor 2 and flushes libgfortran's buffers before restoring it."""
-    script = ("import os\nfrom gaitbench.silence import quiet_stderr\n"
-              "from plugins.uno_solver import _flush_fortran_units\n"
+    script = ("import os\nfrom gaitbench.solve.silence import quiet_stderr\n"
+              "from plugins.solvers.uno_solver import _flush_fortran_units\n"
               "with quiet_stderr(True):\n    os.write(2, b'from C')\n    _flush_fortran_units()\n"
               "os.write(2, b'after')")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.cli import main
-from gaitbench.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
-from gaitbench.mechanics import BipedModel
+from gaitbench.cli.main import main
+from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
-from gaitbench.verify import verify_step
-from gaitbench.walk import WalkProblem, next_step_state
-from plugins.hermite_simpson import HermiteSimpson
-from plugins.ipopt import Ipopt
-from plugins.one_phase import OnePhase
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
+from gaitbench.solve.verify import verify_step
+from gaitbench.solve.walk import WalkProblem, next_step_state
+from plugins.solvers.ipopt import Ipopt
+from plugins.strategies.one_phase import OnePhase
+from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()
 

@@ -8,9 +8,9 @@ from gaitbench import Registration, hookimpl
 
 
 def gentle_slope():
-    from gaitbench.experiment import Experiment
-    from gaitbench.robot import RobotParameters
-    from gaitbench.terrain import Terrain
+    from gaitbench.model.experiment import Experiment
+    from gaitbench.model.robot import RobotParameters
+    from gaitbench.model.terrain import Terrain
 
     return Experiment(
         name="gentle-slope",

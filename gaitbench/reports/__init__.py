@@ -1,7 +1,8 @@
 """Reports of a results store: HTML with the thesis's figures regenerated, and CSV files of every table.
 
 ``write_report(store_dir, out_dir)`` reads the store once (:func:`build_report`) and hands the result to each
-reporter plugin (kind ``reporter``; built in: ``csv`` and ``html``, registered by ``plugins/reports.py``). A
+reporter plugin (kind ``reporter``; built in: ``csv`` and ``html``, registered by
+``plugins/reporters/csv_and_html.py``). A
 reporter is any object with ``write(report: ReportData, out_dir: Path) -> list[Path]``. docs/reports.md lists
 every file, column and figure.
 """
@@ -103,7 +104,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
     from gaitbench.reports import figures as fig
     from gaitbench.reports import tables as tb
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
-    from gaitbench.store import ResultStore, StoreError, load_results
+    from gaitbench.run.store import ResultStore, StoreError, load_results
 
     own = not isinstance(progress, _Steps)
     steps = _Steps(progress) if own else progress

@@ -1,9 +1,9 @@
 """One stored gait: its time series, ground reactions and push-off impulses, figures, and a stick-figure animation.
 
 The walk is read from the store (``cases/<key>/walk.json`` + ``walk.npz``, written by
-:meth:`gaitbench.walk.WalkResult.save`). Times are made global (each step starts where the previous one ended).
+:meth:`gaitbench.solve.walk.WalkResult.save`). Times are made global (each step starts where the previous one ended).
 Ground reactions are computed from the stored nodal trajectory with the 4-DOF model's exact constraint force
-(:meth:`gaitbench.mechanics.BipedModel.forward_dynamics`, DECISIONS §2); the 2-DOF First-Phase model pins its
+(:meth:`gaitbench.model.mechanics.BipedModel.forward_dynamics`, DECISIONS §2); the 2-DOF First-Phase model pins its
 stance foot and defines no ground reaction, and the report says so instead of inventing one.
 """
 
@@ -76,9 +76,9 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
     For decrease and conquer, the gait is the verified trajectory, each step polished (re-solved from the chosen
     patchwork), when the walk stored it for every step; the chosen patchwork is kept as :attr:`Gait.overlay`.
     """
-    from gaitbench.mechanics import BipedModel
+    from gaitbench.model.mechanics import BipedModel
     from gaitbench.plugins import load_registry
-    from gaitbench.walk import POLISHED
+    from gaitbench.solve.walk import POLISHED
 
     store_dir = Path(store_dir)
     path = store_dir / case["walk_path"]

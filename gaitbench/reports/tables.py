@@ -1,12 +1,13 @@
 """Every table of a report, computed with pandas from the results store (no plotting, no files).
 
-Start from :func:`prepare` (the store's DataFrame from :func:`gaitbench.store.load_results`, with the columns
+Start from :func:`prepare` (the store's DataFrame from :func:`gaitbench.run.store.load_results`, with the columns
 the tables share); every other function takes its result. Column names are documented in docs/reports.md.
 
 Which ACOT is "verified": for One Phase and the other per-step strategies the store's ``acot`` (every step's COT
 recomputed from its trajectory). For Decrease & Conquer the store's ``acot`` is the mean COT of the synthesized
 patchwork, i.e. the thesis's claim (``claimed_acot``); the figure of trajectories that satisfy the dynamics is the
-polished one in ``strategy_details.verified_acot`` (plugins/decrease_and_conquer.py). The tables use that as the
+polished one in ``strategy_details.verified_acot`` (plugins/strategies/decrease_and_conquer.py). The tables use
+that as the
 verified ACOT of D&C and keep the claim beside it; with ``polish = false`` there is no verified D&C figure (NaN).
 
 Complete walks only: a case is complete when its status is ``solved`` (every requested step solved and verified).
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from gaitbench.objective import NET_POWER
+from gaitbench.problem.objective import NET_POWER
 from gaitbench.reports import thesis_values
 
 DC_STRATEGY = "decrease-and-conquer"
@@ -66,7 +67,7 @@ CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "tr
                  "stop_cause", "stop_step", "stop_status", "retries", "partial_acot", "wall_time_s", "solve_time_s",
                  "iterations", "max_defect", "max_resim_error", "walk_path", "tracking_path"]
 STOP_CAUSE_ORDER = ("complete", "geometry", "solver", "verification", "time_limit", "error", "crashed", "unrecorded")
-"""The store's stop causes (gaitbench.store.STOP_CAUSES) in report order; ``unrecorded``: an incomplete walk stored
+"""The store's stop causes (gaitbench.run.store.STOP_CAUSES) in report order; ``unrecorded``: an incomplete walk stored
 before the store had a ``stop_cause`` column."""
 STATUS_CAUSES = {"solved": "complete", "timeout": "time_limit", "crashed": "crashed", "error": "error"}
 

@@ -1,0 +1,1 @@
+"""The `gaitbench` command line (entry point :func:`gaitbench.cli.main.main`)."""

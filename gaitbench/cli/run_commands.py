@@ -1,0 +1,305 @@
+"""``gaitbench run`` and ``gaitbench runs``: run a suite into a store, and look at what a store holds."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import click
+from rich import box
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+from rich.text import Text
+
+from gaitbench.plugins import PLUGINS_DIR_ENV
+from gaitbench.run.executors import EXECUTORS
+
+
+@click.command("run")
+@click.argument("suite_file", metavar="SUITE.toml", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes (local executor) or local Dask workers.")
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
+              help="local: a pool of worker processes that can stop a hung case; dask: a Dask cluster; "
+                   "inprocess: this process, for debugging (time limits reach the solver only).")
+@click.option("--scheduler", metavar="ADDR", help="Address of an existing Dask scheduler, e.g. tcp://HOST:8786 "
+              "(implies --executor dask); without it a local cluster of --jobs workers is started.")
+@click.option("--store", "store_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Results directory [default: the suite's `output`].")
+@click.option("--method", "methods", multiple=True, metavar="LABEL",
+              help="Run only this method's cases (repeatable), e.g. --method OP-DC --method 'D&C-DC' (quote a "
+                   "label with & in a shell); a later run with --resume does the rest.")
+@click.option("--resume", is_flag=True, help="Skip the cases the store already holds.")
+@click.option("--retry-failed", is_flag=True,
+              help="With --resume, run again the cases that errored, timed out or crashed.")
+@click.option("--report/--no-report", "write_report", default=True, show_default=True,
+              help="Write the HTML and CSV report (`gaitbench report`) to reports/<store name> at the end.")
+@click.pass_obj
+def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
+        methods: tuple[str, ...], resume: bool, retry_failed: bool, write_report: bool) -> None:
+    """Run every case of a suite and record each in the results store as it finishes.
+
+    Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle.
+
+    A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
+    the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
+    Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
+    """
+    from gaitbench.run.runner import RunRefused, run_suite
+    from gaitbench.run.store import StoreError
+    from gaitbench.run.suite import SuiteError, load_suite
+
+    if state.plugin_dirs:  # through the environment, so worker processes load them too
+        os.environ[PLUGINS_DIR_ENV] = os.pathsep.join(
+            [*map(str, state.plugin_dirs), *filter(None, [os.environ.get(PLUGINS_DIR_ENV)])])
+    try:
+        suite = load_suite(suite_file)
+    except SuiteError as error:  # the file names itself, the key and what was expected
+        raise click.UsageError(str(error)) from None
+    console = Console(stderr=True)
+    for problem in suite.plugin_problems:  # as `gaitbench plugins` shows them: a missing plugin changes the run
+        console.print(Text(f"warning: {problem.source}: {problem.message}", style="yellow"), soft_wrap=True)
+    if methods:
+        try:
+            suite = suite.with_methods(methods)
+        except ValueError as error:
+            raise click.BadParameter(str(error), param_hint="--method") from None
+    if scheduler:
+        executor = "dask"
+    if executor != "inprocess" and not scheduler:  # the workers share this machine's memory
+        from gaitbench.run.memory import concurrent_problem
+
+        problem = concurrent_problem(list(suite.memory_mb.values()), jobs)
+        if problem is not None:
+            raise click.BadParameter(problem, param_hint="--jobs")
+    store_dir = store_dir or suite.output
+    with _CaseProgress(console) as progress:
+        try:
+            summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
+                                retry_failed=retry_failed, on_start=progress.start, on_outcome=progress.advance,
+                                on_elsewhere=progress.elsewhere)
+        except (RunRefused, StoreError) as error:
+            raise click.ClickException(str(error)) from None
+    shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
+    console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
+                  f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
+    Console().print(_suite_results(suite, store_dir))
+    if write_report:
+        from gaitbench.cli.report_command import default_report_dir, write_with_progress
+
+        index = write_with_progress(store_dir, default_report_dir(store_dir), console)
+        console.print(Text(f"report: {Path(index).resolve()}", style="bold"), soft_wrap=True)
+    if summary.failed:
+        raise SystemExit(1)
+
+
+def _suite_results(suite, store_dir: Path) -> Table:
+    """What the suite's walks came to, from the store (cases of earlier runs too, so a resumed run shows them all):
+    per experiment and method, how many walks are complete, the lowest verified ACOT over those and its N, and why
+    the others stopped."""
+    from gaitbench.run.store import ResultStore
+
+    keys = {case.key for case in suite.cases}
+    with ResultStore.open(store_dir) as store:
+        rows = [row for row in store.cases() if row["case_key"] in keys]
+    order = {case.key: i for i, case in enumerate(suite.cases)}
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for row in sorted(rows, key=lambda row: order[row["case_key"]]):
+        groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
+    table = Table(title=f"{suite.name}: lowest verified ACOT over complete walks",
+                  box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+    longest = max((len(method) for _, method in groups), default=0)
+    for column in ("experiment", "method", "complete", "ACOT", "at N", "incomplete"):
+        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left",
+                         overflow="fold", no_wrap=column in ("complete", "ACOT", "at N"),
+                         min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
+    for (experiment, method), group in groups.items():
+        complete = [row for row in group if row["status"] == "solved"]
+        best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
+        causes: dict[str, int] = {}
+        for row in group:
+            if row not in complete:
+                cause = row["stop_cause"] or row["status"]
+                causes[cause] = causes.get(cause, 0) + 1
+        table.add_row(experiment, method, f"{len(complete)} of {len(group)}",
+                      _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
+                      ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
+    return table
+
+
+def _executor(name: str, jobs: int, scheduler: str | None):
+    from gaitbench.run.executors import DaskExecutor, InProcessExecutor, LocalPoolExecutor
+
+    if name == "dask":
+        return DaskExecutor(scheduler, jobs)
+    if name == "inprocess":
+        return InProcessExecutor()
+    return LocalPoolExecutor(jobs)
+
+
+class _CaseProgress:
+    """Cases done, failed and left, with an estimate of the time left; each failure printed as it happens."""
+
+    def __init__(self, console: Console) -> None:
+        self.console = console
+        self.done = self.failed = self.taken = 0
+        self.progress = Progress(
+            TextColumn("{task.description}"), BarColumn(),
+            TextColumn("{task.fields[done]} done · {task.fields[failed]} failed · {task.fields[left]} left"),
+            TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=console, transient=False)
+        self.task = None
+
+    def __enter__(self) -> _CaseProgress:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        if self.task is not None:
+            self.progress.__exit__(*exc_info)
+
+    def start(self, to_run: int, skipped: int) -> None:
+        """Show the bar once the run has started, so that an error before it (the store) stays one line."""
+        self.progress.__enter__()
+        if skipped:
+            self.console.print(f"{skipped} cases already in the store are skipped")
+        self.task = self.progress.add_task("cases", total=to_run, done=0, failed=0, left=to_run)
+
+    def elsewhere(self, case) -> None:
+        """A case another run sharing the store took: no longer left for this one."""
+        self.taken += 1
+        total = self.progress.tasks[0].total or 0
+        self.progress.update(self.task, advance=1, left=int(total) - self.done - self.taken)
+
+    def advance(self, outcome) -> None:
+        self.done += 1
+        if outcome.failed:
+            self.failed += 1
+            self.console.print(Text(f"{outcome.status}: {outcome.case.label}: {outcome.message}", style="yellow"),
+                               soft_wrap=True)
+        total = self.progress.tasks[0].total or 0
+        self.progress.update(self.task, advance=1, done=self.done, failed=self.failed,
+                             left=int(total) - self.done - self.taken)
+
+
+@click.group("runs")
+def runs() -> None:
+    """Look at results stores: their runs, their cases, and exports for other tools."""
+
+
+@runs.command("list")
+@click.argument("stores", nargs=-1, type=click.Path(path_type=Path))
+def runs_list(stores: tuple[Path, ...]) -> None:
+    """List the runs of each STORE (default: every store under ./results)."""
+    from gaitbench.run.store import DATABASE, ResultStore, StoreError, run_alive
+
+    paths = list(stores) or sorted(path.parent for path in Path("results").glob(f"*/{DATABASE}"))
+    if not paths:
+        raise click.ClickException("no results stores under ./results; name a store directory")
+    table = Table(title="runs")
+    for column in ("store", "run", "suite", "executor", "jobs", "cases", "done", "failed", "skipped", "finished"):
+        table.add_column(column)
+    for path in paths:
+        try:
+            with ResultStore.open(path) as store:
+                for row in store.runs():
+                    table.add_row(str(path), row["run_id"], row["suite"], row["executor"], str(row["jobs"]),
+                                  str(row["cases_total"]), str(row["cases_done"]), str(row["cases_failed"] or 0),
+                                  str(row["cases_skipped"]), row["finished_at"] or _unfinished(row, run_alive))
+        except StoreError as error:
+            raise click.ClickException(str(error)) from None
+    Console().print(table)
+
+
+SHOW_COLUMNS = ("experiment", "N", "method", "status", "stop cause", "ACOT")
+"""What `runs show` prints by default: readable at 80 columns. `--wide` adds :data:`WIDE_COLUMNS`."""
+
+WIDE_COLUMNS = ("case", "experiment", "N", "method", "status", "stop cause", "stop step", "stop status", "ACOT",
+                "claimed", "COT min", "COT max", "retries", "time (s)", "iterations", "message")
+TEXT_COLUMNS = ("case", "experiment", "method", "status", "stop cause", "stop status", "message")
+
+
+def _show_cells(row: dict) -> dict[str, str]:
+    """One store row as the cells of every `runs show` column."""
+    cells = {"case": row["case_key"], "experiment": row["experiment"], "N": str(row["N"]),
+             "method": row["method"] or row["strategy"], "status": row["status"],
+             "stop cause": row["stop_cause"] or "—", "stop step": _number(row["stop_step"], "d"),
+             "stop status": row["stop_status"] or "", "retries": _number(row["retries"], "d"),
+             "time (s)": _number(row["wall_time_s"], ".1f"), "iterations": _number(row["iterations"], "d"),
+             "message": row["message"] or ""}
+    for column, key in (("ACOT", "acot"), ("claimed", "claimed_acot"), ("COT min", "cot_min"), ("COT max", "cot_max")):
+        cells[column] = _number(row[key], ".4f")
+    return cells
+
+
+@runs.command("show")
+@click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
+@click.argument("run_id", metavar="[RUN]", required=False)
+@click.option("--wide", is_flag=True, help="Every column: case key, where and why each walk stopped, the claimed "
+              "ACOT, per-step COT bounds, retries, time, iterations and the message (lines longer than 80 columns).")
+def runs_show(store_dir: Path, run_id: str | None, wide: bool) -> None:
+    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed.
+
+    By default the table fits 80 columns: experiment, N, method, status, why the walk stopped (stop cause:
+    complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
+    everything else.
+    """
+    from gaitbench.run.store import ResultStore, StoreError
+
+    try:
+        with ResultStore.open(store_dir) as store:
+            rows = store.cases(store.resolve_run(run_id) if run_id else None)
+    except StoreError as error:
+        raise click.ClickException(str(error)) from None
+    columns = WIDE_COLUMNS if wide else SHOW_COLUMNS
+    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""), box=box.SIMPLE_HEAD,
+                  title_justify="left", show_edge=False, pad_edge=False)
+    widths = {"method": 20, "ACOT": 6, "N": 3}  # "decrease-and-conquer" on one line, numbers whole
+    for column in columns:
+        table.add_column(column, justify="left" if column in TEXT_COLUMNS else "right", overflow="fold",
+                         no_wrap=column in ("case", "N", "ACOT"), min_width=None if wide else widths.get(column))
+    for row in rows:
+        cells = _show_cells(row)
+        table.add_row(*(cells[column] for column in columns))
+    console = Console()
+    if wide:  # every column at its natural width: long lines rather than squeezed cells
+        console = Console(width=max(console.width, 240))
+    console.print(table)
+
+
+@runs.command("export")
+@click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
+@click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Output file [default: STORE/cases.csv or STORE/cases.parquet].")
+def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
+    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV)."""
+    import json
+
+    from gaitbench.run.store import JSON_COLUMNS, StoreError, load_results
+
+    try:
+        frame = load_results(store_dir)
+    except StoreError as error:
+        raise click.ClickException(str(error)) from None
+    for column in JSON_COLUMNS:  # nested values as JSON text: one flat, typed table for CSV and Parquet alike
+        frame[column] = frame[column].map(lambda value: None if value is None else json.dumps(value))
+    out = out or Path(store_dir) / f"cases.{fmt}"
+    try:
+        if fmt == "csv":
+            frame.to_csv(out, index=False)
+        else:
+            frame.to_parquet(out, index=False)
+    except OSError as error:  # e.g. the default, inside a store in a read-only place
+        raise click.ClickException(f"{out}: cannot write the export ({error.strerror or error}); "
+                                   "choose another file with --out") from None
+    Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
+
+
+def _unfinished(run: dict, alive) -> str:
+    if alive(run):
+        return f"running (pid {run['pid']} on {run['host']})"
+    return "not finished"
+
+
+def _number(value, spec: str) -> str:
+    return "" if value is None else format(value, spec)

@@ -1,6 +1,0 @@
-"""Biped mechanics: symbolic equations of motion, ground reaction, push-off and heel strike."""
-
-from gaitbench.mechanics.biped import BipedFunctions, biped_functions
-from gaitbench.mechanics.model import BipedModel, HeelStrike, other_leg
-
-__all__ = ["BipedFunctions", "BipedModel", "HeelStrike", "biped_functions", "other_leg"]

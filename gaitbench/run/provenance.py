@@ -1,0 +1,61 @@
+"""Where a result came from: gaitbench's version and commit, the solver packages' versions, the machine.
+
+Computed once per process; each case records the provenance of the process that ran it, since Dask workers
+may be other machines with other installs.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import socket
+import subprocess
+from functools import lru_cache
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+PACKAGES = ("casadi", "numpy", "scipy", "pluggy", "qpsolvers", "osqp", "proxsuite", "clarabel", "daqp", "piqp",
+            "highspy", "quadprog", "cyipopt-wheels", "unopy", "pyomo", "pyomo-ripopt", "pandas", "dask", "distributed")
+"""The packages whose versions can change a result: the solvers and what they are built on."""
+
+
+@lru_cache(maxsize=1)
+def provenance() -> dict[str, Any]:
+    from gaitbench._version import __version__
+
+    return {
+        "gaitbench": __version__,
+        "git_commit": git_commit(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "hostname": socket.gethostname(),
+        "cpus": os.cpu_count(),
+        "packages": package_versions(),
+    }
+
+
+def package_versions() -> dict[str, str | None]:
+    versions: dict[str, str | None] = {}
+    for package in PACKAGES:
+        try:
+            versions[package] = version(package)
+        except PackageNotFoundError:
+            versions[package] = None
+    return versions
+
+
+def git_commit() -> str | None:
+    """The commit of the gaitbench source tree (``+dirty`` with uncommitted changes), or None outside a checkout."""
+    source = Path(__file__).resolve().parent.parent
+    if not (source / ".git").exists():
+        return None
+    try:
+        commit = subprocess.run(["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                check=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, check=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return commit + ("+dirty" if dirty else "")

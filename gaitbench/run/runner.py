@@ -1,0 +1,344 @@
+"""Running a suite: each case solved (anywhere), its outcome recorded in the store the moment it arrives.
+
+:func:`run_case` is what a worker does with one case; it never raises, so a failing method, a broken plugin or
+bad options become a recorded status. :func:`run_suite` hands the cases that are not yet in the store to an
+executor (:mod:`gaitbench.run.executors`), claiming each as the executor takes it so that runs sharing a store never
+solve a case twice, and records each outcome as it arrives.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import traceback
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from gaitbench.run.case import Case
+from gaitbench.run.provenance import provenance
+from gaitbench.run.store import ResultStore, case_file
+
+WALK_FILE = "walk.json"
+TRACK_FILE = "track.json"
+
+
+@dataclass
+class CaseOutcome:
+    """What a worker sends back for one case: plain data, so it crosses process and machine boundaries.
+
+    ``metrics`` are store columns computed in the worker (:func:`walk_metrics`, :func:`tracking_metrics`);
+    ``files`` are the saved walk (and tracking) by file name, written into the store beside the row.
+    """
+
+    case: Case
+    status: str
+    message: str
+    wall_time_s: float
+    metrics: dict[str, Any] = field(default_factory=dict)
+    files: dict[str, bytes] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> bool:
+        return self.status != "solved"
+
+
+def run_case(case: Case) -> CaseOutcome:
+    """Solve one case's walk (and track it if the case asks), in this process."""
+    started = time.perf_counter()
+    metrics: dict[str, Any] = {}
+    files: dict[str, bytes] = {}
+    try:
+        walk = _solve_walk(case)
+        metrics |= walk_metrics(walk)
+        files |= _saved_files(walk, WALK_FILE)
+        status = "solved" if walk.complete else "incomplete"
+        message = "" if walk.complete else (walk.failure or "the walk stopped early")
+        if case.tracking is not None and walk.complete:
+            tracking = _track(case, walk)
+            metrics |= tracking_metrics(tracking)
+            files |= _saved_files(tracking, TRACK_FILE)
+    except Exception as error:  # a failing plugin is this case's result, not the run's end
+        status, message = "error", _describe(error)
+    return CaseOutcome(case, status, message, time.perf_counter() - started, metrics, files, provenance())
+
+
+def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0.0) -> CaseOutcome:
+    """The outcome of a case whose worker never answered (timeout, crash, lost connection)."""
+    return CaseOutcome(case, status, message, wall_time_s)
+
+
+def _solve_walk(case: Case):
+    from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.walk import WalkProblem
+
+    registry = _registry(case)
+    experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
+    transcription = registry.create("transcription", case.transcription.name, **case.transcription.options)
+    solver_options = dict(case.solver.options)
+    if case.time_limit_s is not None:
+        solver_options.setdefault("time_limit_s", case.time_limit_s)
+    solver = registry.create("solver", case.solver.name, **solver_options)
+    strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
+    objective = registry.create("objective", case.objective.name, **case.objective.options)
+    options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
+    problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
+                          objective=objective)
+    return strategy.solve(problem)
+
+
+def _track(case: Case, walk):
+    from gaitbench.control.tracking import track_walk
+
+    stage, registry = case.tracking, _registry(case)
+    experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
+    return track_walk(walk, controller=stage.controller, observer=stage.observer, disturbance=stage.disturbance,
+                      options=stage.options, registry=registry, experiment=experiment)
+
+
+def _saved_files(result, name: str) -> dict[str, bytes]:
+    """The files ``result.save`` writes (JSON and its NPZ), read back as bytes for the trip to the store."""
+    with tempfile.TemporaryDirectory(prefix="gaitbench-save-") as directory:
+        result.save(Path(directory) / name)
+        return {path.name: path.read_bytes() for path in Path(directory).iterdir()}
+
+
+def _registry(case: Case):
+    from gaitbench.plugins import load_registry
+
+    return load_registry(case.plugin_dirs)
+
+
+def _describe(error: Exception) -> str:
+    """The exception and the innermost frame it came from: enough to find the failing plugin."""
+    frame = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
+    where = f" (at {Path(frame.filename).name}:{frame.lineno} in {frame.name})" if frame else ""
+    return f"{type(error).__name__}: {error}{where}"
+
+
+def case_row(outcome: CaseOutcome, suite: str, run_id: str) -> dict[str, Any]:
+    """The store row of an outcome: every parameter of the case, the status, the metrics, the provenance."""
+    case = outcome.case
+    row: dict[str, Any] = {
+        "case_key": case.key, "run_id": run_id, "suite": suite, "method": case.method,
+        "experiment": case.experiment.name, "experiment_options": case.experiment.options,
+        "N": case.n_nodes, "steps": case.steps,
+        "transcription": case.transcription.name, "transcription_options": case.transcription.options,
+        "solver": case.solver.name, "solver_options": case.solver.options,
+        "strategy": case.strategy.name, "strategy_options": case.strategy.options,
+        "objective": case.objective.describe(),
+        "problem_options": case.problem_options, "repetition": case.repetition, "time_limit_s": case.time_limit_s,
+        "tracking_stage": case.tracking.as_dict() if case.tracking else None,
+        "status": outcome.status, "message": outcome.message, "wall_time_s": outcome.wall_time_s,
+        "provenance": outcome.provenance or None, "finished_at": _now(),
+    }
+    row |= outcome.metrics
+    if outcome.status in RUN_FAILURE_CAUSES:  # the run failed, not the method: the walk's own record is moot
+        row["stop_cause"] = RUN_FAILURE_CAUSES[outcome.status]
+    for column, name in (("walk_path", WALK_FILE), ("tracking_path", TRACK_FILE)):
+        if name in outcome.files:
+            row[column] = case_file(case.key, name)
+    return row
+
+
+RUN_FAILURE_CAUSES = {"error": "error", "timeout": "time_limit", "crashed": "crashed"}
+"""The ``stop_cause`` of a case the run lost (it raised, ran past its limit, or its worker died)."""
+
+
+def stop_cause(status: str) -> str:
+    """The ``stop_cause`` (gaitbench.run.store.STOP_CAUSES) of a walk stopped by a step with this status.
+
+    ``infeasible_geometry`` is checked before any solve; a solver's ``time_limit`` is the case's time limit passed
+    to it; a step whose solve converged but that is not solved failed the verification after it; every other status
+    (``infeasible``, ``iteration_limit``, ``error``, a plugin's own) is the solver's.
+    """
+    if status == "infeasible_geometry":
+        return "geometry"
+    if status == "time_limit":
+        return "time_limit"
+    if status == "converged" or "verif" in status:
+        return "verification"
+    return "solver"
+
+
+def walk_stop(walk) -> dict[str, Any]:
+    """Why and where a walk stopped (store columns ``stop_cause``, ``stop_step``, ``stop_status``), how many
+    solve retries it took (``retries``: each step's ``details["retries"]``, a list; missing means none) and how many
+    steps were solved again after a dead end (``back_ups``: steps with ``details["backed_up_from"]``)."""
+    retries, back_ups = 0, 0
+    for step in walk.steps:
+        details = step.details if isinstance(step.details, dict) else {}
+        recorded = details.get("retries")
+        retries += len(recorded) if isinstance(recorded, list) else int(recorded or 0)
+        back_ups += "backed_up_from" in details
+    counts = {"retries": retries, "back_ups": back_ups}
+    failed = next((step for step in walk.steps if not step.solved), None)
+    if failed is not None:
+        return {"stop_cause": stop_cause(failed.status), "stop_step": failed.index, "stop_status": failed.status,
+                **counts}
+    if walk.complete:
+        return {"stop_cause": "complete", "stop_step": None, "stop_status": None, **counts}
+    # Fewer steps than requested, each solved: the strategy ended the walk without a failing step to blame.
+    return {"stop_cause": "solver", "stop_step": len(walk.steps) + 1, "stop_status": None, **counts}
+
+
+def walk_metrics(walk) -> dict[str, Any]:
+    """ACOT, per-step COT and its bounds, effort, verification and why the walk stopped, as store columns."""
+    cots = [step.verification.cot if step.verification else None for step in walk.steps]
+    solved = [cot for cot in cots if cot is not None]
+    results = [step.solver_result for step in walk.steps if step.solver_result is not None]
+    checks = [step.verification for step in walk.steps if step.verification is not None]
+    details = walk.strategy_details
+    return {
+        # The ACOT of trajectories that satisfy the dynamics: for decrease-and-conquer the polished one (None
+        # without polish), never the patchwork's claim, which goes to claimed_acot.
+        "acot": details["verified_acot"] if "verified_acot" in details else walk.acot,
+        "claimed_acot": details.get("claimed_acot"),
+        "cot_steps": cots,
+        "cot_min": min(solved) if solved else None,
+        "cot_max": max(solved) if solved else None,
+        "steps_solved": sum(step.solved for step in walk.steps),
+        "solve_time_s": sum(result.wall_time_s for result in results),
+        "function_time_s": sum(result.function_time_s for result in results),
+        "iterations": sum(result.iterations for result in results),
+        "max_defect": max((check.max_defect for check in checks), default=None),
+        "max_resim_error": max((check.resim_error for check in checks), default=None),
+        "strategy_details": details or None,
+        **walk_stop(walk),
+    }
+
+
+def tracking_metrics(tracking) -> dict[str, Any]:
+    summary = tracking.as_dict()
+    return {
+        "max_position_error": summary.get("max_position_error"),
+        "max_velocity_error": summary.get("max_velocity_error"),
+        "acot_tracked": summary.get("acot_tracked"),
+        "acot_increase_percent": summary.get("acot_increase_percent"),
+        "fell": summary.get("fell"),
+        "tracking": {key: value for key, value in summary.items() if not isinstance(value, list)},
+    }
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    run_id: str
+    store: Path
+    total: int
+    skipped: int
+    solved: int
+    failed: int
+    wall_time_s: float
+    elsewhere: int = 0
+    """Cases of this run that another run sharing the store solved (or was solving when this one ended)."""
+
+
+def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
+              on_start: Callable[[int, int], None] | None = None,
+              on_outcome: Callable[[CaseOutcome], None] | None = None,
+              on_elsewhere: Callable[[Case], None] | None = None) -> RunSummary:
+    """Run every case of ``suite`` that the store does not hold yet, recording each as it finishes.
+
+    Without ``resume`` a store that already holds cases of this suite is refused (nothing is overwritten), unless
+    another run is working on it now: then this run shares that work. Each case is claimed right before the
+    executor starts it, so runs sharing a store split the cases between them; a case another live run has claimed
+    or finished meanwhile is left to it (``on_elsewhere``). With ``resume``, finished cases are skipped (and failed
+    ones re-run with ``retry_failed``), and a dead run's claims are taken over. ``on_start(to_run, skipped)`` and
+    ``on_outcome(outcome)`` feed a progress display.
+    """
+    started = time.perf_counter()
+    with ResultStore.create(store_dir) as store:
+        stored = store.case_runs()
+        finished = store.finished_keys(retry_failed=retry_failed)
+        present = [case for case in suite.cases if case.key in finished]
+        if present and not resume and not store.live_runs():
+            raise RunRefused(
+                f"{store.directory} already holds {len(present)} of the {len(suite.cases)} cases of this suite; "
+                "pass --resume to run only the missing ones, or --store to write somewhere else"
+            )
+        pending = largest_first([case for case in suite.cases if case.key not in finished])
+        run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,
+                                  "suite_path": str(suite.path), "suite_text": suite.text,
+                                  "executor": executor.name, "jobs": executor.jobs,
+                                  "cases_total": len(suite.cases), "cases_skipped": len(present),
+                                  "started_at": _now(), "provenance": run_provenance(suite)})
+        finished_at = None
+        try:
+            store.clean_leftovers(run_id)
+            if on_start:
+                on_start(len(pending), len(present))
+            solved = failed = 0
+            elsewhere: list[Case] = []
+
+            def left(case: Case) -> None:
+                elsewhere.append(case)
+                if on_elsewhere:
+                    on_elsewhere(case)
+
+            with store.heartbeat(run_id):
+                for outcome in executor.run(_claimed(store, run_id, pending, stored, left)):
+                    store.record_case(case_row(outcome, suite.name, run_id), outcome.files)
+                    solved += not outcome.failed
+                    failed += outcome.failed
+                    if on_outcome:
+                        on_outcome(outcome)
+            finished_at = _now()
+        finally:
+            store.finish_run(run_id, finished_at)  # a stopped run's claims go too; it stays unfinished
+    return RunSummary(run_id, Path(store_dir), len(suite.cases), len(present), solved, failed,
+                      time.perf_counter() - started, len(elsewhere))
+
+
+def run_provenance(suite) -> dict[str, Any]:
+    """The run's provenance: this process's (:func:`gaitbench.run.provenance.provenance`) and the plugins that failed to
+    load when the suite was loaded (``plugin_problems``, each ``{source, message}``; empty when all loaded)."""
+    problems = [{"source": problem.source, "message": problem.message}
+                for problem in getattr(suite, "plugin_problems", ())]
+    return {**provenance(), "plugin_problems": problems}
+
+
+def _claimed(store, run_id: str, cases: Iterable[Case], stored: dict[str, str],
+             elsewhere: Callable[[Case], None]) -> Iterator[Case]:
+    """The cases this run gets to solve, claimed one at a time as the executor takes them (so runs sharing the
+    store split the work in largest-first order). A case a live run holds is looked at once more at the end, in
+    case that run has died since; a case finished by another run is left to it."""
+    held = []
+    for case in cases:
+        verdict = store.claim(case.key, run_id, stored.get(case.key))
+        if verdict == "claimed":
+            yield case
+        elif verdict == "running":
+            held.append(case)
+        else:
+            elsewhere(case)
+    for case in held:
+        if store.claim(case.key, run_id, stored.get(case.key)) == "claimed":
+            yield case
+        else:
+            elsewhere(case)
+
+
+def largest_first(cases: list[Case]) -> list[Case]:
+    """The cases by N, largest first, in suite order among equal N: the order they are handed to the executor.
+
+    A case's time grows steeply with N (decrease-and-conquer as N^2.4–2.6), and a pool handed the largest cases last
+    idles at the end for up to the last case's time; largest first, the small cases fill the gaps at the end
+    (longest-processing-time-first scheduling).
+    """
+    return sorted(cases, key=lambda case: -case.n_nodes)
+
+
+def _run_stem(suite_name: str) -> str:
+    """``<UTC time to the second>-<suite>``; the store adds ``-2``, ``-3``, ... for runs started within a second."""
+    return f"{datetime.now(timezone.utc):%Y%m%d-%H%M%S}-{suite_name}"
+
+
+class RunRefused(Exception):
+    """A run that would mix with or overwrite stored results; the message says which flag to pass."""
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")

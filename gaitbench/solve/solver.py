@@ -1,0 +1,80 @@
+"""What every solver plugin returns, and the protocol it implements."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from enum import Enum
+from typing import Protocol
+
+import numpy as np
+
+from gaitbench.problem.nlp import NLP
+
+
+class SolverStatus(str, Enum):
+    CONVERGED = "converged"
+    INFEASIBLE = "infeasible"
+    ITERATION_LIMIT = "iteration_limit"
+    TIME_LIMIT = "time_limit"
+    ERROR = "error"
+
+
+@dataclass
+class SolverResult:
+    """The shared result of one NLP solve. A failure is a status with a message, never an exception."""
+
+    status: SolverStatus
+    message: str
+    x: np.ndarray
+    objective: float
+    constraint_violation: float
+    iterations: int
+    wall_time_s: float
+    function_time_s: float
+    evaluations: dict[str, int] = field(default_factory=dict)
+    multipliers: np.ndarray | None = None
+
+    @property
+    def converged(self) -> bool:
+        return self.status is SolverStatus.CONVERGED
+
+    def summary(self) -> dict:
+        """JSON-ready fields (no arrays)."""
+        data = asdict(self)
+        for key in ("x", "multipliers"):
+            data.pop(key)
+        data["status"] = self.status.value
+        return data
+
+
+class Solver(Protocol):
+    """Solves an :class:`NLP` for given parameter values from an initial guess."""
+
+    name: str
+
+    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult: ...
+
+
+def prepare(solver: Solver, nlp: NLP) -> None:
+    """Build what ``solver`` reuses across solves of ``nlp`` (its ``nlp.solver_cache`` entry) ahead of the first solve.
+
+    Optional for solver plugins: one that defines ``prepare(nlp)`` lets a strategy build in one process before it
+    forks workers, which then inherit the built solver instead of each building its own. Without it, this does
+    nothing and the first solve builds as usual.
+    """
+    method = getattr(solver, "prepare", None)
+    if method is not None:
+        method(nlp)
+
+
+def options_key(name: str, options: dict) -> tuple:
+    """A hashable, order-independent key for ``nlp.solver_cache``: a solver built with these options is reusable."""
+    return (name, _freeze(options))
+
+
+def _freeze(options):
+    if isinstance(options, dict):
+        return tuple(sorted((key, _freeze(value)) for key, value in options.items()))
+    if isinstance(options, list | tuple):
+        return tuple(_freeze(value) for value in options)
+    return options

@@ -1,0 +1,396 @@
+"""Walks: the problem a strategy solves, what it returns, and the step-by-step chaining most strategies share.
+
+Each step starts from the heel-strike map (after push-off, in the second phase) of the previous step's solution
+(DECISIONS §7). A step whose geometry is infeasible or whose solve fails ends the walk with its reason; the steps
+solved before it are kept.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from gaitbench.model.energetics import average_cot
+from gaitbench.model.experiment import Experiment
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.terrain import StepCheck
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.problem.objective import NET_POWER, Objective
+from gaitbench.problem.transcription import Seed, StepTrajectory, TranscribedStep, Transcription
+from gaitbench.solve.solver import Solver, SolverResult, SolverStatus
+from gaitbench.solve.verify import StepVerification, verify_step
+
+
+@dataclass
+class StepOutcome:
+    index: int
+    stance: int
+    status: str  # a SolverStatus value, or "infeasible_geometry"
+    message: str
+    solver_result: SolverResult | None = None
+    trajectory: StepTrajectory | None = None
+    verification: StepVerification | None = None
+    next_state: np.ndarray | None = field(default=None, repr=False)
+    """(q1, q2, q̇1, q̇2) after this step's push-off and heel strike: where the next step starts."""
+    details: dict = field(default_factory=dict)
+    """What the strategy did to produce this step (candidates, choices, polish), JSON-ready."""
+    polished: StepOutcome | None = field(default=None, repr=False)
+    """The step's problem re-solved from this outcome's trajectory and verified, when the strategy polishes (decrease
+    and conquer, whose own trajectory is a patchwork that need not satisfy the dynamics): the verified trajectory.
+    Saved beside the step's own (``stepNN_polished_*`` arrays)."""
+
+    @property
+    def solved(self) -> bool:
+        return self.verification is not None and self.next_state is not None
+
+    @property
+    def verified(self) -> StepOutcome:
+        """The outcome whose trajectory is the verified one: the polished step when there is one that solved, else
+        this step."""
+        return self.polished if self.polished is not None and self.polished.solved else self
+
+    def summary(self) -> dict:
+        """Status, verified COT, iterations and time: how a strategy records a sub-solve in its details."""
+        result, check = self.solver_result, self.verification
+        return {"status": self.status, "cot": check.cot if check else None,
+                "iterations": result.iterations if result else None,
+                "solve_time_s": result.wall_time_s if result else None,
+                "resim_error": check.resim_error if check else None}
+
+    def as_dict(self) -> dict:
+        result, check = self.solver_result, self.verification
+        return {
+            "index": self.index,
+            "stance": self.stance,
+            "status": self.status,
+            "message": self.message,
+            "cot": check.cot if check else None,
+            "objective": result.objective if result else None,
+            "solve_time_s": result.wall_time_s if result else None,
+            "function_time_s": result.function_time_s if result else None,
+            "iterations": result.iterations if result else None,
+            "constraint_violation": result.constraint_violation if result else None,
+            "max_defect": check.max_defect if check else None,
+            "resim_error": check.resim_error if check else None,
+            "resim_max_error": check.resim_max_error if check else None,
+            "hip_energy": check.hip_energy if check else None,
+            "push_off_energy": check.push_off_energy if check else None,
+            "objective_cot": check.objective_cot if check else None,
+            "objective_gap": check.objective_gap if check else None,
+            "objective_agrees": check.objective_agrees if check else None,
+            "push_off_impulse": self.trajectory.push_off if self.trajectory else None,
+            **({"details": self.details} if self.details else {}),
+        }
+
+
+@dataclass
+class WalkResult:
+    experiment: str
+    transcription: str
+    solver: str
+    strategy: str
+    N: int
+    phase: str
+    requested_steps: int
+    steps: list[StepOutcome] = field(default_factory=list)
+    wall_time_s: float = 0.0
+    strategy_details: dict = field(default_factory=dict)
+    """Walk-level figures of the strategy (for decrease-and-conquer: claimed and verified ACOT, candidates)."""
+    problem_options: dict = field(default_factory=dict)
+    """The :class:`ProblemOptions` the walk was solved under, every field (limits included)."""
+    objective: str = NET_POWER.name
+    """The objective every COT of the walk is measured in (:meth:`gaitbench.problem.objective.Objective.describe`)."""
+
+    @property
+    def failure(self) -> str | None:
+        failed = [step for step in self.steps if not step.solved]
+        return f"step {failed[0].index}: {failed[0].message}" if failed else None
+
+    @property
+    def complete(self) -> bool:
+        return len(self.steps) == self.requested_steps and all(step.solved for step in self.steps)
+
+    @property
+    def acot(self) -> float | None:
+        """Average verified COT over the walk; ``None`` unless every requested step was solved."""
+        return average_cot([step.verification.cot for step in self.steps]) if self.complete else None
+
+    def as_dict(self) -> dict:
+        return {
+            "experiment": self.experiment,
+            "transcription": self.transcription,
+            "solver": self.solver,
+            "strategy": self.strategy,
+            "objective": self.objective,
+            "N": self.N,
+            "phase": self.phase,
+            "requested_steps": self.requested_steps,
+            "complete": self.complete,
+            "acot": self.acot,
+            "failure": self.failure,
+            "wall_time_s": self.wall_time_s,
+            "strategy_details": self.strategy_details,
+            "problem_options": self.problem_options,
+            "steps": [step.as_dict() for step in self.steps],
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the result as JSON and the trajectories beside it as NPZ (referenced from the JSON)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {}
+        for step in self.steps:
+            prefix = f"step{step.index:02d}"
+            if step.trajectory is not None:
+                arrays |= trajectory_arrays(step.trajectory, prefix)
+            if step.polished is not None and step.polished.trajectory is not None:
+                arrays |= trajectory_arrays(step.polished.trajectory, f"{prefix}_{POLISHED}")
+        data = self.as_dict()
+        if arrays:
+            npz = path.with_suffix(".npz")
+            np.savez_compressed(npz, **arrays)
+            data["trajectories"] = npz.name
+        path.write_text(json.dumps(data, indent=2, default=_json_default))
+        return path
+
+
+POLISHED = "polished"
+"""The middle of the NPZ names of a polished step's arrays: ``step01_polished_q`` beside ``step01_q``."""
+
+
+def trajectory_arrays(trajectory: StepTrajectory, prefix: str) -> dict[str, np.ndarray]:
+    """The NPZ arrays of one step trajectory: ``<prefix>_t``, ``_q``, ``_dq``, ``_tau``, ``_tau_t``, ``_push_off``."""
+    return {
+        f"{prefix}_t": trajectory.times,
+        f"{prefix}_q": trajectory.q,
+        f"{prefix}_dq": trajectory.dq,
+        f"{prefix}_tau": trajectory.tau,
+        f"{prefix}_tau_t": trajectory.control_times,
+        f"{prefix}_push_off": np.array([trajectory.push_off]),
+    }
+
+
+@dataclass(frozen=True)
+class WalkProblem:
+    """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
+    transcription and one solver, under the given problem options, for the given objective."""
+
+    experiment: Experiment
+    transcription: Transcription
+    solver: Solver
+    n_nodes: int
+    steps: int | None = None
+    options: ProblemOptions | None = None
+    objective: Objective = NET_POWER
+
+    def __post_init__(self) -> None:
+        if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
+            raise ValueError(f"steps = {self.steps}: the {self.experiment.name} experiment has "
+                             f"{self.experiment.n_steps} steps")
+        if self.options is None:
+            object.__setattr__(self, "options", ProblemOptions(limits=self.experiment.limits))
+
+    @property
+    def n_steps(self) -> int:
+        return self.experiment.n_steps if self.steps is None else self.steps
+
+    def structure(self, phase: str, n_nodes: int | None = None, walked: bool = False) -> StepStructure:
+        """The step NLP's shape; ``walked``: a First-Phase step the walk goes on from (see StepStructure). Only the
+        First Phase tells the two apart, so a 4-DOF step is one structure, and one build, for every strategy."""
+        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective,
+                             walked and phase == "first")
+
+    def step_data(self, index: int, state: np.ndarray) -> StepData:
+        """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""
+        terrain = self.experiment.terrain
+        geometry = terrain.steps[index - 1]
+        return StepData(self.experiment.robot, self.experiment.stance_leg(index), np.asarray(state, dtype=float),
+                        geometry.D, geometry.theta, self.experiment.time_step(self.n_nodes),
+                        previous_slope=terrain.ground_behind(index))
+
+    def start_state(self) -> np.ndarray:
+        """(q1, q2, q̇1, q̇2) at the start of step 1, in the start pose the options ask for."""
+        return self.experiment.start_state(self.options.start_pose)
+
+    def feasibility(self) -> list[StepCheck]:
+        """The experiment's per-step geometry checks under the options' leg-angle limits."""
+        return self.experiment.feasibility(self.options.angle_bounds)
+
+    def model(self, phase: str) -> BipedModel:
+        """The model a step of ``phase`` is verified with: 4-DOF (push-off acts) or the 2-DOF First Phase."""
+        return BipedModel(self.experiment.robot, 4 if phase == "second" else 2)
+
+    def result(self, strategy: str, phase: str = "second") -> WalkResult:
+        return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
+                          solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
+                          requested_steps=self.n_steps, problem_options=asdict(self.options),
+                          objective=self.objective.describe())
+
+
+class Strategy(Protocol):
+    """How the per-step gait problems of a walk are posed, solved and combined (a ``strategy`` plugin)."""
+
+    name: str
+
+    def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
+        """Walk the problem; report each finished step to ``on_step``. Failures end the walk, never raise."""
+
+
+StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
+"""Solves step ``index`` from a (q1, q2, q̇1, q̇2) state; a solved outcome carries the next step's state."""
+
+
+def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
+                      on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
+                      back_up: StepSolver | None = None) -> WalkResult:
+    """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
+
+    A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
+    steps before it are kept. With ``back_up``, a step that the solver cannot solve is first taken as a dead end
+    the previous step walked into: that step is solved again by ``back_up`` (which looks further ahead) from its
+    own initial state, and the walk goes on from the new one. Each step is backed up at most once; the step that
+    was replaced is recorded in the new one's ``details["backed_up_from"]``.
+    """
+    walk = problem.result(strategy, phase)
+    started = time.perf_counter()
+    checks = problem.feasibility()
+    states = [problem.start_state()]  # states[i - 1]: where step i starts
+    backed_up: set[int] = set()
+    index = 1
+    while index <= problem.n_steps:
+        check = checks[index - 1]
+        if check.ok:
+            outcome = solve_step(problem, index, states[index - 1])
+        else:
+            outcome = StepOutcome(index, problem.experiment.stance_leg(index), "infeasible_geometry",
+                                  "; ".join(check.problems))
+        if not outcome.solved and check.ok and back_up is not None and index > 1 and index - 1 not in backed_up:
+            backed_up.add(index - 1)
+            replaced = walk.steps[-1]
+            previous = back_up(problem, index - 1, states[index - 2])
+            if previous.solved:
+                previous.details = {**previous.details, "backed_up_from": {
+                    **replaced.summary(), "dead_end": {"step": index, "message": outcome.message}}}
+                walk.steps[-1] = previous
+                if on_step:
+                    on_step(previous)
+                del states[index - 1:]
+                states.append(previous.next_state)
+                continue
+            outcome.details = {**outcome.details, "back_up": {"step": index - 1, "message": previous.message,
+                                                              **previous.summary()}}
+        walk.steps.append(outcome)
+        if on_step:
+            on_step(outcome)
+        if not outcome.solved:
+            break
+        states.append(outcome.next_state)
+        index += 1
+    walk.wall_time_s = time.perf_counter() - started
+    return walk
+
+
+def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
+                     seed: Seed | None = None, phase: str = "second", solver: Solver | None = None) -> StepOutcome:
+    """Step ``index``'s NLP solved from ``seed`` (the blended guess by default), decoded, verified and chained.
+
+    ``solver`` replaces the problem's solver for this solve (a retry's variant of it)."""
+    solver = solver or problem.solver
+    result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data, seed))
+    if not result.converged:
+        return StepOutcome(index, data.stance, result.status.value, f"{result.status.value}: {result.message}",
+                           result)
+    trajectory = built.trajectory(result.x, data)
+    model = problem.model(phase)
+    verification = verify_step(built, result.x, data, trajectory, model)
+    return StepOutcome(index, data.stance, result.status.value, result.message, result, trajectory, verification,
+                       next_state=next_step_state(model, trajectory))
+
+
+RETRIED_STATUSES = (SolverStatus.INFEASIBLE.value, SolverStatus.ITERATION_LIMIT.value, SolverStatus.ERROR.value)
+"""Failures worth another try: a local solver that calls a feasible step infeasible, runs out of iterations or
+fails in its restoration phase has often only started badly. A time limit is final."""
+
+
+def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
+                       seed: Seed | None = None, phase: str = "second") -> StepOutcome:
+    """:func:`solve_and_verify`, and when the solve fails with a :data:`RETRIED_STATUSES` status, the retry
+    ladder (docs/solvers.md, "Retries") until a rung solves the step:
+
+    1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess;
+    2. ``first-phase-seed`` (4-DOF steps only): the step's 2-DOF First-Phase problem solved, and the 4-DOF problem
+       started from its trajectory, with the solver and then each of its remedies.
+
+    Every rung tried is recorded in the outcome's ``details["retries"]`` (remedy, status, iterations, time), and
+    the first attempt's status in ``details["first_attempt"]``; a step that still fails keeps the first failure's
+    message, with the rungs that were tried.
+    """
+    outcome = solve_and_verify(problem, index, built, data, seed, phase)
+    if outcome.solved or outcome.status not in RETRIED_STATUSES:
+        return outcome
+    first_attempt, retries = outcome, []
+    for remedy, attempt in _ladder(problem, index, built, data, seed, phase):
+        retry = attempt()
+        retries.append({"remedy": remedy, **retry.summary()})
+        if retry.solved:
+            outcome = retry
+            break
+    outcome.details = {**outcome.details, "first_attempt": first_attempt.summary(), "retries": retries}
+    if not outcome.solved:
+        tried = ", ".join(entry["remedy"] for entry in retries) or "none applies"
+        outcome.message = f"{first_attempt.message} (retried: {tried})"
+    return outcome
+
+
+def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
+            phase: str):
+    """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
+    remedies = solver_remedies(problem.solver)
+    for name, variant in remedies:
+        yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
+    if phase != "second":
+        return
+    first_phase: list[StepOutcome] = []
+
+    def seeded(variant: Solver | None) -> StepOutcome:
+        if not first_phase:
+            first = problem.transcription.build(problem.structure("first"))
+            first_phase.append(solve_and_verify(problem, index, first, data, phase="first"))
+        coarse = first_phase[0]
+        if not coarse.solved:
+            return coarse
+        return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), phase, variant)
+
+    yield "first-phase-seed", lambda: seeded(None)
+    for name, variant in remedies:
+        yield f"first-phase-seed+{name}", lambda variant=variant: seeded(variant)
+
+
+def solver_remedies(solver: Solver) -> list[tuple[str, Solver]]:
+    """The solver's variants worth a retry after a failed solve (its optional ``remedies()``), named."""
+    method = getattr(solver, "remedies", None)
+    return list(method()) if method is not None else []
+
+
+def next_step_state(model: BipedModel, trajectory: StepTrajectory) -> np.ndarray:
+    """(q1, q2, q̇1, q̇2) at the start of the next step: push-off (4 DOF), then heel strike and the role swap."""
+    q, dq = trajectory.q[-1], trajectory.dq[-1]
+    if model.dof == 4:
+        q, dq = np.r_[q, 0.0, 0.0], np.r_[dq, 0.0, 0.0]
+        dq, _ = model.push_off(q, dq, trajectory.push_off, trajectory.stance)
+    strike = model.heel_strike(q, dq, trajectory.stance)
+    return np.r_[strike.q[:2], strike.dq[:2]]
+
+
+def _json_default(value):
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot serialize {type(value).__name__}")

@@ -1,0 +1,1 @@
+"""Built-in tracking plugins: controllers, observers and disturbances."""

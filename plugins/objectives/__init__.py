@@ -1,0 +1,1 @@
+"""Built-in objective plugins: net power (the thesis), actuator work, squared torques."""

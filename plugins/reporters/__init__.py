@@ -1,0 +1,1 @@
+"""Built-in reporters: CSV tables and the HTML report."""

@@ -1,0 +1,340 @@
+"""Decrease & Conquer (thesis §3.7; ch3b §6; DECISIONS §7), with the verification the thesis leaves out.
+
+Per step:
+
+1. the First Phase (2-DOF) problem;
+2. the complete Second Phase (4-DOF) problem from the step's initial state (k0 = 1), seeded by the First Phase;
+3. the sectional Second Phase problems, k0 = 2 … N−2, each started from the First Phase state at node k0 and
+   covering nodes k0 … N with the same time step (the thesis's k0 = N−1 would leave a two-node problem, below the
+   three nodes a step needs, so it is not posed);
+4. synthesis: at each node the candidate with the lowest point cost that keeps the reference's "typical value
+   relation", with backtracking (:mod:`plugins.strategies.synthesis`);
+5. the sectional trajectories completed with the earlier nodes, and the final choice by the thesis's candidate COT
+   among the synthesized and completed trajectories;
+6. the next step from the heel-strike map of the chosen trajectory.
+
+The synthesized (and completed) trajectories are node-wise patchworks of different NLP solutions, so in general
+they are not motions of the robot. Every chosen trajectory is therefore verified like any other step — the
+transcription's dynamics residual at its nodes and its re-simulation under its own torques — and, with ``polish``,
+the complete 4-DOF problem is re-solved from it: the polished COT is the figure of a trajectory that satisfies the
+dynamics, reported beside the claimed one.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from gaitbench import Registration, hookimpl
+from gaitbench.model.energetics import candidate_cot
+from gaitbench.problem.gait_problem import StepData, StepStructure, role_robot_vector, sectional_structure
+from gaitbench.problem.objective import Objective
+from gaitbench.problem.transcription import StepTrajectory, TranscribedStep, Transcription, nodal_trajectory
+from gaitbench.solve.solver import SolverResult, prepare
+from gaitbench.solve.verify import verify_step
+from gaitbench.solve.walk import (
+    StepOutcome,
+    WalkProblem,
+    WalkResult,
+    next_step_state,
+    solve_and_verify,
+    solve_with_retries,
+    walk_step_by_step,
+)
+from plugins.strategies.synthesis import complete_sections, synthesize
+
+DYNAMICS_TOLERANCE = 1e-6
+"""A chosen trajectory whose dynamics residual exceeds this is reported as failing verification."""
+
+
+class DecreaseAndConquer:
+    """Options: ``polish`` (True: re-solve the complete problem from each chosen trajectory and report its COT),
+    ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
+    the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
+    to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
+    (processes for the sectional solves of a step; see :class:`SectionalSolves`)."""
+
+    name = "decrease-and-conquer"
+
+    def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
+                 workers: int = 1):
+        if sectional_guess not in ("first-phase", "complete"):
+            raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
+        if int(workers) < 1:
+            raise ValueError(f"workers = {workers}: expected at least 1")
+        if int(workers) > 1 and "fork" not in multiprocessing.get_all_start_methods():
+            raise ValueError("workers > 1 needs the 'fork' start method (Linux, macOS); use workers = 1 here")
+        self.polish = bool(polish)
+        self.sectional_guess = sectional_guess
+        self.max_checks = int(max_checks)
+        self.workers = int(workers)
+
+    def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
+        with SectionalSolves(problem, self.workers) as sections:
+            walk = walk_step_by_step(problem, self.name, partial(self._solve_step, sections=sections), on_step)
+        walk.strategy_details = walk_summary(walk)
+        return walk
+
+    def _solve_step(self, problem: WalkProblem, index: int, state: np.ndarray,
+                    sections: SectionalSolves) -> StepOutcome:
+        transcription, n = problem.transcription, problem.n_nodes
+        data = problem.step_data(index, state)
+        first = solve_with_retries(problem, index, transcription.build(problem.structure("first")), data,
+                                   phase="first")
+        if not first.solved:
+            first.message = f"First Phase: {first.message}"
+            return first
+        complete_built = transcription.build(problem.structure("second"))
+        complete = solve_with_retries(problem, index, complete_built, data, seed=first.trajectory.seed())
+        details = {"first_phase": first.summary(), "complete": complete.summary(),
+                   "retries": first.details.get("retries", []) + complete.details.get("retries", [])}
+        if not complete.solved:
+            complete.message = f"complete Second Phase: {complete.message}"
+            complete.details = details
+            return complete
+
+        h = data.time_step
+        candidates, starts, failed = [complete.trajectory], [0], []
+        section_data = {k0: StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
+                                                                    first.trajectory.dq[k0 - 1]],
+                                     data.chord, data.slope, h, data.previous_slope) for k0 in sections.starts}
+        seed_from = first if self.sectional_guess == "first-phase" else complete
+        tasks = [(k0, section_data[k0].parameter_vector(),
+                  sections.built[k0].initial_guess(section_data[k0], seed_from.trajectory.seed((k0 - 1) * h)))
+                 for k0 in sections.starts]
+        for (k0, _, _), result in zip(tasks, sections.solve(tasks), strict=True):
+            if result.converged:
+                candidates.append(sections.built[k0].trajectory(result.x, section_data[k0]))
+                starts.append(k0 - 1)  # 0-based node
+            else:
+                failed.append({"k0": k0, "status": result.status.value, "message": result.message})
+
+        costs = PointCosts(problem.objective, data.stance, role_robot_vector(data.robot, data.stance))
+        nodes = NodeValues.of(candidates, starts, n, h, problem.model("second"), costs)
+        synthesis = synthesize(nodes.pcot, nodes.values, max_checks=self.max_checks)
+        completed = nodes.completed(starts)
+        options = {"synthesized": nodes.patch(synthesis.selection)}
+        options |= {_label(start): completed.patch([j] * n) for j, start in enumerate(starts)}
+        robot = data.robot
+        cots = {label: candidate_cot(patch.pcot, robot.total_mass, data.chord, robot.g)
+                for label, patch in options.items()}
+        chosen_label = min(cots, key=cots.get)
+        chosen = options[chosen_label]
+        trajectory = chosen.trajectory(data.stance, h)
+        model = problem.model("second")
+        x_patch = complete_built.initial_guess(data, trajectory.seed())
+        verification = verify_step(complete_built, x_patch, data, trajectory, model)
+        details |= {
+            "candidates": len(candidates), "failed_sections": failed,
+            "selection": [_label(starts[j]) for j in synthesis.selection],
+            "backtracks": synthesis.backtracks, "relation_checks": synthesis.checks,
+            "synthesis_exhausted": synthesis.exhausted, "candidate_cots": cots, "chosen": chosen_label,
+            "claimed_cot": verification.cot,
+            "verified": verification.max_defect <= DYNAMICS_TOLERANCE,
+        }
+        polished = None
+        if self.polish:
+            polished = solve_and_verify(problem, index, complete_built, data, seed=trajectory.seed())
+            details["polished"] = polished.summary() | (
+                {key: value for key, value in polished.verification.as_dict().items() if key != "cot"}
+                if polished.verification else {})
+        message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
+                                          f"fails verification: dynamics residual {verification.max_defect:.2e}")
+        return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
+                           verification, next_state=next_step_state(model, trajectory), details=details,
+                           polished=polished)
+
+
+class SectionalSolves:
+    """The sectional problems k0 = 2 … N−2 of a walk: each NLP built once, solved for every step.
+
+    With ``workers`` > 1 the solves of a step run in a pool of forked processes. Forking, rather than sending
+    the problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures
+    that do not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once
+    rather than once per worker. A process that is itself
+    a daemon (a suite's local pool worker) cannot have children: give the suite ``--jobs`` or the strategy
+    ``workers``, not both.
+    """
+
+    def __init__(self, problem: WalkProblem, workers: int = 1) -> None:
+        structure = problem.structure("second")
+        self.starts = list(range(2, problem.n_nodes - 1))
+        builder = sectional_builder(problem.transcription, structure)
+        self.built: dict[int, TranscribedStep] = {
+            k0: builder.build(sectional_structure(structure, k0)) for k0 in self.starts}
+        self.solver = problem.solver
+        self._pool: ProcessPoolExecutor | None = None
+        if workers > 1 and len(self.starts) > 1:
+            for built in self.built.values():  # built once here and inherited, not once per worker
+                prepare(self.solver, built.nlp)
+            global _FORKED
+            _FORKED = self  # what the forked workers see: workers start on first submit, after this is set
+            self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
+
+    def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]]) -> list[SolverResult]:
+        """Solve (k0, parameters, initial guess) tasks; results in the tasks' order."""
+        if self._pool is None:
+            return [self.solve_one(task) for task in tasks]
+        return list(self._pool.map(_solve_forked, tasks))
+
+    def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
+        k0, parameters, guess = task
+        return self.solver.solve(self.built[k0].nlp, parameters, guess)
+
+    def __enter__(self) -> SectionalSolves:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+
+
+_FORKED: SectionalSolves | None = None
+
+
+def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
+    return _FORKED.solve_one(task)
+
+
+_SECTION_BUILDERS: list[Transcription] = []
+"""Per process, the transcription instances whose sectional builds later walks reuse: one per configuration."""
+
+
+def sectional_builder(transcription: Transcription, structure: StepStructure) -> Transcription:
+    """The instance that builds this walk's sections, kept for the walks this process runs next.
+
+    A section of M nodes is the step structure of M nodes whatever the walk's N, so a suite's worker, running
+    D&C at N = 10, 20, ..., builds only the sizes it has not built yet, and the NLPs come with their built
+    solvers. It keeps only the sections of the walk's problem options (another experiment's limits make other
+    structures), so it holds at most the sections of its largest N per transcription: what that walk needed anyway.
+    """
+    builder = next((kept for kept in _SECTION_BUILDERS if kept.builds_like(transcription)), None)
+    if builder is None:
+        _SECTION_BUILDERS.append(builder := transcription)
+    for kept in _SECTION_BUILDERS:
+        kept.keep_builds(lambda section: (section.options, section.objective)
+                                         == (structure.options, structure.objective))
+    return builder
+
+
+def release_sections() -> None:
+    """Drop the sections kept for later walks, and their memory: the next walk builds its own, as a fresh
+    process would (how ``benchmarks/performance.py`` times each walk as a case of its own)."""
+    _SECTION_BUILDERS.clear()
+
+
+def _label(start: int) -> str:
+    return "complete" if start == 0 else f"sectional-{start + 1}"
+
+
+@dataclass
+class PointCosts:
+    """The walk's objective as point costs at one step's nodes (:meth:`Objective.point_costs`): what synthesis
+    ranks candidates by and the candidate COT sums, so that decrease and conquer chooses by the cost it reports."""
+
+    objective: Objective
+    stance: int
+    robot: np.ndarray
+    """The step's robot vector in role order."""
+
+    def __call__(self, dq: np.ndarray, tau: np.ndarray, push_off_work: float) -> np.ndarray:
+        return self.objective.point_costs(dq, tau, push_off_work, self.stance, self.robot)
+
+
+class NodeValues:
+    """Every candidate's values at the step's N nodes (NaN before its start): states, torques, point costs."""
+
+    def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: np.ndarray,
+                 push_off_energy: np.ndarray, costs: PointCosts) -> None:
+        self.q, self.dq, self.tau = q, dq, tau  # (J, N, 2), leg order
+        self.push_off, self.push_off_energy = push_off, push_off_energy  # (J,)
+        self.costs = costs
+
+    @classmethod
+    def of(cls, candidates: list[StepTrajectory], starts: list[int], n_nodes: int, h: float, model,
+           costs: PointCosts) -> NodeValues:
+        shape = (len(candidates), n_nodes, 2)
+        q, dq, tau = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+        push_off, energy = np.zeros(len(candidates)), np.zeros(len(candidates))
+        for j, (trajectory, start) in enumerate(zip(candidates, starts, strict=True)):
+            q[j, start:], dq[j, start:] = trajectory.q, trajectory.dq
+            tau[j, start:] = [trajectory.control(t) for t in trajectory.times]
+            push_off[j] = trajectory.push_off
+            foot = np.zeros(2)
+            _, energy[j] = model.push_off(np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot],
+                                          trajectory.push_off, trajectory.stance)
+        return cls(q, dq, tau, push_off, energy, costs)
+
+    @property
+    def values(self) -> np.ndarray:
+        """(J, N, 4): q1, q2, q̇1, q̇2 — the variables the synthesis's relation check compares."""
+        return np.concatenate([self.q, self.dq], axis=2)
+
+    @property
+    def pcot(self) -> np.ndarray:
+        """(J, N) point costs, the push-off's event cost of each candidate at its last node."""
+        rows = []
+        for j in range(self.q.shape[0]):
+            defined = ~np.isnan(self.q[j, :, 0])
+            row = np.full(self.q.shape[1], np.nan)
+            row[defined] = self.costs(self.dq[j, defined], self.tau[j, defined], self.push_off_energy[j])
+            rows.append(row)
+        return np.array(rows)
+
+    def completed(self, starts: list[int]) -> NodeValues:
+        return NodeValues(complete_sections(self.q, starts), complete_sections(self.dq, starts),
+                          complete_sections(self.tau, starts), self.push_off, self.push_off_energy, self.costs)
+
+    def patch(self, selection: list[int]) -> Patch:
+        nodes = np.arange(len(selection))
+        last = selection[-1]
+        return Patch(self.q[selection, nodes], self.dq[selection, nodes], self.tau[selection, nodes],
+                     float(self.push_off[last]), float(self.push_off_energy[last]), self.costs)
+
+
+class Patch:
+    """A trajectory assembled node by node from candidates: what the thesis synthesizes and completes."""
+
+    def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float, push_off_energy: float,
+                 costs: PointCosts):
+        self.q, self.dq, self.tau = q, dq, tau
+        self.push_off, self.push_off_energy = push_off, push_off_energy
+        self.costs = costs
+
+    @property
+    def pcot(self) -> np.ndarray:
+        return self.costs(self.dq, self.tau, self.push_off_energy)
+
+    def trajectory(self, stance: int, h: float) -> StepTrajectory:
+        """The patch as a step trajectory: cubic Hermite angles through the nodal (q, q̇), linear rates and
+        torques (:func:`~gaitbench.problem.transcription.nodal_trajectory`), the reading a saved walk's patchwork
+        gets back."""
+        return nodal_trajectory(np.arange(len(self.q)) * h, self.q, self.dq, self.tau, self.push_off, stance)
+
+
+def walk_summary(walk: WalkResult) -> dict:
+    """Claimed against verified: the thesis's figure and the figure of trajectories that satisfy the dynamics."""
+    steps = [step for step in walk.steps if step.details.get("chosen")]
+    polished = [step.details.get("polished", {}).get("cot") for step in steps]
+    complete = walk.complete
+    return {
+        "claimed_acot": walk.acot,
+        "verified_acot": float(np.mean(polished)) if complete and polished and None not in polished else None,
+        "steps_satisfying_dynamics": sum(step.details["verified"] for step in steps),
+        "chosen": [step.details["chosen"] for step in steps],
+        "candidates": sum(step.details["candidates"] for step in steps),
+        "failed_sections": sum(len(step.details["failed_sections"]) for step in steps),
+        "backtracks": sum(step.details["backtracks"] for step in steps),
+    }
+
+
+@hookimpl
+def register_strategies():
+    return [Registration("decrease-and-conquer", "First Phase, N−2 Second Phase solves, synthesis by point cost "
+                         "with verification and backtracking (the thesis's method), verified and polished",
+                         DecreaseAndConquer)]

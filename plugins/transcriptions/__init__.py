@@ -1,0 +1,1 @@
+"""Built-in transcription plugins: Hermite-Simpson and trapezoidal collocation, discrete mechanics (DMOC)."""
