@@ -16,7 +16,7 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.objective import NET_POWER
-from gaitbench.problem.transcription import Interpolant, StepTrajectory
+from gaitbench.problem.trajectory import Interpolant, StepTrajectory
 from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_running_cost, objective_gap, verify_step
 from gaitbench.solve.walk import WalkProblem
 from plugins.solvers.ipopt import Ipopt

@@ -13,7 +13,7 @@ from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.problem.objective import NET_POWER
-from gaitbench.problem.transcription import nodal_trajectory
+from gaitbench.problem.trajectory import nodal_trajectory
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
 from gaitbench.solve.walk import WalkProblem
 from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared

@@ -20,7 +20,8 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.problem.transcription import TranscribedStep, locate_interval
+from gaitbench.problem.trajectory import locate_interval
+from gaitbench.problem.transcription import TranscribedStep
 
 ROBOT = RobotParameters(m1=20, m2=20, M=40, l=1, a=0.5)  # the forward experiment's robot
 MODEL = BipedModel(ROBOT, 2)

@@ -42,7 +42,7 @@ from gaitbench.model.numeric import NumericFunction
 from gaitbench.model.terrain import clearance
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, legs_to_roles
-from gaitbench.problem.transcription import Seed, StepTrajectory, nodal_trajectory
+from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
 from gaitbench.solve.verify import StepVerification
 from gaitbench.solve.walk import POLISHED, StepOutcome, WalkResult, next_step_state
 

@@ -6,7 +6,7 @@ an objective's running cost is in watts. r has two parts:
 
 - *charged powers* P_c (channels: the hip power for ``net-power``; the hip and ankle motors' powers for
   ``actuator-work``), each charged w⁺ max(P, 0) + w⁻ max(−P, 0): the NLP writes this exactly with the slack split
-  P = s⁺ − s⁻, s± ≥ 0 (:func:`gaitbench.problem.transcription.charged`), verification with exact max on a fine grid;
+  P = s⁺ − s⁻, s± ≥ 0 (:func:`gaitbench.problem.step_cost.charged`), verification with exact max on a fine grid;
 - a *smooth rate* (``torque-squared``), written as it is in both.
 
 The same methods serve SX expressions (inside the NLP) and NumPy arrays (verification, decrease and conquer's point

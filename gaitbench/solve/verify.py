@@ -22,7 +22,8 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.simulate import OpenLoop, simulate
 from gaitbench.problem.gait_problem import StepData, role_robot_vector
 from gaitbench.problem.objective import Objective
-from gaitbench.problem.transcription import StepTrajectory, TranscribedStep
+from gaitbench.problem.trajectory import StepTrajectory
+from gaitbench.problem.transcription import TranscribedStep
 
 SAMPLES_PER_INTERVAL = 16
 INSIDE = 1e-9

@@ -22,7 +22,8 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.terrain import StepCheck
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.objective import NET_POWER, Objective
-from gaitbench.problem.transcription import Seed, StepTrajectory, TranscribedStep, Transcription
+from gaitbench.problem.trajectory import Seed, StepTrajectory
+from gaitbench.problem.transcription import TranscribedStep, Transcription
 from gaitbench.solve.solver import Solver, SolverResult, SolverStatus
 from gaitbench.solve.verify import StepVerification, verify_step
 

@@ -34,7 +34,8 @@ from gaitbench import Registration, hookimpl
 from gaitbench.model.energetics import candidate_cot
 from gaitbench.problem.gait_problem import StepData, StepStructure, role_robot_vector, sectional_structure
 from gaitbench.problem.objective import Objective
-from gaitbench.problem.transcription import StepTrajectory, TranscribedStep, Transcription, nodal_trajectory
+from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
+from gaitbench.problem.transcription import TranscribedStep, Transcription
 from gaitbench.solve.solver import SolverResult, prepare
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import (

@@ -43,19 +43,9 @@ from gaitbench import Registration, hookimpl
 from gaitbench.model.mechanics import BipedFunctions
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepStructure
 from gaitbench.problem.nlp import NLPBuilder
-from gaitbench.problem.transcription import (
-    QUADRATURE_RULES,
-    Discretization,
-    Interpolant,
-    StepSymbols,
-    Transcription,
-    angle_box,
-    cubic_hermite,
-    interval_running_costs,
-    locate_interval,
-    running_cost,
-    sample_seed,
-)
+from gaitbench.problem.step_cost import QUADRATURE_RULES, interval_running_costs, running_cost
+from gaitbench.problem.trajectory import Interpolant, cubic_hermite, locate_interval, sample_seed
+from gaitbench.problem.transcription import Discretization, StepSymbols, Transcription, angle_box
 
 TIME_STEP = PARAMETER_LAYOUT["time_step"]
 

@@ -19,19 +19,9 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT
-from gaitbench.problem.transcription import (
-    QUADRATURE_RULES,
-    Discretization,
-    Interpolant,
-    Transcription,
-    collocation_variables,
-    cubic_hermite,
-    interval_running_costs,
-    locate_interval,
-    running_cost,
-    sample_seed,
-    state_derivative,
-)
+from gaitbench.problem.step_cost import QUADRATURE_RULES, interval_running_costs, running_cost
+from gaitbench.problem.trajectory import Interpolant, cubic_hermite, locate_interval, sample_seed
+from gaitbench.problem.transcription import Discretization, Transcription, collocation_variables, state_derivative
 
 QUADRATURES = ("simpson", "boole")
 

@@ -27,17 +27,13 @@ from gaitbench import Registration, hookimpl
 from gaitbench.model.mechanics import BipedFunctions
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepStructure
 from gaitbench.problem.nlp import NLPBuilder
+from gaitbench.problem.step_cost import QUADRATURE_RULES, interval_running_costs, running_cost
+from gaitbench.problem.trajectory import Interpolant, locate_interval, sample_seed
 from gaitbench.problem.transcription import (
-    QUADRATURE_RULES,
     Discretization,
-    Interpolant,
     StepSymbols,
     Transcription,
     collocation_variables,
-    interval_running_costs,
-    locate_interval,
-    running_cost,
-    sample_seed,
     state_derivative,
 )
 
