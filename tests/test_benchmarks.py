@@ -64,10 +64,17 @@ def test_baseline_covers_the_regression_suite():
     assert {case.key for case in suite.cases} == set(baseline)
 
 
-def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own():
+def _performance_module(monkeypatch):
+    """benchmarks/performance.py, which imports its sibling performance_summary as a script run from there would."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
     spec = importlib.util.spec_from_file_location("performance", BENCHMARKS / "performance.py")
-    performance = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(performance)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own(monkeypatch):
+    performance = _performance_module(monkeypatch)
     laws = {("forward", "OP-DC"): (0.01, 1.0), ("stairs", "OP-DC"): (0.002, 2.0), ("stairs", "reference"): (0.5, 1.5)}
     sample = [{"experiment": experiment, "method": method, "N": n, "status": "solved", "wall_s": a * n**b}
               for (experiment, method), (a, b) in laws.items() for n in (10, 20, 30)]
@@ -79,15 +86,8 @@ def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own():
     assert abs(fit["wall_s_lower_bound"] - sum(expected.values()) / 2) < 1e-6 * sum(expected.values())
 
 
-def _performance_module():
-    spec = importlib.util.spec_from_file_location("performance", BENCHMARKS / "performance.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path):
-    performance = _performance_module()
+def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path, monkeypatch):
+    performance = _performance_module(monkeypatch)
     text = performance.sampled_suite("thesis-all", (50, 100), 900, performance.OBJECTIVE_SCALING)
     sample = tmp_path / "sample.toml"
     sample.write_text(text)
@@ -103,8 +103,8 @@ def test_a_sampled_suite_keeps_its_methods_and_gives_ipopt_the_options(tmp_path)
             assert solver.name == "ipopt" and solver.options == performance.OBJECTIVE_SCALING
 
 
-def test_the_rest_of_thesis_all_and_thesis_forward_are_its_cases_split_without_overlap(tmp_path):
-    performance = _performance_module()
+def test_the_rest_of_thesis_all_and_thesis_forward_are_its_cases_split_without_overlap(tmp_path, monkeypatch):
+    performance = _performance_module(monkeypatch)
     rest = tmp_path / "rest.toml"
     rest.write_text(performance.sampled_suite("thesis-all", (50,), 3600,
                                               experiments=("downward-slope", "upward-slope", "stairs")))
@@ -114,8 +114,8 @@ def test_the_rest_of_thesis_all_and_thesis_forward_are_its_cases_split_without_o
     assert len(keys) == 12 and sorted(keys + [case.key for case in forward]) == sorted(case.key for case in whole)
 
 
-def test_the_list_schedule_packs_the_measured_case_times_in_either_order():
-    performance = _performance_module()
+def test_the_list_schedule_packs_the_measured_case_times_in_either_order(monkeypatch):
+    performance = _performance_module(monkeypatch)
     cases = [Case(PluginChoice("forward"), n, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
                   PluginChoice("one-phase"), method="OP") for n in (10, 20, 30)]
     measured = [{"experiment": "forward", "method": "OP", "N": n, "wall_s": t}
@@ -124,3 +124,11 @@ def test_the_list_schedule_packs_the_measured_case_times_in_either_order():
     assert performance.list_schedule(measured, 2, cases) == 11.0
     assert performance.list_schedule(measured, 2, largest_first(cases)) == 10.0
     assert performance.list_schedule(measured, 1, largest_first(cases)) == 13.0
+
+
+def test_the_recorded_summary_is_the_rendering_of_the_recorded_results(monkeypatch):
+    performance = _performance_module(monkeypatch)
+    from performance_summary import summary_markdown
+
+    results = json.loads(performance.RESULTS.read_text())
+    assert summary_markdown(results) == performance.SUMMARY.read_text()
