@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gaitbench.reports import build_report, tables, write_report
+from gaitbench.reports import build_report, case_frame, tables, write_report
 
 CHROMIUM_MISSING = "chromium is not installed (Debian package chromium; .ci/run installs it)"
 
@@ -63,7 +63,7 @@ def _frame(rows):
             "tracking_path": None, "experiment": "forward"}
     frame = pd.DataFrame([base | row for row in rows])
     frame["case_key"] = [f"k{i}" for i in range(len(frame))]
-    return tables.prepare(frame)
+    return case_frame.prepare(frame)
 
 
 def test_savings_formula_and_minimum_marking():
@@ -79,7 +79,7 @@ def test_savings_formula_and_minimum_marking():
         rows.append({"method": "reference", "strategy": "one-phase", "N": n, "acot": ref,
                      "status": "solved" if ref else "incomplete", "message": "" if ref else "step 1: failed"})
     df = _frame(rows)
-    info = tables.method_info(df)
+    info = case_frame.method_info(df)
     assert dict(zip(info["method"], info["thesis_method"], strict=True)) == {
         "OP-DC": "OP-DC", "D&C-DC": "D&C-DC", "reference": "SNOPT"}
     acot = tables.acot_table(df)
@@ -114,7 +114,7 @@ def test_energetics_table_and_figures():
     df = _frame(rows)
     table = tables.energetics_table(df)
     assert list(table.columns) == tables.ENERGETICS_COLUMNS and len(table) == 4
-    assert tables.experiments(df) == []  # the study is not an ACOT-vs-N sweep
+    assert case_frame.experiments(df) == []  # the study is not an ACOT-vs-N sweep
     from gaitbench.reports.figures import energetics_figures
 
     assert [figure.id for figure in energetics_figures(table)] == ["fig-energetics-rm"]

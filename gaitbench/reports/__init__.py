@@ -101,6 +101,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
     """
     import numpy as np
 
+    from gaitbench.reports import case_frame
     from gaitbench.reports import figures as fig
     from gaitbench.reports import tables as tb
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
@@ -118,8 +119,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
             store_dir = store.directory
     except StoreError as error:
         raise ReportError(str(error)) from None
-    df = tb.prepare(raw)
-    info = tb.method_info(df)
+    df = case_frame.prepare(raw)
+    info = case_frame.method_info(df)
     acot = tb.acot_table(df)
     minima = tb.method_minima(acot, info)
     savings = tb.savings_table(acot, info)
@@ -134,7 +135,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
     }
     suites = sorted({run.get("suite") or "?" for run in runs})
     report = ReportData(store_dir=store_dir, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",
-                        cases=df, runs=runs, tables=tables, experiments=tb.experiments(df))
+                        cases=df, runs=runs, tables=tables, experiments=case_frame.experiments(df))
     steps.add(len(report.experiments) + 1)
     for experiment in report.experiments:
         steps.start(f"figures of {experiment}")

@@ -71,7 +71,7 @@ class Gait:
 
 
 def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
-    """The gait of one stored case (a row of :func:`gaitbench.reports.tables.prepare`).
+    """The gait of one stored case (a row of :func:`gaitbench.reports.case_frame.prepare`).
 
     For decrease and conquer, the gait is the verified trajectory, each step polished (re-solved from the chosen
     patchwork), when the walk stored it for every step; the chosen patchwork is kept as :attr:`Gait.overlay`.

@@ -1,40 +1,30 @@
 """Every table of a report, computed with pandas from the results store (no plotting, no files).
 
-Start from :func:`prepare` (the store's DataFrame from :func:`gaitbench.run.store.load_results`, with the columns
-the tables share); every other function takes its result. Column names are documented in docs/reports.md.
-
-Which ACOT is "verified": for One Phase and the other per-step strategies the store's ``acot`` (every step's COT
-recomputed from its trajectory). For Decrease & Conquer the store's ``acot`` is the mean COT of the synthesized
-patchwork, i.e. the thesis's claim (``claimed_acot``); the figure of trajectories that satisfy the dynamics is the
-polished one in ``strategy_details.verified_acot`` (plugins/strategies/decrease_and_conquer.py). The tables use
-that as the
-verified ACOT of D&C and keep the claim beside it; with ``polish = false`` there is no verified D&C figure (NaN).
-
-Complete walks only: a case is complete when its status is ``solved`` (every requested step solved and verified).
-Every ACOT, claim and per-step COT bound in the tables and figures is of complete walks; a walk that stopped early
-contributes to the completion rate and the stop-cause table, and its own figure appears only as ``partial_acot``
-in the per-case tables, under that name, never inside an ACOT average.
+Every function takes the store's cases as :func:`gaitbench.reports.case_frame.prepare` returns them; that module says
+which ACOT the tables call verified, and why they average complete walks only. Column names are documented in
+docs/reports.md.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
-from gaitbench.problem.objective import NET_POWER
 from gaitbench.reports import thesis_values
+from gaitbench.reports.case_frame import (
+    DC_STRATEGY,
+    ENERGETICS,
+    ONE_PHASE,
+    REFERENCE_LABEL,
+    number,
+    parse_details,
+    sweep_cases,
+)
 
-DC_STRATEGY = "decrease-and-conquer"
-ONE_PHASE = "one-phase"
-REFERENCE_LABEL = "reference"
-ENERGETICS = "energetics"
 ENERGETICS_OPTIONS = ("mass_ratio", "length_ratio", "speed", "step_length", "slope")
-THESIS_TRANSCRIPTION = {"hermite-simpson": "DC", "dmoc": "DM"}
 
 ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "completion_rate", "acot", "claimed_acot", "cot_min",
                 "cot_max", "wall_time_s", "iterations", "retries", "max_defect", "max_resim_error", "is_minimum"]
@@ -69,140 +59,6 @@ CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "tr
 STOP_CAUSE_ORDER = ("complete", "geometry", "solver", "verification", "time_limit", "error", "crashed", "unrecorded")
 """The store's stop causes (gaitbench.run.store.STOP_CAUSES) in report order; ``unrecorded``: an incomplete walk stored
 before the store had a ``stop_cause`` column."""
-STATUS_CAUSES = {"solved": "complete", "timeout": "time_limit", "crashed": "crashed", "error": "error"}
-
-
-# --- shared columns --------------------------------------------------------------------------------------------
-
-def prepare(cases: pd.DataFrame) -> pd.DataFrame:
-    """The store's case rows with the columns every table uses.
-
-    ``experiment`` becomes a label (the plugin name, with its options for parametrized experiments other than
-    ``energetics``), ``method`` falls back to strategy/transcription/solver when a case has no label and names its
-    objective in brackets unless it is the thesis's ``net-power`` (``objective``; null in stores that predate it),
-    so that no table sets numbers of different objectives side by side unnamed,
-    ``store_acot`` keeps the store's ``acot`` and ``acot`` becomes the verified ACOT (see the module docstring).
-    ``complete`` marks complete walks; ``acot``, ``claimed_acot``, ``cot_min`` and ``cot_max`` are kept only for them,
-    and ``partial_acot`` holds the mean COT of the steps an incomplete walk solved. ``stop_cause`` is filled from the
-    status where a store predates the column.
-    """
-    df = cases.copy()
-    for column in ("stop_cause", "stop_step", "stop_status", "retries", "back_ups", "cot_steps", "steps_solved",
-                   "objective"):
-        if column not in df.columns:
-            df[column] = None
-    if df.empty:
-        for column in ("store_acot", "verified_acot", "is_dc", "experiment_name", "complete", "partial_acot"):
-            df[column] = pd.Series(dtype=object)
-        return df
-    df["experiment_name"] = df["experiment"]
-    df["experiment"] = [_experiment_label(name, options) for name, options in
-                        zip(df["experiment"], df["experiment_options"], strict=True)]
-    df["method"] = [method if isinstance(method, str) and method else
-                    f"{strategy} {transcription} {solver}" for method, strategy, transcription, solver in
-                    zip(df["method"], df["strategy"], df["transcription"], df["solver"], strict=True)]
-    df["objective"] = [objective if isinstance(objective, str) and objective else NET_POWER.name
-                       for objective in df["objective"]]
-    df["method"] = [method if objective == NET_POWER.name else f"{method} [{objective}]"
-                    for method, objective in zip(df["method"], df["objective"], strict=True)]
-    df["is_dc"] = df["strategy"] == DC_STRATEGY
-    df["store_acot"] = pd.to_numeric(df["acot"], errors="coerce")
-    df["claimed_acot"] = pd.to_numeric(df["claimed_acot"], errors="coerce")
-    verified = [_details(details).get("verified_acot") if is_dc else acot
-                for details, is_dc, acot in zip(df["strategy_details"], df["is_dc"], df["store_acot"], strict=True)]
-    df["verified_acot"] = pd.to_numeric(pd.Series(verified, index=df.index, dtype=object), errors="coerce")
-    complete = df["status"] == "solved"
-    df["complete"] = complete
-    df["acot"] = df["verified_acot"].where(complete)
-    df["claimed_acot"] = df["claimed_acot"].where(complete & df["is_dc"])
-    for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N",
-                   "retries", "back_ups", "steps_solved"):
-        df[column] = pd.to_numeric(df[column], errors="coerce")
-    for column in ("cot_min", "cot_max"):  # a partial walk's bounds would pass for the walk's
-        df[column] = df[column].where(complete)
-    df["stop_step"] = pd.to_numeric(df["stop_step"], errors="coerce").astype("Int64")
-    df["stop_cause"] = [cause if isinstance(cause, str) and cause else STATUS_CAUSES.get(status, "unrecorded")
-                        for cause, status in zip(df["stop_cause"], df["status"], strict=True)]
-    df["partial_acot"] = [math.nan if done or is_dc else _partial_acot(cots)
-                          for done, is_dc, cots in zip(complete, df["is_dc"], df["cot_steps"], strict=True)]
-    return df
-
-
-def _partial_acot(cot_steps: Any) -> float:
-    """Mean COT of the steps a walk solved before it stopped (NaN if none): the partial walk's own figure."""
-    if isinstance(cot_steps, str):
-        try:
-            cot_steps = json.loads(cot_steps)
-        except json.JSONDecodeError:
-            return math.nan
-    if not isinstance(cot_steps, list):
-        return math.nan
-    solved = [_number(cot) for cot in cot_steps]
-    solved = [cot for cot in solved if math.isfinite(cot)]
-    return float(np.mean(solved)) if solved else math.nan
-
-
-def _experiment_label(name: str, options: Any) -> str:
-    if not options or name == ENERGETICS:
-        return name
-    listed = ", ".join(f"{key}={value}" for key, value in sorted(dict(options).items()))
-    return f"{name}({listed})"
-
-
-def _details(value: Any) -> dict:
-    if isinstance(value, str):
-        try:
-            value = json.loads(value)
-        except json.JSONDecodeError:
-            return {}
-    return value if isinstance(value, dict) else {}
-
-
-def sweep_cases(df: pd.DataFrame) -> pd.DataFrame:
-    """The cases of the per-experiment ACOT sweeps (everything but the energetics study)."""
-    return df[df["experiment_name"] != ENERGETICS] if not df.empty else df
-
-
-def experiments(df: pd.DataFrame) -> list[str]:
-    """The sweep experiments in store order."""
-    return list(dict.fromkeys(sweep_cases(df)["experiment"])) if not df.empty else []
-
-
-def method_info(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per (experiment, method): its transcription, solver, strategy and the thesis method it stands for."""
-    columns = ["experiment", "method", "transcription", "solver", "strategy", "thesis_method"]
-    sweep = sweep_cases(df)
-    if sweep.empty:
-        return pd.DataFrame(columns=columns)
-    info = sweep.groupby(["experiment", "method"], sort=False)[["transcription", "solver", "strategy"]].first()
-    info = info.reset_index()
-    info["thesis_method"] = None
-    for _, group in info.groupby("experiment", sort=False):
-        taken: set[str] = set()
-        guesses = {}
-        for index, row in group.iterrows():
-            guesses[index] = _thesis_method(row["method"], row["strategy"], row["transcription"])
-        counts = pd.Series([g for g in guesses.values() if g]).value_counts()
-        for index, guess in guesses.items():
-            if guess and counts[guess] == 1 and guess not in taken:
-                info.loc[index, "thesis_method"] = guess
-                taken.add(guess)
-    return info[columns]
-
-
-def _thesis_method(label: str, strategy: str, transcription: str) -> str | None:
-    if label in thesis_values.METHODS:
-        return label
-    if label.lower() == REFERENCE_LABEL:
-        return thesis_values.REFERENCE_METHOD
-    suffix = THESIS_TRANSCRIPTION.get(transcription)
-    if suffix is None:
-        return None
-    if strategy == ONE_PHASE:
-        return f"OP-{suffix}"
-    if strategy == DC_STRATEGY:
-        return f"D&C-{suffix}"
-    return None
 
 
 # --- ACOT, minima, COT bounds ------------------------------------------------------------------------------------
@@ -372,9 +228,9 @@ def dc_claims(df: pd.DataFrame) -> pd.DataFrame:
     trajectories satisfy the dynamics."""
     rows = []
     for _, case in df[df["is_dc"]].iterrows() if not df.empty else []:
-        details = _details(case["strategy_details"])
-        claimed = _number(details.get("claimed_acot", case["claimed_acot"]))
-        verified = _number(details.get("verified_acot"))
+        details = parse_details(case["strategy_details"])
+        claimed = number(details.get("claimed_acot", case["claimed_acot"]))
+        verified = number(details.get("verified_acot"))
         rows.append({"experiment": case["experiment"], "method": case["method"], "N": int(case["N"]),
                      "case_key": case["case_key"], "status": case["status"], "claimed_acot": claimed,
                      "verified_acot": verified,
@@ -392,13 +248,6 @@ def _integers(table: pd.DataFrame, *columns: str) -> pd.DataFrame:
     for column in columns:
         table[column] = pd.to_numeric(table[column], errors="coerce").astype("Int64")
     return table
-
-
-def _number(value: Any) -> float:
-    try:
-        return float(value) if value is not None else math.nan
-    except (TypeError, ValueError):
-        return math.nan
 
 
 # --- energetics, tracking, failures, provenance ------------------------------------------------------------------
@@ -520,13 +369,6 @@ def chosen_gaits(df: pd.DataFrame) -> dict[str, str]:
     for experiment, group in candidates.groupby("experiment", sort=False):
         chosen[experiment] = group.loc[group["acot"].idxmin(), "case_key"]
     return chosen
-
-
-def finite(value: Any) -> bool:
-    try:
-        return value is not None and np.isfinite(float(value))
-    except (TypeError, ValueError):
-        return False
 
 
 def write_csv(tables: dict[str, pd.DataFrame], out_dir) -> list:
