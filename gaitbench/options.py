@@ -13,6 +13,7 @@ from __future__ import annotations
 import difflib
 import inspect
 import math
+import re
 import types
 import typing
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -91,9 +92,32 @@ def check_common_solver_options(options: Mapping[str, Any]) -> None:
 
 def describe(value: Any) -> str:
     """``a string 'x'``, ``an integer (3)``, ``a table``: what was given where something else was expected."""
-    from gaitbench.run.suite_schema import _found
+    if isinstance(value, bool):
+        return f"a boolean ({'true' if value else 'false'})"
+    if isinstance(value, int):
+        return f"an integer ({value})"
+    if isinstance(value, float):
+        return f"a float ({value!r})"
+    if isinstance(value, str):
+        return f"a string {value!r}"
+    if isinstance(value, list):
+        return "an empty array" if not value else f"an array ({show_value(value)})"
+    if isinstance(value, dict):
+        return "a table"
+    return f"a {type(value).__name__} ({value})"
 
-    return _found(value)
+
+def show_value(value: Any) -> str:
+    """A value as TOML would write it, for labels (a suite's grid variants) and messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"' if not re.fullmatch(r"[A-Za-z0-9_.+-]+", value) else value
+    if isinstance(value, list):
+        return "[" + ", ".join(show_value(item) for item in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {show_value(v)}" for k, v in value.items()) + "}"
+    return repr(value) if isinstance(value, float) else str(value)
 
 
 def _keyword_parameters(factory: Callable[..., Any], injected: int) -> tuple[list[str] | None, bool]:

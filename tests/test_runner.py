@@ -21,7 +21,8 @@ from gaitbench.cli.main import main
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
 from gaitbench.run.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_case, run_suite
-from gaitbench.run.store import CASE_COLUMNS, DATABASE, ResultStore, StoreError
+from gaitbench.run.store import DATABASE, ResultStore
+from gaitbench.run.store_schema import CASE_COLUMNS, StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
 COMPARED = ("case_key", "method", "N", "status", "acot", "cot_steps", "iterations", "steps_solved", "max_defect")
@@ -438,7 +439,9 @@ def test_a_store_written_before_the_stop_columns_opens_and_gains_them(tmp_path: 
     old_columns = {c: t for c, t in CASE_COLUMNS.items() if c not in new}
     with sqlite3.connect(tmp_path / DATABASE) as db:
         db.execute(f"CREATE TABLE cases ({', '.join(f'{c} {t}' for c, t in old_columns.items())})")
-        db.execute("CREATE TABLE runs (run_id TEXT PRIMARY KEY, suite TEXT, started_at TEXT)")
+        db.execute("CREATE TABLE runs (run_id TEXT PRIMARY KEY, suite TEXT, suite_path TEXT, suite_text TEXT, "
+                   "executor TEXT, jobs INTEGER, cases_total INTEGER, cases_skipped INTEGER, started_at TEXT, "
+                   "finished_at TEXT, provenance TEXT)")  # as the first stores had it (schema version 1)
         db.execute("INSERT INTO cases (case_key, status, acot) VALUES ('old', 'solved', 0.03)")
     frame = gaitbench.load_results(tmp_path)  # reading opens it
     assert list(frame.columns) == list(CASE_COLUMNS)
@@ -446,7 +449,7 @@ def test_a_store_written_before_the_stop_columns_opens_and_gains_them(tmp_path: 
     with sqlite3.connect(tmp_path / DATABASE) as db:
         present = {row[1] for row in db.execute("PRAGMA table_info(cases)")}
         runs = {row[1] for row in db.execute("PRAGMA table_info(runs)")}
-    assert set(new) <= present and "provenance" in runs
+    assert set(new) <= present and {"provenance", "heartbeat_at"} <= runs
     with ResultStore.create(tmp_path) as store:  # and a resumed run writes the new columns into it
         store.record_case(case_row(CaseOutcome(walk_case(8), "crashed", "SIGKILL", 1.0), "s", "r"))
         rows = {row["case_key"]: row for row in store.cases()}

@@ -22,7 +22,8 @@ import gaitbench
 from gaitbench.cli.main import main
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.runner import CaseOutcome, case_row, run_suite
-from gaitbench.run.store import DATABASE, ResultStore, StoreError
+from gaitbench.run.store import DATABASE, ResultStore
+from gaitbench.run.store_schema import StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
 ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "COLUMNS": "200"}

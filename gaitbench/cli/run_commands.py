@@ -47,7 +47,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
     """
     from gaitbench.run.runner import RunRefused, run_suite
-    from gaitbench.run.store import StoreError
+    from gaitbench.run.store_schema import StoreError
     from gaitbench.run.suite import SuiteError, load_suite
 
     if state.plugin_dirs:  # through the environment, so worker processes load them too
@@ -190,7 +190,8 @@ def runs() -> None:
 @click.argument("stores", nargs=-1, type=click.Path(path_type=Path))
 def runs_list(stores: tuple[Path, ...]) -> None:
     """List the runs of each STORE (default: every store under ./results)."""
-    from gaitbench.run.store import DATABASE, ResultStore, StoreError, run_alive
+    from gaitbench.run.store import DATABASE, ResultStore, run_alive
+    from gaitbench.run.store_schema import StoreError
 
     paths = list(stores) or sorted(path.parent for path in Path("results").glob(f"*/{DATABASE}"))
     if not paths:
@@ -243,7 +244,8 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool) -> None:
     complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
     everything else.
     """
-    from gaitbench.run.store import ResultStore, StoreError
+    from gaitbench.run.store import ResultStore
+    from gaitbench.run.store_schema import StoreError
 
     try:
         with ResultStore.open(store_dir) as store:
@@ -275,7 +277,8 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     """Export every case of STORE, one row per case (JSON columns as JSON text in CSV)."""
     import json
 
-    from gaitbench.run.store import JSON_COLUMNS, StoreError, load_results
+    from gaitbench.run.store import load_results
+    from gaitbench.run.store_schema import JSON_COLUMNS, StoreError
 
     try:
         frame = load_results(store_dir)

@@ -105,7 +105,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
     from gaitbench.reports import figures as fig
     from gaitbench.reports import tables as tb
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
-    from gaitbench.run.store import ResultStore, StoreError, load_results
+    from gaitbench.run.store import ResultStore, load_results
+    from gaitbench.run.store_schema import StoreError
 
     own = not isinstance(progress, _Steps)
     steps = _Steps(progress) if own else progress

@@ -57,8 +57,8 @@ CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "tr
                  "stop_cause", "stop_step", "stop_status", "retries", "partial_acot", "wall_time_s", "solve_time_s",
                  "iterations", "max_defect", "max_resim_error", "walk_path", "tracking_path"]
 STOP_CAUSE_ORDER = ("complete", "geometry", "solver", "verification", "time_limit", "error", "crashed", "unrecorded")
-"""The store's stop causes (gaitbench.run.store.STOP_CAUSES) in report order; ``unrecorded``: an incomplete walk stored
-before the store had a ``stop_cause`` column."""
+"""The store's stop causes (gaitbench.run.store_schema.STOP_CAUSES) in report order; ``unrecorded``: an incomplete
+walk stored before the store had a ``stop_cause`` column."""
 
 
 # --- ACOT, minima, COT bounds ------------------------------------------------------------------------------------

@@ -149,7 +149,7 @@ RUN_FAILURE_CAUSES = {"error": "error", "timeout": "time_limit", "crashed": "cra
 
 
 def stop_cause(status: str) -> str:
-    """The ``stop_cause`` (gaitbench.run.store.STOP_CAUSES) of a walk stopped by a step with this status.
+    """The ``stop_cause`` (gaitbench.run.store_schema.STOP_CAUSES) of a walk stopped by a step with this status.
 
     ``infeasible_geometry`` is checked before any solve; a solver's ``time_limit`` is the case's time limit passed
     to it; a step whose solve converged but that is not solved failed the verification after it; every other status

@@ -12,7 +12,8 @@ committed, so a crash or kill loses at most the cases in flight, and a row alway
 Several runs may share a store: each claims a case (table ``claims``, under SQLite's write lock) right before it
 starts it, so no case is solved twice, and a claim dies with its run (same host: the process is gone; any host:
 no heartbeat for :data:`LEASE_S`). Readers open the store read-only and never change it; a file that is not a
-gaitbench store is refused before anything is written to it.
+gaitbench store is refused before anything is written to it. The tables, their schema version and the migrations of
+older stores are in :mod:`gaitbench.run.store_schema`.
 """
 
 from __future__ import annotations
@@ -33,12 +34,22 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from gaitbench.run.store_schema import (
+    CASE_COLUMNS,
+    CLAIM_COLUMNS,
+    JSON_COLUMNS,
+    RETRYABLE_STATUSES,
+    RUN_COLUMNS,
+    StoreError,
+    check_file,
+    check_schema,
+    connect_read_only,
+    upgrade,
+    upgrade_file,
+)
+
 DATABASE = "results.sqlite"
 CASES_DIR = "cases"
-
-APPLICATION_ID = int.from_bytes(b"gbch", "big")
-"""``PRAGMA application_id`` of a gaitbench store: how a store is told from another SQLite file before anything is
-written (stores written before it existed are recognized by their tables, and stamped when next written)."""
 
 HEARTBEAT_S = 20.0
 """How often a running suite refreshes its run's ``heartbeat_at``."""
@@ -47,108 +58,10 @@ LEASE_S = 120.0
 """A run whose heartbeat is older than this is dead, and its claims free: the only test for a run on another host
 (on the same host a run is also dead as soon as its process is)."""
 
-STORE_TABLES = {"runs", "cases", "claims"}
 _STAGING = re.compile(r"^\.[0-9a-f]{16}-")
-
-FINISHED_STATUSES = ("solved", "incomplete", "error", "timeout", "crashed")
-"""``solved``: every step solved and verified. ``incomplete``: the method failed at a step (a result, not a
-fault). ``error``: the case raised. ``timeout``: it ran past its time limit. ``crashed``: its worker died."""
-
-RETRYABLE_STATUSES = ("error", "timeout", "crashed")
-"""Failures of the run rather than of the method: ``--resume --retry-failed`` runs them again."""
-
-CASE_COLUMNS: dict[str, str] = {
-    "case_key": "TEXT PRIMARY KEY",
-    "run_id": "TEXT",
-    "suite": "TEXT",
-    "method": "TEXT",
-    "experiment": "TEXT",
-    "experiment_options": "TEXT",
-    "N": "INTEGER",
-    "steps": "INTEGER",
-    "transcription": "TEXT",
-    "transcription_options": "TEXT",
-    "solver": "TEXT",
-    "solver_options": "TEXT",
-    "strategy": "TEXT",
-    "strategy_options": "TEXT",
-    "objective": "TEXT",
-    "problem_options": "TEXT",
-    "repetition": "INTEGER",
-    "time_limit_s": "REAL",
-    "tracking_stage": "TEXT",
-    "status": "TEXT",
-    "message": "TEXT",
-    "acot": "REAL",
-    "claimed_acot": "REAL",
-    "cot_steps": "TEXT",
-    "cot_min": "REAL",
-    "cot_max": "REAL",
-    "steps_solved": "INTEGER",
-    "stop_cause": "TEXT",
-    "stop_step": "INTEGER",
-    "stop_status": "TEXT",
-    "retries": "INTEGER",
-    "back_ups": "INTEGER",
-    "wall_time_s": "REAL",
-    "solve_time_s": "REAL",
-    "function_time_s": "REAL",
-    "iterations": "INTEGER",
-    "max_defect": "REAL",
-    "max_resim_error": "REAL",
-    "strategy_details": "TEXT",
-    "max_position_error": "REAL",
-    "max_velocity_error": "REAL",
-    "acot_tracked": "REAL",
-    "acot_increase_percent": "REAL",
-    "fell": "INTEGER",
-    "tracking": "TEXT",
-    "walk_path": "TEXT",
-    "tracking_path": "TEXT",
-    "provenance": "TEXT",
-    "finished_at": "TEXT",
-}
-"""Every column of the ``cases`` table, in order (documented in docs/results.md). Columns holding lists or
-dicts are JSON text; paths are relative to the store directory. A store written before a column existed gains it
-(null in its old rows) when opened: see :func:`_add_missing_columns`."""
-
-STOP_CAUSES = ("complete", "geometry", "solver", "verification", "time_limit", "error", "crashed")
-"""Values of the ``stop_cause`` column: why a walk ended (``complete``: it did not stop; null: not recorded, a row
-written before the column existed)."""
-
-JSON_COLUMNS = ("experiment_options", "transcription_options", "solver_options", "strategy_options",
-                "problem_options", "tracking_stage", "cot_steps", "strategy_details", "tracking", "provenance")
-
-RUN_COLUMNS: dict[str, str] = {
-    "run_id": "TEXT PRIMARY KEY",
-    "suite": "TEXT",
-    "suite_path": "TEXT",
-    "suite_text": "TEXT",
-    "executor": "TEXT",
-    "jobs": "INTEGER",
-    "cases_total": "INTEGER",
-    "cases_skipped": "INTEGER",
-    "started_at": "TEXT",
-    "finished_at": "TEXT",
-    "provenance": "TEXT",
-    "host": "TEXT",
-    "pid": "INTEGER",
-    "heartbeat_at": "TEXT",
-}
-
-CLAIM_COLUMNS: dict[str, str] = {
-    "case_key": "TEXT PRIMARY KEY",
-    "run_id": "TEXT NOT NULL",
-    "claimed_at": "TEXT",
-}
-"""A case being solved and by which run; the row goes when the case's row is written or its run ends."""
 
 _OPEN_RUNS: set[str] = set()
 """Runs this process is running: a claim whose pid is this process's is alive only if its run is one of them."""
-
-
-class StoreError(Exception):
-    """A store that is missing, unreadable or not a gaitbench store; the message says which path and why."""
 
 
 class ResultStore:
@@ -167,7 +80,8 @@ class ResultStore:
         """Open the store at ``directory`` for writing, creating it (and its tables) if needed.
 
         :class:`StoreError` (one line naming the path) if the directory cannot be written or ``results.sqlite`` is
-        not a gaitbench store; such a file is left exactly as it was.
+        not a gaitbench store, or one newer than this code; such a file is left exactly as it was. A store written
+        by an older gaitbench is migrated to today's schema version.
         """
         directory = Path(directory)
         database = directory / DATABASE
@@ -175,7 +89,7 @@ class ResultStore:
             directory.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise StoreError(f"{directory}: cannot create the results store here ({_reason(error)})") from None
-        _check_file(database)
+        check_file(database)
         try:
             connection = sqlite3.connect(database, timeout=30, isolation_level=None)
         except sqlite3.Error as error:
@@ -184,15 +98,12 @@ class ResultStore:
         try:
             connection.row_factory = sqlite3.Row
             with store._write():  # checked again under the write lock: what the WAL holds, and a file made meanwhile
-                _check_schema(connection, database)
+                check_schema(connection, database)
             # readers (`runs show` during a run) never block the writer, and several runs can share the store
             connection.execute("PRAGMA journal_mode=WAL")
             connection.execute("PRAGMA synchronous=FULL")
             with store._write():
-                for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS), ("claims", CLAIM_COLUMNS)):
-                    connection.execute(_create_table(table, columns))
-                _add_missing_columns(connection)
-                connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+                upgrade(connection, database)
         except sqlite3.Error as error:
             connection.close()
             raise StoreError(f"{database}: cannot write the results store ({error})") from None
@@ -207,21 +118,21 @@ class ResultStore:
 
         The connection is read-only (``immutable`` too where the directory cannot be written, which a WAL database
         needs for its lock files), so a store in a read-only place can be read and reading never changes one. A
-        store written before some columns existed gains them here when it can be written (see
-        :func:`_add_missing_columns`); otherwise it is read without them.
+        store written by an older gaitbench is migrated here when it can be written (see
+        :mod:`gaitbench.run.store_schema`); otherwise it is read without the columns it lacks.
         """
         directory = Path(directory)
         database = directory / DATABASE if directory.is_dir() else directory
         if not database.is_file():
             raise StoreError(f"{directory}: no results store here (expected {DATABASE}); "
                              "pass the directory given to `gaitbench run --store`, or the suite's output directory")
-        _check_file(database)
+        check_file(database)
         writable = os.access(database.parent, os.W_OK) and os.access(database, os.W_OK)
         if writable:
-            _migrate(database)
+            upgrade_file(database)
         try:
-            connection = _connect_read_only(database, immutable=not writable)
-            _check_schema(connection, database)
+            connection = connect_read_only(database, immutable=not writable)
+            check_schema(connection, database)
             connection.execute("SELECT case_key FROM cases LIMIT 1")
         except sqlite3.DatabaseError as error:
             raise StoreError(f"{database}: not a gaitbench results store ({error})") from None
@@ -430,104 +341,6 @@ def load_results(path: str | Path):
     with ResultStore.open(path) as store:
         rows = store.cases()
     return pd.DataFrame(rows, columns=list(CASE_COLUMNS))
-
-
-def _connect_read_only(database: Path, immutable: bool) -> sqlite3.Connection:
-    uri = database.resolve().as_uri() + "?mode=ro" + ("&immutable=1" if immutable else "")
-    connection = sqlite3.connect(uri, uri=True, timeout=30, isolation_level=None)
-    connection.row_factory = sqlite3.Row
-    return connection
-
-
-def _check_file(database: Path) -> None:
-    """Refuse, before anything is written, a ``results.sqlite`` that is not a gaitbench store (StoreError).
-
-    Reads the SQLite header (magic, application id) and, for a file without gaitbench's application id, its tables,
-    through an immutable read-only connection that touches nothing, not even lock files.
-    """
-    try:
-        with open(database, "rb") as file:
-            header = file.read(100)
-    except FileNotFoundError:
-        return
-    except OSError as error:
-        raise StoreError(f"{database}: cannot read the results store ({_reason(error)})") from None
-    if not header:
-        return  # an empty file is an empty database: a new store
-    if not header.startswith(b"SQLite format 3\0"):
-        raise StoreError(f"{database}: not a gaitbench results store (not an SQLite database); nothing was changed")
-    application_id = int.from_bytes(header[68:72], "big") if len(header) >= 72 else 0
-    if application_id == APPLICATION_ID:
-        return
-    if application_id:
-        raise StoreError(f"{database}: not a gaitbench results store (an SQLite file of another application, "
-                         f"application_id {application_id:#x}); nothing was changed")
-    try:
-        connection = _connect_read_only(database, immutable=True)
-        try:
-            _check_schema(connection, database)
-        finally:
-            connection.close()
-    except sqlite3.DatabaseError as error:
-        raise StoreError(f"{database}: not a gaitbench results store ({error}); nothing was changed") from None
-
-
-def _check_schema(connection: sqlite3.Connection, database: Path) -> None:
-    """StoreError unless the database is empty, has gaitbench's application id, or holds only gaitbench's tables
-    with a ``cases.case_key`` column (a store from before the application id)."""
-    if connection.execute("PRAGMA application_id").fetchone()[0] == APPLICATION_ID:
-        return
-    tables = {row[0] for row in connection.execute(
-        "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite\\_%' ESCAPE '\\'")}
-    if not tables:
-        return
-    columns = {row[1] for row in connection.execute("PRAGMA table_info(cases)")}
-    if tables <= STORE_TABLES and "case_key" in columns:
-        return
-    foreign = ", ".join(sorted(tables - STORE_TABLES) or sorted(tables))
-    raise StoreError(f"{database}: not a gaitbench results store (it holds tables {foreign}); nothing was changed")
-
-
-def _migrate(database: Path) -> None:
-    """Add the columns an older gaitbench's store lacks, if any, when it can be written (else it is read as is)."""
-    try:
-        connection = _connect_read_only(database, immutable=False)
-        try:
-            missing = _missing_columns(connection)
-        finally:
-            connection.close()
-        if not missing:
-            return
-        connection = sqlite3.connect(database, timeout=5, isolation_level=None)
-        try:
-            connection.execute("BEGIN IMMEDIATE")
-            _add_missing_columns(connection)
-            connection.execute("COMMIT")
-        finally:
-            connection.close()
-    except sqlite3.Error:  # read-only after all, locked, or not a store (which open() reports): read as it is
-        pass
-
-
-def _missing_columns(connection: sqlite3.Connection) -> list[tuple[str, str, str]]:
-    missing = []
-    for table, columns in (("runs", RUN_COLUMNS), ("cases", CASE_COLUMNS)):
-        present = {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
-        missing += [(table, column, kind) for column, kind in columns.items() if present and column not in present]
-    return missing
-
-
-def _create_table(name: str, columns: dict[str, str]) -> str:
-    return f"CREATE TABLE IF NOT EXISTS {name} ({', '.join(f'{c} {t}' for c, t in columns.items())})"
-
-
-def _add_missing_columns(connection: sqlite3.Connection) -> None:
-    """Add the columns a store written by an older gaitbench lacks, so it can be read and resumed (old rows: null).
-
-    Only additions are migrated; SQLite's ``ALTER TABLE ADD COLUMN`` keeps the existing rows and is cheap.
-    """
-    for table, column, kind in _missing_columns(connection):
-        connection.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
 
 
 def _insert(table: str, columns: dict[str, str], replace: bool) -> str:

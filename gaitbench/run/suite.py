@@ -27,7 +27,8 @@ from gaitbench.plugins import (
     load_registry,
 )
 from gaitbench.run.case import DEFAULT_OBJECTIVE, Case, TrackingStage
-from gaitbench.run.suite_schema import METHOD_PARTS, Entry, SuiteError, SuiteSpec, Variant, parse_suite
+from gaitbench.run.suite_schema import METHOD_PARTS, parse_suite
+from gaitbench.run.suite_spec import Entry, SuiteError, SuiteSpec, Variant
 
 __all__ = ["Suite", "SuiteError", "expand", "load_suite"]
 

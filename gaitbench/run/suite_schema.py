@@ -9,15 +9,16 @@ its options is the registry's business and is checked by :mod:`gaitbench.run.sui
 from __future__ import annotations
 
 import difflib
-import itertools
 import math
 import re
 import sys
-from dataclasses import dataclass, field, fields
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from gaitbench.run.case import PluginChoice, TrackingStage
+from gaitbench.options import describe, show_value
+from gaitbench.run.case import TrackingStage
+from gaitbench.run.suite_spec import Entry, Exclusion, MethodSpec, SuiteError, SuiteSpec
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -42,105 +43,6 @@ TRACKING_KEYS = ("controller", "observer", "disturbance", "options")
 RANGE_KEYS = ("start", "stop", "step")
 PRODUCT_KEYS = {"transcription": "transcriptions", "solver": "solvers", "strategy": "strategies"}
 """Each method part and the ``[sweep]`` list that gives it when there is no ``[[method]]``."""
-
-
-class SuiteError(Exception):
-    """A suite file that cannot be run: ``<file>: <key>: <message>``, the key as ``[sweep].solvers[1]``."""
-
-    def __init__(self, path: str | Path, key: str, message: str) -> None:
-        self.path = Path(path)
-        self.key = key
-        self.message = message
-        super().__init__(path, key, message)  # so it pickles
-
-    def __str__(self) -> str:
-        return f"{self.path}: {self.key}: {self.message}" if self.key else f"{self.path}: {self.message}"
-
-
-@dataclass(frozen=True)
-class Entry:
-    """One plugin entry as written: a name, or ``{name, options, grid, label}``; ``key`` is where it stands."""
-
-    name: str
-    key: str
-    options: dict[str, Any] = field(default_factory=dict)
-    grid: dict[str, list[Any]] = field(default_factory=dict)
-    label: str | None = None
-
-    def variants(self) -> list[Variant]:
-        """One variant per combination of the grid's values (cartesian, in file order); one without a grid."""
-        if not self.grid:
-            return [Variant(self, PluginChoice(self.name, dict(self.options)), "")]
-        names = list(self.grid)
-        variants = []
-        for values in itertools.product(*(self.grid[name] for name in names)):
-            chosen = dict(zip(names, values, strict=True))
-            suffix = ", ".join(f"{name}={_show(value)}" for name, value in chosen.items())
-            variants.append(Variant(self, PluginChoice(self.name, {**self.options, **chosen}), suffix))
-        return variants
-
-
-@dataclass(frozen=True)
-class Variant:
-    """An entry with its grid values filled in: the plugin choice and how tables and exclusions name it."""
-
-    entry: Entry
-    choice: PluginChoice
-    grid_suffix: str
-    """``option=value, ...`` of the grid values, empty without a grid."""
-
-    @property
-    def label(self) -> str:
-        """The entry's label (with the grid values in parentheses) or, unlabelled, ``name(option=value, ...)``."""
-        if self.entry.label is None:
-            return self.choice.describe()
-        return f"{self.entry.label}({self.grid_suffix})" if self.grid_suffix else self.entry.label
-
-    @property
-    def names(self) -> set[str]:
-        """What an exclusion may call it: the plugin name, the entry's label, the variant's label."""
-        return {self.choice.name, self.label} | ({self.entry.label} if self.entry.label else set())
-
-
-@dataclass(frozen=True)
-class MethodSpec:
-    """One ``[[method]]``: an optional label, its three parts and optionally its ``objective`` (an entry under the
-    part name ``objective``; net-power when not given)."""
-
-    key: str
-    label: str | None
-    parts: dict[str, Entry]
-
-
-@dataclass(frozen=True)
-class Exclusion:
-    """One ``[[exclude]]``: each key with the names (or N values) it matches."""
-
-    key: str
-    match: dict[str, tuple[Any, ...]]
-
-
-@dataclass(frozen=True)
-class SuiteSpec:
-    """A suite file after parsing and structural checks, plugins not yet looked up."""
-
-    name: str
-    description: str
-    output: Path
-    repetitions: int
-    time_limit_s: float
-    steps: int | None
-    plugins: tuple[str, ...]
-    """Plugin directories as written (relative to the suite file)."""
-    problem_options: dict[str, Any]
-    experiments: list[Entry]
-    n_nodes: list[int]
-    product: dict[str, list[Entry]] | None
-    """``transcription``/``solver``/``strategy`` → entries, when the methods are their product."""
-    methods: list[MethodSpec] | None
-    """The ``[[method]]`` list, when given (then ``product`` is None)."""
-    exclusions: list[Exclusion]
-    tracking: TrackingStage | None
 
 
 def parse_suite(path: str | Path, text: str) -> SuiteSpec:
@@ -249,10 +151,10 @@ class _Parser:
                     if name == "N":
                         if not _is_int(single):
                             raise self.error(where, f"expected an integer N or an array of them, found "
-                                                    f"{_found(single)}")
+                                                    f"{describe(single)}")
                     elif not isinstance(single, str) or not single:
                         raise self.error(where, f"expected a {name} name or label (or an array of them), "
-                                                f"found {_found(single)}")
+                                                f"found {describe(single)}")
                 match[name] = tuple(items)
             exclusions.append(Exclusion(key, match))
         return exclusions
@@ -261,7 +163,7 @@ class _Parser:
         if value is None:
             return None
         if not isinstance(value, dict):
-            raise self.error("[tracking]", f"expected a table, found {_found(value)}")
+            raise self.error("[tracking]", f"expected a table, found {describe(value)}")
         self.keys(value, "[tracking]", TRACKING_KEYS)
         names = {part: self.string(value, part, "[tracking]") for part in ("controller", "observer", "disturbance")}
         options = self.table(value, "options", "[tracking].options") or {}
@@ -271,7 +173,7 @@ class _Parser:
         if value is None:
             return {}
         if not isinstance(value, dict):
-            raise self.error(key, f"expected a table of ProblemOptions overrides, found {_found(value)}")
+            raise self.error(key, f"expected a table of ProblemOptions overrides, found {describe(value)}")
         self.keys(value, key, tuple(problem_option_kinds()))
         for name, option in value.items():
             problem = problem_option_error(name, option)
@@ -289,7 +191,7 @@ class _Parser:
             return []
         value = table[name]
         if not isinstance(value, list):
-            raise self.error(key, f"expected an array of {name}, found {_found(value)}")
+            raise self.error(key, f"expected an array of {name}, found {describe(value)}")
         if not value:
             raise self.error(key, f"expected a non-empty array of {name}, found []")
         entries = [self.entry(item, f"{key}[{index}]") for index, item in enumerate(value)]
@@ -308,7 +210,7 @@ class _Parser:
             return Entry(value, key)
         if not isinstance(value, dict):
             raise self.error(key, f"expected a plugin name or a table {{name, options, grid, label}}, found "
-                                  f"{_found(value)}")
+                                  f"{describe(value)}")
         self.keys(value, key, ENTRY_KEYS)
         name = self.string(value, "name", key, required=True)
         if not name:
@@ -317,13 +219,13 @@ class _Parser:
         grid = self.table(value, "grid", f"{key}.grid") or {}
         for option, values in grid.items():
             if not isinstance(values, list):
-                raise self.error(f"{key}.grid.{option}", f"expected an array of values, found {_found(values)}")
+                raise self.error(f"{key}.grid.{option}", f"expected an array of values, found {describe(values)}")
             if not values:
                 raise self.error(f"{key}.grid.{option}", "expected a non-empty array of values, found []")
             if option in options:
                 raise self.error(f"{key}.grid.{option}", f"'{option}' is given both in options and in grid")
             if len({_canonical(item) for item in values}) < len(values):
-                raise self.error(f"{key}.grid.{option}", f"a value is listed twice in {_show(values)}")
+                raise self.error(f"{key}.grid.{option}", f"a value is listed twice in {show_value(values)}")
         label = self.string(value, "label", key)
         if label is not None and not label.strip():
             raise self.error(f"{key}.label", "expected a non-empty string, found ''")
@@ -342,7 +244,7 @@ class _Parser:
             return list(range(start, stop + 1, step))
         if not isinstance(value, list):
             raise self.error(key, f"expected an array of integers or a table {{start, stop, step}}, found "
-                                  f"{_found(value)}")
+                                  f"{describe(value)}")
         if not value:
             raise self.error(key, "expected a non-empty array of integers, found []")
         for index, item in enumerate(value):
@@ -353,7 +255,7 @@ class _Parser:
 
     def check_nodes(self, value: Any, key: str) -> None:
         if not _is_int(value):
-            raise self.error(key, f"expected an integer number of nodes per step, found {_found(value)}")
+            raise self.error(key, f"expected an integer number of nodes per step, found {describe(value)}")
         if value < MIN_NODES:
             raise self.error(key, f"expected N ≥ {MIN_NODES} (a step needs at least {MIN_NODES} nodes), "
                                   f"found {value}")
@@ -378,12 +280,12 @@ class _Parser:
             return None
         value = data[name]
         if not isinstance(value, dict):
-            raise self.error(where, f"expected a table, found {_found(value)}")
+            raise self.error(where, f"expected a table, found {describe(value)}")
         return value
 
     def array_of_tables(self, value: Any, key: str) -> list[dict]:
         if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
-            raise self.error(key, f"expected an array of tables ({key} headers), found {_found(value)}")
+            raise self.error(key, f"expected an array of tables ({key} headers), found {describe(value)}")
         return value
 
     def string(self, table: dict, name: str, where: str, *, required: bool = False) -> str | None:
@@ -393,16 +295,16 @@ class _Parser:
             return None
         value = table[name]
         if not isinstance(value, str):
-            raise self.error(f"{where}.{name}", f"expected a string, found {_found(value)}")
+            raise self.error(f"{where}.{name}", f"expected a string, found {describe(value)}")
         return value
 
     def strings(self, table: dict, name: str, where: str) -> list[str]:
         value = table.get(name, [])
         if not isinstance(value, list):
-            raise self.error(f"{where}.{name}", f"expected an array of strings, found {_found(value)}")
+            raise self.error(f"{where}.{name}", f"expected an array of strings, found {describe(value)}")
         for index, item in enumerate(value):
             if not isinstance(item, str) or not item:
-                raise self.error(f"{where}.{name}[{index}]", f"expected a non-empty string, found {_found(item)}")
+                raise self.error(f"{where}.{name}[{index}]", f"expected a non-empty string, found {describe(item)}")
         return value
 
     def integer(self, table: dict, name: str, where: str, *, minimum: int, default: Any = None,
@@ -413,7 +315,7 @@ class _Parser:
             return default
         value = table[name]
         if not _is_int(value):
-            raise self.error(f"{where}.{name}", f"expected an integer, found {_found(value)}")
+            raise self.error(f"{where}.{name}", f"expected an integer, found {describe(value)}")
         if value < minimum:
             raise self.error(f"{where}.{name}", f"expected an integer ≥ {minimum}, found {value}")
         return value
@@ -423,7 +325,7 @@ class _Parser:
             return default
         value = table[name]
         if not _is_number(value) or not math.isfinite(value) or value <= 0:
-            raise self.error(f"{where}.{name}", f"expected a positive number, found {_found(value)}")
+            raise self.error(f"{where}.{name}", f"expected a positive number, found {describe(value)}")
         return float(value)
 
 
@@ -472,7 +374,7 @@ def problem_option_error(name: str, value: Any) -> str | None:
         ok = isinstance(value, str)
     else:
         ok = _is_number(value) and math.isfinite(value) and value >= 0
-    return None if ok else f"expected {expected}, found {_found(value)}"
+    return None if ok else f"expected {expected}, found {describe(value)}"
 
 
 def _alternatives(choices: tuple[str, ...]) -> str:
@@ -491,36 +393,6 @@ def _is_number(value: Any) -> bool:
 
 def _table_name(name: str) -> str:
     return f"[[{name}]]" if name in ("exclude", "method") else f"[{name}]"
-
-
-def _found(value: Any) -> str:
-    """``a string 'x'``, ``an integer (3)``, ``a table``: what the file has where something else was expected."""
-    if isinstance(value, bool):
-        return f"a boolean ({'true' if value else 'false'})"
-    if isinstance(value, int):
-        return f"an integer ({value})"
-    if isinstance(value, float):
-        return f"a float ({value!r})"
-    if isinstance(value, str):
-        return f"a string {value!r}"
-    if isinstance(value, list):
-        return "an empty array" if not value else f"an array ({_show(value)})"
-    if isinstance(value, dict):
-        return "a table"
-    return f"a {type(value).__name__} ({value})"
-
-
-def _show(value: Any) -> str:
-    """A value as TOML would write it, for labels and messages."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return f'"{value}"' if not re.fullmatch(r"[A-Za-z0-9_.+-]+", value) else value
-    if isinstance(value, list):
-        return "[" + ", ".join(_show(item) for item in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{k} = {_show(v)}" for k, v in value.items()) + "}"
-    return repr(value) if isinstance(value, float) else str(value)
 
 
 def _canonical(value: Any) -> str:
