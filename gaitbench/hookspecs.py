@@ -3,7 +3,8 @@
 A plugin is a module (or object) with functions decorated by ``gaitbench.hookimpl`` whose names match the
 specifications below. Each hook takes no arguments and returns a list of :class:`gaitbench.Registration`,
 one per thing the plugin provides; the registration's ``factory`` builds the object on demand, so listing
-plugins never pays for building them.
+plugins never pays for building them. What each kind's factory builds, the interface the core calls, is declared in
+:mod:`gaitbench.contracts`.
 
 Plugins are found through the ``gaitbench`` entry-point group (built-in plugins use it too) and through
 plugin directories (``--plugins-dir`` or ``GAITBENCH_PLUGINS_DIR``). Names are unique per kind: two
@@ -21,11 +22,11 @@ hookspec = pluggy.HookspecMarker("gaitbench")
 def register_experiments():
     """Walking experiments: a robot, a terrain, an initial state and per-step timing.
 
-    ``factory(**options)`` returns a :class:`gaitbench.model.experiment.Experiment`; options (from a suite's
-    ``options``/``grid``) parametrize a family of experiments, and invalid ones raise ``ValueError``. The
-    built-in experiments are ``forward``, ``downward-slope``, ``upward-slope``, ``stairs`` (the thesis's
-    chapter 5, no options), ``energetics`` (the §5.6 study's bipeds, with options) and ``compass-gait`` (the
-    passive walker of Goswami, Thuilot and Espiau, 1996).
+    ``factory(**options)`` returns a :class:`gaitbench.model.experiment.Experiment` (the experiment contract); options
+    (from a suite's ``options``/``grid``) parametrize a family of experiments, and invalid ones raise ``ValueError``.
+    The built-in experiments are ``forward``, ``downward-slope``, ``upward-slope``, ``stairs`` (the thesis's chapter 5,
+    no options), ``energetics`` (the §5.6 study's bipeds, with options) and ``compass-gait`` (the passive walker of
+    Goswami, Thuilot and Espiau, 1996).
     """
 
 
@@ -34,10 +35,9 @@ def register_models():
     """Biped dynamic models.
 
     ``factory(robot)`` takes :class:`gaitbench.model.robot.RobotParameters` and returns a
-    :class:`gaitbench.model.mechanics.BipedModel`-compatible object (mass matrix, Coriolis and gravity terms,
-    input map, ground reaction, push-off and heel-strike maps, both stance cases). Built-in: ``biped-2dof``
-    (stance foot pinned, the First Phase model) and ``biped-4dof`` (stance-foot coordinates q3, q4, the Second
-    Phase model).
+    :class:`gaitbench.model.mechanics.BipedModel` (the model contract: mass matrix, Coriolis and gravity terms, input
+    map, ground reaction, push-off and heel-strike maps, both stance cases). Built-in: ``biped-2dof`` (stance foot
+    pinned, the First Phase model) and ``biped-4dof`` (stance-foot coordinates q3, q4, the Second Phase model).
     """
 
 
@@ -45,9 +45,10 @@ def register_models():
 def register_transcriptions():
     """Transcriptions: turn a per-step gait problem into a finite-dimensional NLP.
 
-    ``factory(**options)`` returns an object that builds the NLP of a gait problem for a given number of
-    nodes N and maps an NLP solution back to a trajectory with its own interpolant (for example direct
-    collocation or discrete mechanics).
+    ``factory(**options)`` returns a :class:`gaitbench.contracts.Transcription`: it builds the NLP of a gait
+    problem for a given number of nodes N and maps an NLP solution back to a trajectory with its own interpolant
+    (for example direct collocation or discrete mechanics). Subclass
+    :class:`gaitbench.problem.transcription.Transcription`, which implements the contract given ``discretize``.
     """
 
 
@@ -55,10 +56,10 @@ def register_transcriptions():
 def register_objectives():
     """Objectives: what a step costs, the NLP's running and event costs and the COT verification recomputes.
 
-    ``factory(**options)`` returns a :class:`gaitbench.problem.objective.Objective` (a frozen dataclass, since
-    built NLPs
-    are cached under it): its charged powers and smooth rate, in role order, serve the NLP and the fine-grid check
-    alike. Built-in: ``net-power`` (the thesis's cost, the default), ``actuator-work`` and ``torque-squared``.
+    ``factory(**options)`` returns a :class:`gaitbench.problem.objective.Objective` (the objective contract: a
+    frozen dataclass, since built NLPs are cached under it): its charged powers and smooth rate, in role order,
+    serve the NLP and the fine-grid check alike. Built-in: ``net-power`` (the thesis's cost, the default),
+    ``actuator-work`` and ``torque-squared``.
     """
 
 
@@ -66,9 +67,9 @@ def register_objectives():
 def register_solvers():
     """NLP solvers.
 
-    ``factory(**options)`` returns an object with ``solve(nlp, parameters, initial_guess)`` that returns the
-    shared solver result (status, objective, constraint violation, iterations, timings). A failure is reported
-    as a status with a message, never raised.
+    ``factory(**options)`` returns a :class:`gaitbench.contracts.Solver`: ``solve(nlp, parameters, initial_guess)``
+    returns the shared solver result (status, objective, constraint violation, iterations, timings). A failure is
+    reported as a status with a message, never raised.
     """
 
 
@@ -76,8 +77,8 @@ def register_solvers():
 def register_strategies():
     """Gait-generation strategies: how the per-step problems of a walk are posed and combined.
 
-    ``factory(**options)`` returns an object that, given an experiment, a transcription and a solver, produces
-    the walk's trajectory step by step (for example one-phase or decrease-and-conquer).
+    ``factory(**options)`` returns a :class:`gaitbench.contracts.Strategy`: given an experiment, a transcription
+    and a solver, it produces the walk's trajectory step by step (for example one-phase or decrease-and-conquer).
     """
 
 
@@ -85,8 +86,9 @@ def register_strategies():
 def register_controllers():
     """Tracking controllers for closed-loop simulation of a generated gait.
 
-    ``factory(model, reference, **options)`` returns a control law mapping (time, state estimate, step) to
-    joint torques and the push-off impulse (for example computed torque or partial feedback linearization).
+    ``factory(model, reference, **options)`` returns a :class:`gaitbench.contracts.Controller`, a control law mapping
+    (time, state estimate, step) to joint torques and the push-off impulse (for example computed torque or partial
+    feedback linearization).
     """
 
 
@@ -94,8 +96,8 @@ def register_controllers():
 def register_observers():
     """State and disturbance observers used by tracking controllers.
 
-    ``factory(model, **options)`` returns an observer that estimates velocities (and disturbances) from
-    measured positions and applied torques, and that can be reset at impacts.
+    ``factory(model, **options)`` returns a :class:`gaitbench.contracts.Observer`, which estimates velocities (and
+    disturbances) from measured positions and applied torques, and can be reset at impacts.
     """
 
 
@@ -103,8 +105,9 @@ def register_observers():
 def register_disturbances():
     """Disturbances acting on the robot during closed-loop simulation.
 
-    ``factory(experiment, **options)`` returns a callable giving generalized disturbance forces from
-    (time, state, step), for example joint friction or an external push.
+    ``factory(experiment, **options)`` returns a :class:`gaitbench.contracts.Disturbance`, giving generalized
+    forces from (time, state, step) and the impulse acting with push-off, for example joint friction or an
+    external push.
     """
 
 
@@ -112,6 +115,6 @@ def register_disturbances():
 def register_reporters():
     """Report writers.
 
-    ``factory(**options)`` returns an object that renders stored benchmark results into files (HTML, CSV) in
-    an output directory.
+    ``factory(**options)`` returns a :class:`gaitbench.contracts.Reporter`, which renders stored benchmark results
+    into files (HTML, CSV) in an output directory.
     """

@@ -17,12 +17,26 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import pluggy
 
 import gaitbench.hookspecs as hookspecs
 from gaitbench.registration import Registration
+
+if TYPE_CHECKING:
+    from gaitbench.contracts import (
+        BipedModel,
+        Controller,
+        Disturbance,
+        Experiment,
+        Objective,
+        Observer,
+        Reporter,
+        Solver,
+        Strategy,
+        Transcription,
+    )
 
 PLUGINS_DIR_ENV = "GAITBENCH_PLUGINS_DIR"
 """Environment variable with extra plugin directories, separated by ``os.pathsep``."""
@@ -41,7 +55,8 @@ KINDS: dict[str, str] = {
     "disturbance": "register_disturbances",
     "reporter": "register_reporters",
 }
-"""Each plugin kind and the hook (see :mod:`gaitbench.hookspecs`) whose registrations it holds."""
+"""Each plugin kind and the hook (see :mod:`gaitbench.hookspecs`) whose registrations it holds; what each kind's
+factories build is declared in :mod:`gaitbench.contracts`."""
 
 _DIR_MODULE_PREFIX = "gaitbench_plugin_dir"
 
@@ -155,8 +170,35 @@ class PluginRegistry:
         listed = "; ".join(f"{problem.source}: {problem.message}" for problem in failures)
         return f"; {which} failed to load and may have registered it: {listed}"
 
+    @overload
+    def create(self, kind: Literal["experiment"], name: str, *args: Any, **kwargs: Any) -> Experiment: ...
+    @overload
+    def create(self, kind: Literal["model"], name: str, *args: Any, **kwargs: Any) -> BipedModel: ...
+    @overload
+    def create(self, kind: Literal["transcription"], name: str, *args: Any, **kwargs: Any) -> Transcription: ...
+    @overload
+    def create(self, kind: Literal["objective"], name: str, *args: Any, **kwargs: Any) -> Objective: ...
+    @overload
+    def create(self, kind: Literal["solver"], name: str, *args: Any, **kwargs: Any) -> Solver: ...
+    @overload
+    def create(self, kind: Literal["strategy"], name: str, *args: Any, **kwargs: Any) -> Strategy: ...
+    @overload
+    def create(self, kind: Literal["controller"], name: str, *args: Any, **kwargs: Any) -> Controller: ...
+    @overload
+    def create(self, kind: Literal["observer"], name: str, *args: Any, **kwargs: Any) -> Observer: ...
+    @overload
+    def create(self, kind: Literal["disturbance"], name: str, *args: Any, **kwargs: Any) -> Disturbance: ...
+    @overload
+    def create(self, kind: Literal["reporter"], name: str, *args: Any, **kwargs: Any) -> Reporter: ...
+    @overload
+    def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any: ...
+
     def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any:
-        """Build the named plugin's object: ``get(kind, name).factory(*args, **kwargs)``."""
+        """Build the named plugin's object: ``get(kind, name).factory(*args, **kwargs)``.
+
+        Typed by the kind's contract (:mod:`gaitbench.contracts`) when ``kind`` is a literal: a type checker takes
+        ``create("solver", ...)`` for a :class:`~gaitbench.contracts.Solver`.
+        """
         return self.get(kind, name).factory(*args, **kwargs)
 
 

@@ -225,9 +225,9 @@ def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_si
     passive gait (measured 1.9e-9)."""
     from gaitbench.plugins import load_registry
     from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.one_phase import OnePhase
     from gaitbench.solve.walk import WalkProblem
     from plugins.solvers.ipopt import Ipopt
-    from plugins.strategies.one_phase import OnePhase
     from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
     experiment = load_registry().create("experiment", "compass-gait")

@@ -14,10 +14,10 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import nodal_trajectory
+from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
 from gaitbench.solve.walk import WalkProblem
 from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
-from plugins.strategies.one_phase import OnePhase
 
 REGISTRY = load_registry()
 OBJECTIVES = {"net-power": NET_POWER, "actuator-work": ActuatorWork(), "actuator-work-margaria": ActuatorWork(True),

@@ -10,10 +10,10 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.terrain import terrain_clearance
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
+from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.walk import WalkProblem, solve_with_retries
 from plugins.solvers.ipopt import Ipopt
-from plugins.strategies.one_phase import OnePhase
 from plugins.transcriptions.dmoc import DiscreteMechanics
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 

@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import WalkProblem
 from plugins.strategies.decrease_and_conquer import (
@@ -23,7 +24,6 @@ from plugins.strategies.decrease_and_conquer import (
     PointCosts,
     release_sections,
 )
-from plugins.strategies.synthesis import complete_sections, relation_holds, synthesize
 
 NAN = np.nan
 REGISTRY = load_registry()

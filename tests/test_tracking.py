@@ -21,9 +21,9 @@ from gaitbench.control.tracking import (
     track_walk,
 )
 from gaitbench.plugins import UnknownPluginError, load_registry
+from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk import WalkProblem
 from plugins.solvers.ipopt import Ipopt
-from plugins.strategies.one_phase import OnePhase
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()

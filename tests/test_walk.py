@@ -10,10 +10,10 @@ from gaitbench.cli.main import main
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
+from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import WalkProblem, next_step_state
 from plugins.solvers.ipopt import Ipopt
-from plugins.strategies.one_phase import OnePhase
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()

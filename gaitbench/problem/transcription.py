@@ -154,7 +154,8 @@ class TranscribedStep:
 
 
 class Transcription(ABC):
-    """Base class of transcription plugins; builds are cached per structure, so a structure is built once."""
+    """Base class of transcription plugins: implements :class:`gaitbench.contracts.Transcription` given
+    :meth:`discretize`. Builds are cached per structure, so a structure is built once."""
 
     name: str = ""
 
@@ -166,7 +167,7 @@ class Transcription(ABC):
             self._built[structure] = self._build(structure)
         return self._built[structure]
 
-    def builds_like(self, other: Transcription) -> bool:
+    def builds_like(self, other: object) -> bool:
         """Whether ``other`` builds the same NLP for every structure: the same class configured the same (equal
         attributes, the build cache aside), so one instance's builds can serve the other's problems."""
         return type(other) is type(self) and _configuration(other) == _configuration(self)
@@ -204,7 +205,7 @@ class Transcription(ABC):
                                cost_of_transport=cost_of_transport)
 
 
-def _configuration(transcription: Transcription) -> dict:
+def _configuration(transcription: object) -> dict:
     return {name: value for name, value in vars(transcription).items() if name != "_built"}
 
 

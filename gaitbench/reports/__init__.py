@@ -3,7 +3,8 @@
 ``write_report(store_dir, out_dir)`` reads the store once (:func:`build_report`) and hands the result to each
 reporter plugin (kind ``reporter``; built in: ``csv`` and ``html``, registered by
 ``plugins/reporters/csv_and_html.py``). A
-reporter is any object with ``write(report: ReportData, out_dir: Path) -> list[Path]``. docs/reports.md lists
+reporter is any object with ``write(report: ReportData, out_dir: Path) -> list[Path]``
+(:class:`gaitbench.contracts.Reporter`). docs/reports.md lists
 every file, column and figure.
 """
 
@@ -13,7 +14,10 @@ import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from gaitbench.plugins import PluginRegistry
 
 DEFAULT_REPORTERS = ("csv", "html")
 
@@ -92,7 +96,7 @@ class ReportData:
     tracking: list[TrackingSection] = field(default_factory=list)
 
 
-def build_report(store_dir: str | Path, gait: str | None = None, registry=None,
+def build_report(store_dir: str | Path, gait: str | None = None, registry: PluginRegistry | None = None,
                  progress: ProgressCallback | _Steps | None = None) -> ReportData:
     """Read the store and compute every table and figure of its report.
 
@@ -228,7 +232,7 @@ def _track_summaries(store_dir: Path, df) -> dict[str, dict]:
 
 
 def write_report(store_dir: str | Path, out_dir: str | Path, gait: str | None = None,
-                 reporters: Sequence[str] = DEFAULT_REPORTERS, registry=None,
+                 reporters: Sequence[str] = DEFAULT_REPORTERS, registry: PluginRegistry | None = None,
                  progress: ProgressCallback | None = None) -> Path:
     """Write the report of the store at ``store_dir`` into ``out_dir`` with the named reporter plugins.
 

@@ -15,11 +15,15 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import provenance
 from gaitbench.run.store import ResultStore, case_file
+
+if TYPE_CHECKING:
+    from gaitbench.plugins import PluginRegistry
+    from gaitbench.solve.walk import WalkResult
 
 WALK_FILE = "walk.json"
 TRACK_FILE = "track.json"
@@ -71,7 +75,7 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
     return CaseOutcome(case, status, message, wall_time_s)
 
 
-def _solve_walk(case: Case):
+def _solve_walk(case: Case) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.walk import WalkProblem
 
@@ -106,7 +110,7 @@ def _saved_files(result, name: str) -> dict[str, bytes]:
         return {path.name: path.read_bytes() for path in Path(directory).iterdir()}
 
 
-def _registry(case: Case):
+def _registry(case: Case) -> PluginRegistry:
     from gaitbench.plugins import load_registry
 
     return load_registry(case.plugin_dirs)

@@ -1,14 +1,18 @@
-"""What every solver plugin returns, and the protocol it implements."""
+"""What every solver plugin returns (its interface is :class:`gaitbench.contracts.Solver`), and the optional solver
+members the core uses when present."""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from enum import Enum
-from typing import Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gaitbench.problem.nlp import NLP
+
+if TYPE_CHECKING:
+    from gaitbench.contracts import Solver
 
 
 class SolverStatus(str, Enum):
@@ -45,14 +49,6 @@ class SolverResult:
             data.pop(key)
         data["status"] = self.status.value
         return data
-
-
-class Solver(Protocol):
-    """Solves an :class:`NLP` for given parameter values from an initial guess."""
-
-    name: str
-
-    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult: ...
 
 
 def prepare(solver: Solver, nlp: NLP) -> None:

@@ -1,4 +1,5 @@
-"""Walks: the problem a strategy solves, what it returns, and the step-by-step chaining most strategies share.
+"""Walks: the problem a strategy (:class:`gaitbench.contracts.Strategy`) solves, what it returns, and the
+step-by-step chaining most strategies share.
 
 Each step starts from the heel-strike map (after push-off, in the second phase) of the previous step's solution
 (DECISIONS §7). A step whose geometry is infeasible or whose solve fails ends the walk with its reason; the steps
@@ -12,10 +13,10 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
+from gaitbench.contracts import Solver, Transcription
 from gaitbench.model.energetics import average_cot
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
@@ -23,8 +24,8 @@ from gaitbench.model.terrain import StepCheck
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory
-from gaitbench.problem.transcription import TranscribedStep, Transcription
-from gaitbench.solve.solver import Solver, SolverResult, SolverStatus
+from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.verify import StepVerification, verify_step
 
 
@@ -232,15 +233,6 @@ class WalkProblem:
                           solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
                           requested_steps=self.n_steps, problem_options=asdict(self.options),
                           objective=self.objective.describe())
-
-
-class Strategy(Protocol):
-    """How the per-step gait problems of a walk are posed, solved and combined (a ``strategy`` plugin)."""
-
-    name: str
-
-    def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
-        """Walk the problem; report each finished step to ``on_step``. Failures end the walk, never raise."""
 
 
 StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]

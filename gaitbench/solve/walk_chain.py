@@ -18,12 +18,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from gaitbench.contracts import Solver
 from gaitbench.model.mechanics import biped_functions
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, legs_to_roles
 from gaitbench.problem.nlp import NLP
 from gaitbench.problem.trajectory import Seed
 from gaitbench.problem.transcription import TranscribedStep
-from gaitbench.solve.solver import Solver
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import StepOutcome, WalkProblem, next_step_state, solve_with_retries, solver_remedies
 

@@ -1,1 +1,1 @@
-"""Built-in strategy plugins: One Phase, warm start, Decrease & Conquer, synthesis, whole walk."""
+"""Built-in strategy plugins: One Phase, warm start, Decrease & Conquer, whole walk."""

@@ -8,7 +8,7 @@ Per step:
    covering nodes k0 … N with the same time step (the thesis's k0 = N−1 would leave a two-node problem, below the
    three nodes a step needs, so it is not posed);
 4. synthesis: at each node the candidate with the lowest point cost that keeps the reference's "typical value
-   relation", with backtracking (:mod:`plugins.strategies.synthesis`);
+   relation", with backtracking (:mod:`gaitbench.solve.synthesis`);
 5. the sectional trajectories completed with the earlier nodes, and the final choice by the thesis's candidate COT
    among the synthesized and completed trajectories;
 6. the next step from the heel-strike map of the chosen trajectory.
@@ -37,6 +37,7 @@ from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep, Transcription
 from gaitbench.solve.solver import SolverResult, prepare
+from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import (
     StepOutcome,
@@ -47,7 +48,6 @@ from gaitbench.solve.walk import (
     solve_with_retries,
     walk_step_by_step,
 )
-from plugins.strategies.synthesis import complete_sections, synthesize
 
 DYNAMICS_TOLERANCE = 1e-6
 """A chosen trajectory whose dynamics residual exceeds this is reported as failing verification."""

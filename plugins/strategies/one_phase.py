@@ -1,61 +1,9 @@
-"""The One Phase strategy: each step's problem solved directly from the blended initial guess (DECISIONS §7).
-
-With ``phase="second"`` (the default) this is the thesis's One Phase method and the baseline that
-decrease-and-conquer is compared against: the full 4-DOF problem with push-off, heel strike and ground reactions.
-``phase="first"`` walks with the 2-DOF First Phase problem alone, which is what the thesis's Chapter 2 evaluates.
-``look_ahead=H`` solves each step together with the next H − 1 and commits it alone (DECISIONS §7); H = 1, the
-default, is the thesis's greedy walk. With ``back_up`` (the default), a step the solver cannot solve is first taken
-for a dead end that the step before walked into: that step is solved again looking one step further ahead (H + 1)
-and the walk goes on from there. A walk that completes without it is the same walk with it.
-"""
+"""The One Phase strategy (:class:`gaitbench.solve.one_phase.OnePhase`), registered as ``one-phase``."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
-import numpy as np
-
 from gaitbench import Registration, hookimpl
-from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, solve_with_retries, walk_step_by_step
-from gaitbench.solve.walk_chain import LookAhead
-
-
-class OnePhase:
-    name = "one-phase"
-
-    def __init__(self, phase: str = "second", look_ahead: int = 1, back_up: bool = True) -> None:
-        if phase not in ("first", "second"):
-            raise ValueError(f"phase = {phase!r}: expected 'first' (2-DOF) or 'second' (4-DOF)")
-        if int(look_ahead) != look_ahead or look_ahead < 1:
-            raise ValueError(f"look_ahead = {look_ahead!r}: expected a whole number of steps, at least 1")
-        if look_ahead > 1 and phase != "second":
-            raise ValueError("look_ahead > 1 chains steps through push-off and heel strike: it needs phase = 'second'")
-        self.phase = phase
-        self.look_ahead = int(look_ahead)
-        self.back_up = bool(back_up) and phase == "second"
-
-    def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
-        built = problem.transcription.build(problem.structure(self.phase, walked=True))
-        window = LookAhead(built, self.look_ahead)
-        backing = LookAhead(built, self.look_ahead + 1, fallback=False)
-
-        def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
-            if self.look_ahead > 1:
-                return window.solve_step(problem, index, state)
-            data = problem.step_data(index, state)
-            outcome = solve_with_retries(problem, index, built, data, phase=self.phase)
-            seed = backing.seed_for(state)
-            if outcome.solved or seed is None:
-                return outcome
-            # Just backed up: the window that re-solved the previous step solved this one too; start from it.
-            retry = solve_with_retries(problem, index, built, data, seed=seed)
-            rungs = outcome.details.get("retries", []) + [{"remedy": "look-ahead-seed", **retry.summary()}]
-            chosen = retry if retry.solved else outcome
-            chosen.details = {**chosen.details, "retries": rungs}
-            return chosen
-
-        return walk_step_by_step(problem, self.name, solve_step, on_step, phase=self.phase,
-                                 back_up=backing.solve_step if self.back_up else None)
+from gaitbench.solve.one_phase import OnePhase
 
 
 @hookimpl

@@ -16,6 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench import Registration, hookimpl
+from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, next_step_state
 from gaitbench.solve.walk_chain import WalkChain
@@ -69,8 +70,6 @@ class WholeWalk:
 
     def _initial_guess(self, problem: WalkProblem, chain: WalkChain, start: np.ndarray) -> tuple[np.ndarray, dict]:
         if self.guess == "one-phase":
-            from plugins.strategies.one_phase import OnePhase
-
             baseline = OnePhase().solve(problem)
             if baseline.complete:
                 states = [start] + [step.next_state for step in baseline.steps[:-1]]

@@ -1,4 +1,5 @@
-"""Decrease & Conquer's trajectory synthesis with on-line verification (thesis §3.7, ch3b §6.4–6.5).
+"""Decrease & Conquer's trajectory synthesis with on-line verification (thesis §3.7, ch3b §6.4–6.5), in the core so
+that any strategy can build on it.
 
 Pure logic on node arrays, independent of how the candidates were computed: candidate ``j`` is defined from its
 start node on; at every node the candidate with the lowest point cost is taken, provided the "typical value
