@@ -39,9 +39,9 @@ import scipy.sparse.linalg as spla
 from gaitbench import Registration, hookimpl
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
+from gaitbench.solve.qp import INACCURATE_STATUSES, backend_status
 from gaitbench.solve.silence import quiet_stdout
 from gaitbench.solve.solver import SolverResult, SolverStatus
-from plugins.solvers.sqp import _INACCURATE, _backend_status
 
 _MAX_GRADIENT = 100.0
 """Gradient-based scaling target (IPOPT's ``nlp_scaling_max_gradient``): rows whose gradient at the start exceeds
@@ -912,8 +912,9 @@ def _solve_qp(problem: qpsolvers.Problem) -> qpsolvers.Solution:
         except Exception as error:  # a backend that rejects the problem counts as a failed QP
             statuses.append(f"{solver}: {type(error).__name__}")
             continue
-        status = _backend_status(solution)
-        if (solution.found or status in _INACCURATE) and solution.x is not None and np.all(np.isfinite(solution.x)):
+        status = backend_status(solution)
+        usable = solution.found or status in INACCURATE_STATUSES
+        if usable and solution.x is not None and np.all(np.isfinite(solution.x)):
             if solution.z_box is None:
                 solution.z_box = np.zeros(problem.P.shape[0])
             return solution
