@@ -23,6 +23,10 @@ direction" at iteration 97, the equalities never below 1.09). The default ``subp
 structure — a feasible start, feasible iterates, an exact penalty on the equalities, an arc search with a
 second-order correction — with a QP over every linearised row (sparse, through ``qpsolvers``) for d0 and ``sqp``'s
 convexified exact Hessian; see :class:`FSQP`.
+
+Modules: :mod:`.solver` (the options and the two phases of a solve), :mod:`.feasibility` (phase 1),
+:mod:`.equality` and :mod:`.qp_subproblem` (the main phase, by subproblem), :mod:`.form` (the NLP in the thesis's
+form), :mod:`.hessian`, :mod:`.qp` (the QPs through ``qpsolvers``), :mod:`.linalg` and :mod:`.outcome`.
 """
 
 from __future__ import annotations

@@ -90,14 +90,13 @@ interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals 
 Clarabel, PIQP, HiGHS and quadprog start cold (``qpsolvers`` ignores initial values for them, or warns), so they
 are never given any.
 
-
 Options on the command line: ``-s sqp -o qp_solver=daqp -o hessian=bfgs -o merit=filter -o qp_tolerance=1e-9``.
 
-Modules, each layer of one solve building on the one before: :mod:`.solver` (the options), :mod:`.iterate` (the
-point, its multipliers, the KKT test and the result), :mod:`.subproblems` (the QPs of an iteration) with
-:mod:`.linearization` (their ``qpsolvers`` form), :mod:`.backends` (the backend calls) and :mod:`.hessian` (the
-convexification and BFGS), :mod:`.linesearch` (both globalisations), :mod:`.restoration`, and :mod:`.run` (the
-outer loop).
+Modules: :mod:`.solver` holds the options. One solve is a :class:`.run.Run`, built in layers, each class on the one
+before: :mod:`.iterate` (the point, its multipliers, the KKT test and the result), :mod:`.subproblems` (the QPs of an
+iteration), :mod:`.linesearch` (both globalisations), :mod:`.restoration`, :mod:`.run` (the outer loop). They use
+:mod:`.linearization` (the QPs' ``qpsolvers`` form), :mod:`.backends` (the backend calls) and :mod:`.hessian` (the
+convexification and BFGS).
 """
 
 from __future__ import annotations

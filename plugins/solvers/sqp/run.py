@@ -21,6 +21,7 @@ class Run(Restoration):
     iterate."""
 
     def solve(self) -> SolverResult:
+        """Iterate until a convergence test or a limit ends the solve, which every way out reports as a result."""
         if self.o.print_level >= 1:
             print(f"SQP ({self.o.hessian} Hessian, {self.o.merit} merit, QP backend {self.o.qp_solver}): "
                   f"{self.n} variables, {self.m} constraints")
