@@ -13,6 +13,7 @@ from gait_steps import gait_step
 from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative_projection, undefined_at_start
 
 import plugins.solvers.fsqp as fsqp
+import plugins.solvers.fsqp.solver as fsqp_solver
 from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.solve.evaluation import Deadline
 from gaitbench.solve.solver import SolverStatus
@@ -179,7 +180,7 @@ def test_time_limit_inside_the_arc_search(monkeypatch: pytest.MonkeyPatch):
             self.checks += 1
             return self.checks >= 2  # 1: iteration 0 starts; 2: the first trial of its arc search
 
-    monkeypatch.setattr(fsqp, "Deadline", ExpiresOnSecondCheck)
+    monkeypatch.setattr(fsqp_solver, "Deadline", ExpiresOnSecondCheck)
     _, result = _solve(hs071(), time_limit_s=60.0)
     assert result.status is SolverStatus.TIME_LIMIT
     assert result.message == "FSQP: time limit of 60.0 s reached in the arc search"

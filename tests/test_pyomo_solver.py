@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import sys
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-import plugins.solvers.pyomo_solver as pyomo_solver
+import plugins.solvers.pyomo_solver.solver as pyomo_solver
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.solver import SolverStatus
@@ -245,7 +244,9 @@ def test_print_level_zero_is_silent_and_positive_echoes_the_log(capfd: pytest.Ca
 
 
 def test_registered_as_a_solver_plugin(tmp_path: Path):
-    shutil.copy(pyomo_solver.__file__, tmp_path / "pyomo_solver.py")
+    # a plugin directory loads files, not packages: this one registers the package's plugin
+    plugin = "from plugins.solvers.pyomo_solver import register_solvers  # noqa: F401\n"
+    (tmp_path / "pyomo_plugin.py").write_text(plugin)
     registry = load_registry([tmp_path], use_entry_points=False)
     assert registry.names("solver") == ["pyomo"]
     solver = registry.create("solver", "pyomo", max_iterations=5)

@@ -4,7 +4,6 @@ correction, the log, the remedies, and the gait steps and walks."""
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 from functools import cache
@@ -361,9 +360,9 @@ def test_a_failed_qp_is_solved_again_by_the_fallback_backend(monkeypatch):
 
 
 def test_registered_as_a_solver_plugin(tmp_path: Path):
-    """Through a plugin directory holding only this plugin, so the test does not depend on the installed entry
-    points."""
-    shutil.copy(Path(__file__).parents[1] / "plugins" / "sqp.py", tmp_path / "sqp.py")
+    """Through a plugin directory holding only a file that registers this plugin (a package, which a plugin directory
+    does not load itself), so the test does not depend on the installed entry points."""
+    (tmp_path / "sqp_plugin.py").write_text("from plugins.solvers.sqp import register_solvers  # noqa: F401\n")
     registry = load_registry([tmp_path], use_entry_points=False)
     assert registry.names("solver") == ["sqp"]
     solver = registry.create("solver", "sqp", qp_solver="daqp", hessian="bfgs", merit="filter")

@@ -24,6 +24,10 @@ from scipy.sparse import diags
 
 from gaitbench.problem.nlp import NLP
 
+SCALINGS = ("none", "nominal")
+"""The ``scaling`` option of the solver plugins that offer it: ``none``, the solver's own scaling only; ``nominal``,
+variables and constraint rows scaled first by :func:`nominal_factors`, from each solve's initial guess."""
+
 FACTOR_RANGE = (1e-6, 1e6)
 """Every factor is clipped to this range; a variable block guessed at 0, or a row without gradient, gets 1."""
 

@@ -20,9 +20,9 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
+from gaitbench.solve.ipopt import IPOPT_STATUSES, check_ipopt_options
 from gaitbench.solve.silence import quiet_stdout
 from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
-from plugins.solvers.ipopt import IPOPT_STATUSES, check_ipopt_options
 
 _RETURN_STATUSES = {
     0: "Solve_Succeeded",

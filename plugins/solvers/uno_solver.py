@@ -29,11 +29,10 @@ import unopy
 
 from gaitbench import Registration, hookimpl
 from gaitbench.problem.nlp import NLP
-from gaitbench.problem.scaling import nominal_factors
+from gaitbench.problem.scaling import SCALINGS, nominal_factors
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.silence import quiet_stderr
 from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
-from plugins.solvers.ipopt import SCALINGS
 
 PRESETS = ("ipopt", "filtersqp", "funnelsqp", "auto")
 """Uno's presets for NLPs with an exact Hessian (``filterslp`` drops the Hessian and is not offered)."""

@@ -1,0 +1,131 @@
+"""Phase 1: from a start pushed inside its bounds to a point where every inequality row holds (and, for the ``qp``
+subproblem, the equalities nearly so), by damped Gauss–Newton steps (see the FSQP class docstring, "Starting
+point")."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from gaitbench.solve.evaluation import Deadline
+from gaitbench.solve.solver import SolverStatus
+from plugins.solvers.fsqp.form import NLPForm
+from plugins.solvers.fsqp.outcome import Breakdown, Outcome
+from plugins.solvers.fsqp.qp import solve_qp
+
+if TYPE_CHECKING:
+    from plugins.solvers.fsqp.solver import FSQP
+
+_PUSH = 1e-8
+"""The start is pushed this far (relative) inside its bounds: a start exactly on several bounds at once (HS071's
+x0 is on four) has dependent active gradients, which ε-halving can only remove from rows strictly inside."""
+
+_FEASIBILITY_MARGIN = 1e-8
+"""Phase 1 aims every violated or nearly violated inequality row this far inside (scaled units). It is tiny on
+purpose: on a DMOC gait step, a margin of 1e-4 moved the positions enough to raise the dynamics residual to 26."""
+
+_EQUALITY_START = 1e-6
+"""Phase 1 of the ``qp`` subproblem ends when the equality rows are within this of 0 (scaled units)."""
+
+
+def push_inside(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """x projected onto the bounds and pushed inside by min(p max(1, |bound|), p (upper − lower)), p = ``_PUSH``."""
+    lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    with np.errstate(invalid="ignore"):  # inf − inf on infinite bounds, discarded by np.where
+        room = np.where(np.isfinite(upper - lower), _PUSH * (upper - lower), np.inf)
+        low = np.where(np.isfinite(lower), lower + np.minimum(_PUSH * np.maximum(1.0, np.abs(lower)), room), lower)
+        high = np.where(np.isfinite(upper), upper - np.minimum(_PUSH * np.maximum(1.0, np.abs(upper)), room), upper)
+    return np.clip(np.clip(x, low, high), lower, upper)
+
+
+def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) -> Outcome:
+    """Phase 1: damped Gauss–Newton on ½‖max(c_I, 0)‖² until every inequality row holds (see the FSQP class); with
+    the ``qp`` subproblem on ½‖max(c_I, 0)‖² + ½‖c_E‖², until the equalities are within ``_EQUALITY_START``
+    too, so that the first QP's linearisation is consistent."""
+    n_ineq = form.n_inequalities
+    with_equalities = solver.subproblem == "qp"
+
+    def violation_of(c_all: np.ndarray) -> float:
+        value = 0.5 * np.sum(np.maximum(c_all[:n_ineq], 0.0) ** 2)
+        return value + (0.5 * np.sum(c_all[n_ineq:] ** 2) if with_equalities else 0.0)
+
+    def unfinished(c_all: np.ndarray) -> bool:
+        return bool(np.any(c_all[:n_ineq] > 0) or
+                    (with_equalities and np.max(np.abs(c_all[n_ineq:]), initial=0.0) > _EQUALITY_START))
+
+    c_all = form.constraints(x)
+    iteration = 0
+    while np.all(np.isfinite(c_all)) and unfinished(c_all):
+        c = c_all[:n_ineq]
+        if limit := solver.limit_reached(deadline, iteration):
+            return Outcome(*limit, x, iteration, None)
+        violation = violation_of(c_all)
+        rows = np.flatnonzero(c > -_FEASIBILITY_MARGIN)
+        target = c[rows] + _FEASIBILITY_MARGIN
+        residual = np.maximum(c[rows], 0.0)
+        if with_equalities:
+            rows = np.concatenate([rows, np.arange(n_ineq, form.m)])
+            target = np.concatenate([target, c_all[n_ineq:]])
+            residual = np.concatenate([residual, c_all[n_ineq:]])
+        jacobian = form.jacobian(x)[rows]
+        if not np.all(np.isfinite(jacobian.data)):
+            return Outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}", x,
+                            iteration, None)
+        stalled = None
+        if np.linalg.norm(jacobian.T @ residual) <= 1e-10 * max(1.0, np.sqrt(2 * violation)):
+            stalled = "the violation is stationary"
+        else:
+            direction = projection(form, x, c_all) if with_equalities else None
+            if direction is None:
+                normal = (jacobian @ jacobian.T).tocsc()
+                normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
+                direction = -jacobian.T @ spla.splu(normal).solve(target)
+            step = 1.0
+            while True:
+                trial = np.clip(x + step * direction, form.lbx, form.ubx)
+                c_trial = form.constraints(trial)
+                if violation_of(c_trial) <= (1 - 1e-4 * step) * violation:
+                    break
+                step *= 0.5
+                if step < 1e-10:
+                    stalled = "no step reduces the violation"
+                    break
+        if stalled is not None:
+            if np.all(c <= 0):  # only the equalities are left: the main phase drives them to 0
+                break
+            return infeasible(form, x, c, iteration, stalled)
+        solver.record("feasibility", iteration, violation, float(np.linalg.norm(direction)), step, np.nan,
+                     rows.size, form.max_violation(c_all), "gn", x)
+        x, c_all = trial, c_trial
+        iteration += 1
+    if not np.all(np.isfinite(c_all)):
+        return Outcome(SolverStatus.ERROR, "NaN or infinite g at the starting point", x, iteration, None)
+    return Outcome(SolverStatus.CONVERGED, "feasible", x, iteration, None)
+
+
+def projection(form: NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
+    """The least-norm step onto every linearised row within the bounds (a QP: Newton's method for the
+    feasibility problem, where the clipped Gauss–Newton step crept along the bounds for hundreds of iterations
+    on HS, N = 20); None when the linearisation is inconsistent."""
+    jacobian = form.jacobian(x)
+    general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
+    try:
+        solution = solve_qp(qpsolvers.Problem(
+            sp.eye(form.n, format="csc"), np.zeros(form.n),
+            jacobian[general].tocsc() if general.size else None,
+            -c_all[general] - _FEASIBILITY_MARGIN if general.size else None,
+            jacobian[equal].tocsc() if equal.size else None, -c_all[equal] if equal.size else None,
+            np.where(form.free, form.lbx - x, 0.0), np.where(form.free, form.ubx - x, 0.0)))
+    except Breakdown:
+        return None
+    return solution.x
+
+
+def infeasible(form: NLPForm, x: np.ndarray, c: np.ndarray, iteration: int, reason: str) -> Outcome:
+    worst = float(np.max(np.maximum(c, 0.0) / form.row_factor[: form.n_inequalities]))
+    return Outcome(SolverStatus.INFEASIBLE, f"no point satisfies the inequalities: {reason} at a largest "
+                    f"violation of {worst:.3g} (iteration {iteration})", x, iteration, None)

@@ -1,0 +1,59 @@
+"""The QPs of the ``qp`` subproblem, through ``qpsolvers``: each backend in turn until one solves it, and the
+second-order correction."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import qpsolvers
+
+from gaitbench.solve.qp import INACCURATE_STATUSES, backend_status
+from gaitbench.solve.silence import quiet_stdout
+from plugins.solvers.fsqp.form import NLPForm
+from plugins.solvers.fsqp.outcome import Breakdown
+
+_QP_SOLVERS = ("piqp", "clarabel")
+"""Backends of the ``qp`` subproblem, in turn: PIQP, the fastest on the gait QPs (docs/solvers.md, ``sqp``), then
+Clarabel, which solves the convexified QPs PIQP stops on."""
+
+
+def solve_qp(problem: qpsolvers.Problem) -> qpsolvers.Solution:
+    """The QP by each of ``_QP_SOLVERS`` in turn until one solves it (or returns a reduced-accuracy optimum)."""
+    statuses = []
+    for solver in _QP_SOLVERS:
+        try:
+            with warnings.catch_warnings(), quiet_stdout():
+                warnings.simplefilter("ignore")
+                solution = qpsolvers.solve_problem(problem, solver=solver)
+        except Exception as error:  # a backend that rejects the problem counts as a failed QP
+            statuses.append(f"{solver}: {type(error).__name__}")
+            continue
+        status = backend_status(solution)
+        usable = solution.found or status in INACCURATE_STATUSES
+        if usable and solution.x is not None and np.all(np.isfinite(solution.x)):
+            if solution.z_box is None:
+                solution.z_box = np.zeros(problem.P.shape[0])
+            return solution
+        statuses.append(f"{solver}: {status}")
+    raise Breakdown(f"the QP subproblem failed ({'; '.join(statuses)})")
+
+
+def bend(form: NLPForm, x: np.ndarray, d: np.ndarray, qp: qpsolvers.Problem, general: np.ndarray,
+          equal: np.ndarray, d_norm: float) -> np.ndarray:
+    """The second-order correction d̃ = s − d, s the QP again with every row linearised at x + d
+    (c(x + d) − ∇c d + ∇c s), so that the arc x + t d + t² d̃ is x + s at t = 1; zero when that QP fails or d̃
+    is longer than d. (Holding the inequalities ‖d‖^τ inside, as the thesis's d̃ does, made this QP jump.)"""
+    ahead = form.constraints(x + d)
+    if not np.all(np.isfinite(ahead)):
+        return np.zeros(form.n)
+    h = None if qp.G is None else -(ahead[general] - qp.G @ d)
+    b = None if qp.A is None else -(ahead[equal] - qp.A @ d)
+    try:
+        s = solve_qp(qpsolvers.Problem(qp.P, qp.q, qp.G, h, qp.A, b, qp.lb, qp.ub)).x
+    except Breakdown:
+        return np.zeros(form.n)
+    correction = np.clip(x + s, form.lbx, form.ubx) - x - d
+    if np.linalg.norm(correction) > d_norm:
+        return np.zeros(form.n)
+    return correction

@@ -1,0 +1,202 @@
+"""The ``fsqp`` solver plugin's face: its options, the two phases of a solve, and the log of its iterations."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gaitbench.problem.nlp import NLP
+from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
+from gaitbench.solve.solver import SolverResult, SolverStatus
+from plugins.solvers.fsqp.equality import minimize
+from plugins.solvers.fsqp.feasibility import feasibility, push_inside
+from plugins.solvers.fsqp.form import NLPForm
+from plugins.solvers.fsqp.outcome import IterationRecord
+from plugins.solvers.fsqp.qp_subproblem import minimize_qp
+
+
+class FSQP:
+    """Feasible SQP after the thesis's Appendix D, with damped BFGS or the convexified exact Hessian.
+
+    Shared options: ``max_iterations`` (500, the digest's k_max; phase-1 iterations count too), ``time_limit_s``
+    (None; checked every iteration and at every arc-search trial), ``tolerance`` (1e-8: converged when ‖d0‖₂ and the
+    largest equality residual are both ≤ tolerance, in scaled units — d0 = 0 exactly at a KKT point, thesis
+    Lemma 2; the digest's 1e-6 left HS039's equalities violated by 1e-7, and 1e-8 costs about one more iteration
+    where the rate is superlinear), ``print_level`` (0 silent, ≥ 1 one line per iteration: F_c, ‖d0‖, step t,
+    penalty c_k, |J_k|, the NLP's largest violation, the direction taken).
+
+    Method parameters, with the digest's [S] defaults (the thesis gives no values):
+
+    - ``alpha`` = 0.1 ∈ (0, ½): Armijo fraction of the arc search.
+    - ``beta`` = 0.5 ∈ (0, 1): arc-search reduction factor.
+    - ``nu`` = 2.5 > 2: d1 bends every active row to c_j + ∇c_jᵀd = −‖d0‖^ν.
+    - ``delta`` = 2.2 ∈ (2, ν): d1 is taken if ∇F_cᵀd1 ≤ −ξ‖d1‖^δ (and < 0).
+    - ``tau`` = 2.5 ∈ (2, 3): the correction d̃ aims the active rows at −‖d‖^τ.
+    - ``theta`` = 0.8 ∈ (0, 1): share of d3's descent that the d1/d3 combination keeps.
+    - ``xi`` = 1e-3 > 0: the descent-test factor (undeclared in the thesis).
+    - ``epsilon0`` = 1.0: largest active-set tolerance (rows are scaled, see ``scaling``).
+    - ``epsilon`` = 1.0: smallest increase of the penalty c when it must grow.
+    - ``rho`` = 1.0: the initial penalty c₋₁ and the margin in c ≥ max_E |π_j| + ρ.
+    - ``max_halvings`` = 50: Step-1 halvings of ε before the active gradients are declared dependent (LICQ fails).
+    - ``rank_tolerance`` = 1e-6: a normalized active gradient closer than this to the span of the others counts as
+      dependent in the Step-1 rank test.
+    - ``equality_margin`` = 0.1: κ_E, see deviation 4.
+    - ``hessian`` = "exact": ∇²L(x, π⁺) from the evaluator at the Step-2 multipliers π (inequality entries clipped
+      at 0), convexified as below; or, with ``subproblem="equality"`` only, "bfgs": damped (Powell) BFGS on the
+      Lagrangian gradient ∇f + Σ u_j ∇c_j, u the multipliers of d0 (the thesis's undamped update on ∇F_c can lose
+      positive definiteness and ignores the constraints' curvature).
+    - ``h0_scaling`` = "auto": H0 = I, rescaled to (yᵀy / yᵀs) I before the first update (Shanno–Phua), since the
+      NLP's curvature is far from 1; a number γ gives H0 = γ I and no rescaling.
+    - ``scaling`` = "gradient": every row (and f) whose gradient max-norm at the start exceeds 100 is scaled down to
+      100, as IPOPT does; "none" keeps the NLP's units. The DMOC dynamics rows have gradients of ~7e3.
+
+    Deviations from the literal thesis, each found necessary during development (the examples name the test problem
+    that failed without it, measured with the version of the time):
+
+    1. Step 1: ε_{k,0} = min(ε0, ‖d0^{k−1}‖), and an inequality row is not near-active if its multiplier estimate
+       is smaller than its distance (|π_j| < −c_j), or negative while the row is more than ``tolerance`` inside.
+       With a fixed ε0, a row inactive at x* but within ε0 keeps ‖d0‖ away from 0 (HS035 and HS076 stall),
+       contrary to the thesis's Lemma 7; and a relaxed row inside prescribes ∇c_jᵀd = π_j whatever the objective
+       (HS071 with the exact Hessian, from a start 10⁻² inside its bounds, crept for 500 iterations once J had n
+       rows; 13 iterations with this rule). Relaxation is kept for rows on their boundary, where leaving J would let
+       the step cross them.
+    2. A relaxed row keeps its relaxed target a_j in d1 and d̃ (the thesis pins it to the boundary there, so d1
+       never approximates d0 and the slow d3 was taken every iteration on HS071).
+    3. d1 must have ∇F_cᵀd1 < 0 (a zero d1 passed the printed test: the 1-D projection stalled), and the d3
+       combination is scaled by min(1, −∇F_cᵀd3) (the thesis's −∇F_cᵀd3 lengthened d by 10¹⁰ on HS071).
+    4. Powers of norms are min(‖·‖^p, ‖·‖): identical for ‖·‖ ≤ 1, where the thesis's analysis lives, but linear
+       beyond (‖d0‖^ν bent the rows by 10⁴ on HS039). On equality rows the margins are also at most κ_E |c_j|: a
+       margin pushes an equality away from 0, so it must stay below its residual.
+    5. Equalities are kept ≤ 0 by re-orientation rather than by the arc search: a trial may cross zero on an
+       equality row, the Armijo test uses f + c Σ|c_j| (= F_c on oriented rows), and crossed rows are flipped.
+       Inequality rows must stay ≤ 0 as in the thesis. (Not needed on the HS problems; on the DMOC gait step the
+       linear power-split rows, exactly 0, became +1e-18 by rounding and the arc search failed at t ~ 1e-19.)
+    6. A row that blocked the last arc search (violated at the last rejected trial) joins J at the next iteration,
+       unless it makes J rank deficient, as an active-set method adds blocking constraints (HS076: 15 instead of
+       23 iterations with BFGS, 7 instead of 26 with the exact Hessian).
+
+    ``subproblem`` = "qp" (the default) or "equality" (the thesis's Steps 1–5 as above). With "qp", each iteration:
+
+    - d0 solves min ½dᵀHd + ∇fᵀd over every linearised row and the bounds (PIQP, Clarabel when PIQP fails). The
+      equalities are QP equalities: on their linearisation Mayne–Polak's penalty term is constant, so the step is the
+      one their inequality form with ∇F_c gives. H = ∇²L + δI made positive definite as ``sqp`` does it (sparse LDLᵀ
+      tests; the least ρ·max|H|·Σ âᵢâᵢᵀ over a working set of equalities, rows with multipliers and bounds within
+      1e-6, then a shift), convexified once more over the rows the QP held if it left some of that working set; δ is
+      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease.
+    - The merit is f + Σ_E w_j|c_j| with Powell's per-row weights (``sqp``'s), raised together when d would not
+      decrease it by ½dᵀHd: one penalty c ≥ max|π| + ρ dwarfed the gait objective (f ~ 1e-5) and every curvature
+      error in the equalities cut the step.
+    - d̃ = s − d, s the QP again with the rows linearised at x + d (second-order correction); the arc x + t d + t²d̃
+      is searched with every inequality row ≤ ``tolerance`` (scaled units) and Armijo on the merit.
+    - Converged when IPOPT's scaled KKT error, with the QP's multipliers, is below ``tolerance``, or below 1e-6 for
+      15 iterations (IPOPT's acceptable level).
+    - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; the
+      Gauss–Newton step when that QP is inconsistent), until the inequalities hold and the equalities are within
+      1e-6, so that the first QP is consistent.
+
+    The "qp" subproblem takes the exact Hessian only.
+
+    Exact-Hessian convexification: the theory needs H_k ≻ 0. The method tries H = ∇²L, then H + ρ̄ ÂᵀÂ (Â the
+    active gradients with rows normalized; ρ̄ = 100 × the largest diagonal entry), then H + ρ̄ ÂᵀÂ + δI with δ growing
+    8× from a quarter of the last δ (at least 1e-8, at most 1e10 × the largest diagonal entry). The ÂᵀÂ term is
+    constant on the constraint set of every K0 system, so it changes none of d0, d1, d̃ (only their multipliers,
+    which are corrected), and a Hessian positive definite on the null space of the active gradients keeps Newton's
+    steps. Positive definiteness is tested by a sparse LDLᵀ (SuperLU with diagonal pivots in symmetric mode).
+
+    Step-1 rank test: the Gram matrix of the normalized active gradients is factorized the same way; its pivots are
+    the squared distances of each gradient from the span of those eliminated before it, so a pivot below
+    ``rank_tolerance``² flags dependence. It is sparse and costs one small factorization per halving.
+
+    Starting point: x0 is projected onto the bounds (pushed 1e-8 inside). If a general inequality is violated there,
+    phase 1 takes damped Gauss–Newton steps on ½‖max(c_I, 0)‖²: each the least-norm step that moves every violated
+    or nearly violated inequality row (bounds included) just inside in the linearization, projected onto the bounds
+    and halved until the violation drops. A stationary violation > 0, or one that no step reduces, is INFEASIBLE.
+    The equalities play no part (they are oriented afterwards), so phase 1 may worsen them: on the standard DMOC gait
+    guess, whose dynamics rows have gradients of ~7e3, mending the foot clearance raises the dynamics residual from
+    16 to 420 (a variant that kept the linearized equalities fixed converged too slowly to be worth it).
+    NaN at an iterate is an ERROR; at an arc-search trial it only rejects the trial.
+    """
+
+    name = "fsqp"
+
+    def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
+                 print_level: int = 0, hessian: str = "exact", alpha: float = 0.1, beta: float = 0.5,
+                 nu: float = 2.5, delta: float = 2.2, tau: float = 2.5, theta: float = 0.8, xi: float = 1e-3,
+                 epsilon0: float = 1.0, epsilon: float = 1.0, rho: float = 1.0, max_halvings: int = 50,
+                 rank_tolerance: float = 1e-6, equality_margin: float = 0.1, h0_scaling: str | float = "auto",
+                 scaling: str = "gradient", subproblem: str = "qp") -> None:
+        if subproblem not in ("qp", "equality"):
+            raise ValueError(f"subproblem must be 'qp' or 'equality', not {subproblem!r}")
+        if hessian not in ("bfgs", "exact"):
+            raise ValueError(f"hessian must be 'bfgs' or 'exact', not {hessian!r}")
+        if subproblem == "qp" and hessian != "exact":
+            raise ValueError("the 'qp' subproblem takes the exact Hessian; BFGS needs subproblem='equality'")
+        if scaling not in ("gradient", "none"):
+            raise ValueError(f"scaling must be 'gradient' or 'none', not {scaling!r}")
+        if h0_scaling != "auto" and not (isinstance(h0_scaling, int | float) and h0_scaling > 0):
+            raise ValueError(f"h0_scaling must be 'auto' or a positive number, not {h0_scaling!r}")
+        if not (0 < alpha < 0.5 and 0 < beta < 1 and nu > 2 and 2 < delta < nu and 2 < tau < 3 and 0 < theta < 1
+                and xi > 0 and epsilon0 > 0 and epsilon > 0 and rho > 0 and equality_margin > 0):
+            raise ValueError("FSQP needs α ∈ (0, ½), β, θ ∈ (0, 1), ν > 2, δ ∈ (2, ν), τ ∈ (2, 3) and positive ξ, "
+                             "ε0, ε, ρ and equality_margin")
+        self.max_iterations = int(max_iterations)
+        self.time_limit_s = time_limit_s
+        self.tolerance = float(tolerance)
+        self.print_level = int(print_level)
+        self.hessian = hessian
+        self.alpha, self.beta, self.nu, self.delta, self.tau = alpha, beta, nu, delta, tau
+        self.theta, self.xi, self.epsilon0, self.epsilon, self.rho = theta, xi, epsilon0, epsilon, rho
+        self.max_halvings = int(max_halvings)
+        self.rank_tolerance = float(rank_tolerance)
+        self.equality_margin = float(equality_margin)
+        self.h0_scaling = h0_scaling
+        self.scaling = scaling
+        self.subproblem = subproblem
+        self.log: list[IterationRecord] = []
+        """The iterates of the last solve, both phases, in order."""
+
+    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
+        """Phase 1 if the start violates an inequality, then FSQP; every failure becomes a status."""
+        deadline = Deadline(self.time_limit_s)
+        x0 = np.asarray(initial_guess, dtype=float).ravel()
+        self.log = []
+        try:
+            evaluator = NLPEvaluator(nlp, parameters)
+            if x0.size != nlp.n_variables:
+                raise ValueError(f"the initial guess has {x0.size} values, the NLP {nlp.n_variables} variables")
+            return self._solve(evaluator, push_inside(x0, nlp.lbx, nlp.ubx), deadline)
+        except Exception as error:  # the Solver protocol reports failures, it never raises them
+            return error_result(error, x0, deadline)
+
+    def _solve(self, evaluator: NLPEvaluator, x: np.ndarray, deadline: Deadline) -> SolverResult:
+        form = NLPForm(evaluator, x, self.scaling)
+        outcome = feasibility(self, form, x, deadline)
+        if outcome.status is not SolverStatus.CONVERGED:
+            return solver_result(outcome.status, f"FSQP feasibility phase: {outcome.message}", outcome.x, evaluator,
+                                 outcome.iterations, deadline)
+        form.orient(outcome.x)
+        phase = minimize_qp if self.subproblem == "qp" else minimize
+        outcome = phase(self, form, outcome.x, deadline, outcome.iterations)
+        multipliers = None if outcome.multipliers is None else form.nlp_multipliers(outcome.multipliers)
+        return solver_result(outcome.status, f"FSQP: {outcome.message}", outcome.x, evaluator, outcome.iterations,
+                             deadline, multipliers)
+
+    def limit_reached(self, deadline: Deadline, iteration: int) -> tuple[SolverStatus, str] | None:
+        """The time or iteration limit with its message, once reached: checked first by every loop of the method."""
+        if deadline.expired():
+            return SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached"
+        if iteration >= self.max_iterations:
+            return SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached"
+        return None
+
+    def record(self, phase: str, iteration: int, merit: float, d0_norm: float, step: float, penalty: float,
+               active: int, max_violation: float, direction: str, x: np.ndarray) -> None:
+        """Log iteration ``iteration`` of ``phase`` in :attr:`log`, and print it at ``print_level ≥ 1``."""
+        if self.print_level >= 1:
+            if not self.log or self.log[-1].phase != phase:
+                print(f"FSQP {phase} phase")
+                label = "F_c" if phase == "main" else "½|c_I+|²"
+                print(f"{'iter':>5} {label:>13} {'|d0|':>9} {'step':>9} {'c_k':>9} {'|J|':>5} {'max viol':>9}  dir")
+            print(f"{iteration:>5} {merit:>13.6e} {d0_norm:>9.2e} {step:>9.2e} {penalty:>9.2e} {active:>5} "
+                  f"{max_violation:>9.2e}  {direction}")
+        self.log.append(IterationRecord(phase, iteration, merit, d0_norm, step, penalty, active, max_violation,
+                                        direction, x.copy()))

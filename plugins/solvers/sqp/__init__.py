@@ -1,0 +1,113 @@
+"""A line-search SQP whose quadratic subproblems go to any backend of the ``qpsolvers`` library.
+
+Why: an active-set method with the exact Hessian converges superlinearly once it has found the active set, which
+makes it the natural comparison for IPOPT's interior point on the gait NLPs, and routing every QP through
+``qpsolvers`` lets one benchmark compare QP backends (interior point: Clarabel, PIQP; active set: DAQP, quadprog,
+HiGHS; ADMM / proximal: OSQP, ProxQP) on exactly the subproblems an SQP produces.
+
+Each iteration solves, at the current x with multipliers λ,
+
+    min ½dᵀPd + ∇fᵀd   s.t.   lbg ≤ g + J d ≤ ubg,   lbx ≤ x + d ≤ ubx
+
+in ``qpsolvers`` form: rows with lbg = ubg become ``A d = b``, every finite side of the other rows a row of
+``G d ≤ h`` (upper sides as J, lower sides as −J), the bounds ``lb ≤ d ≤ ub`` (infinite entries stay infinite:
+every installed backend accepts them, and PIQP mistakes 1e20 for a real bound). Sparse backends get SciPy CSC
+matrices, dense-only ones (DAQP, quadprog) dense arrays; a problem with neither constraints nor bounds is the
+Newton system, solved without a backend. The QP duals are the multiplier estimates, in CasADi's sign convention
+∇f + Jᵀλ_g + λ_x = 0; the first ones are IPOPT's least-squares estimate for the equality rows.
+
+P must be positive definite for every backend (strictly for quadprog and DAQP). With ``hessian="exact"`` it is the
+Hessian H of the Lagrangian, convexified without an eigen-decomposition, each candidate tested by a sparse LDLᵀ
+factorisation (:func:`.hessian.positive_definite`; the whole model stays sparse, the Hessian and Jacobian being
+CasADi's):
+
+1. H + δI, δ = max(δ₀, δ_LM), δ₀ = 1e-10·max(1, max|H|) lifting only exactly singular directions, and δ_LM the
+   Levenberg–Marquardt damping below;
+2. H + δI + ρ·max(1, max|H|)·Σ_W a_i a_iᵀ/‖a_i‖², ρ = 1, 10, …, 10⁴, the least that factorises, over a working
+   set W of constraint normals a_i: the equality rows, the inequality rows that are violated, within 1e-6 of a
+   bound or carry a multiplier, and the variables at a bound. For a row active in the QP, a_iᵀd is fixed, so the
+   added term is constant on the QP's feasible set: once W is the active set the step is the exact Newton step,
+   and by Debreu's lemma such a ρ exists when H is positive definite on the null space of the active constraints.
+   The multipliers of rows active in the QP are corrected by ρ·a_iᵀd/‖a_i‖², so they are those of H itself
+   (a one-sided row whose corrected multiplier has the wrong sign is not active for H: its multiplier is zero);
+3. failing that, the ρ = 100 augmentation plus a shift from max(δ, 1e-8·max(1, max|H|)) growing ×4 until the
+   factorisation is positive definite, like IPOPT's inertia correction.
+
+δ_LM, with the ℓ1 merit: the shift of the last iteration times ½ when the full step's actual decrease of φ was at
+least ¾ of its model's (−Dφ(d) − ½dᵀ(H + δI)d), times 1 down to ¼, times 4 below ¼ or when the full step was
+rejected (from at least 1e-8·max(1, max|H|)). On the gait steps the Lagrangian is indefinite along the flat valleys
+of the thesis cost. IPOPT's rule alone (start from a fraction of the last shift) cycled there: the shift fell until
+a step was far too long, the violation rose to 1e-2–1, and the next Hessian needed a shift 1000× larger, for
+hundreds of iterations (forward HS N = 20, step 3: iteration limit; DMOC N = 100: time limit). The ratio control
+converged on all five first steps measured (HS and DMOC, N = 50 and 100; DMOC N = 20) and on 3-step walks.
+
+With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
+the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.
+
+Globalisation (``merit``):
+
+- ``"l1"``: the exact penalty φ = f + Σ μ_i viol_i(g), with Powell's per-row weights μ_i = max(|λ_i|,
+  (μ_i + |λ_i|)/2) as in SLSQP (raised uniformly when the step would not decrease φ by ½ max(dᵀHd, 0), as the
+  Nocedal–Wright rule (18.36) raises a single penalty), and Armijo backtracking (halving) on the directional
+  derivative ∇fᵀd − Σ μ_i (viol_i(g) − viol_i(g + J d)). Weights that follow each row's multiplier matter on the
+  gait steps, whose rows differ by orders of magnitude in scale: a single penalty set by the largest multiplier
+  all but stops progress in f. When the QP fails or its multipliers exceed 1e6 (a nearly inconsistent
+  linearisation), the step comes from its elastic version (SNOPT's elastic mode, Fletcher's Sℓ1QP)
+  min ½dᵀPd + ∇fᵀd + W·Σ(p + n) s.t. lbg ≤ g + J d − p + n ≤ ubg, the bounds, p, n ≥ 0, W = max(100, 10‖λ‖∞).
+- ``"filter"``: the Wächter–Biegler filter line search on (θ = ‖viol(g)‖₁, f), with its switching condition, the
+  Armijo condition on f for f-type steps and filter augmentation for h-type steps. A failed QP, multipliers above
+  1e6 or a step length below the filter's minimum start the restoration phase.
+
+After an elastic step the multipliers restart from least squares: the ones that made the QP fail would shape the
+next Hessians. At a stationary point (KKT residual below ``tolerance``) that is only slightly infeasible (below
+``acceptable_tolerance``), one Gauss–Newton projection onto the constraints (the restoration's QP below) is taken
+whole when it halves θ.
+
+Restoration phase (the filter's, and the ℓ1 merit's when even the elastic QP fails): Gauss–Newton steps on θ (the
+elastic QP with P = I, no objective and W = 1e4, so the least-norm step that reduces the linearised violation most
+— a well-conditioned QP whatever the Hessian), each with Armijo backtracking on θ, until θ is below 0.9 times its
+value on entry and the point is acceptable to the filter, which holds the iterate restoration started from; the
+multipliers then restart from least squares.
+
+Both try one second-order correction against the Maratos effect when the full step is rejected and did not reduce θ:
+the QP again, with the constraints linearised as g(x + d) − J d + J s, accepted on the test for α = 1.
+
+INFEASIBLE (local infeasibility): x violates the constraints, and the elastic QP predicts no decrease of θ (x is a
+stationary point of the violation) or no step along its direction reduces the merit (θ, in restoration); the
+message names the backend status of the QP that failed.
+
+Convergence: the violation (max-norm) below ``tolerance`` and the stationarity/complementarity residual below
+``tolerance`` times IPOPT's dual scaling s_d, with the current multipliers or with the ones the QP at x has just
+returned; or, as IPOPT's "acceptable" level, both below ``acceptable_tolerance`` for 15 consecutive iterations or
+when the iteration cannot continue from such a point. Complementarity is IPOPT's product |μ_i|·d_i near a bound.
+
+QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as
+failed. PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to
+5e4 at DMOC, N = 50), which Clarabel solves, if only to its reduced accuracy.
+
+Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
+interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords).
+Clarabel, PIQP, HiGHS and quadprog start cold (``qpsolvers`` ignores initial values for them, or warns), so they
+are never given any.
+
+Options on the command line: ``-s sqp -o qp_solver=daqp -o hessian=bfgs -o merit=filter -o qp_tolerance=1e-9``.
+
+Modules: :mod:`.solver` holds the options. One solve is a :class:`.run.Run`, built in layers, each class on the one
+before: :mod:`.iterate` (the point, its multipliers, the KKT test and the result), :mod:`.subproblems` (the QPs of an
+iteration), :mod:`.linesearch` (both globalisations), :mod:`.restoration`, :mod:`.run` (the outer loop). They use
+:mod:`.linearization` (the QPs' ``qpsolvers`` form), :mod:`.backends` (the backend calls) and :mod:`.hessian` (the
+convexification and BFGS).
+"""
+
+from __future__ import annotations
+
+from gaitbench import Registration, hookimpl
+from plugins.solvers.sqp.solver import SQP
+
+__all__ = ["SQP", "register_solvers"]
+
+
+@hookimpl
+def register_solvers():
+    return [Registration("sqp", "line-search SQP (exact or BFGS Hessian, l1 merit or filter), QPs through "
+                                "qpsolvers", SQP)]

@@ -1,0 +1,159 @@
+"""The iterate of one solve and what is read off it: f, g and their derivatives, the multipliers, the KKT test, and the
+result it becomes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as sp
+
+from gaitbench.solve.evaluation import Deadline, NLPEvaluator, solver_result
+from gaitbench.solve.solver import SolverResult, SolverStatus
+from plugins.solvers.sqp.backends import QPBackends, QPOutcome
+from plugins.solvers.sqp.hessian import damped_bfgs_update
+from plugins.solvers.sqp.linearization import Linearization
+
+if TYPE_CHECKING:
+    from plugins.solvers.sqp.solver import SQP
+
+
+@dataclass
+class Trial:
+    """A point of the line search with its objective, constraints and ℓ1 violation θ of g."""
+
+    x: np.ndarray
+    f: float
+    g: np.ndarray
+    theta: float
+
+
+def _complementarity(multipliers: np.ndarray, values: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
+    """max_i |μ_i|·min(1, d_i), d_i the distance to the bound μ_i's sign says is active: zero iff signs and
+    complementarity hold. Near a bound it is IPOPT's complementarity product; a multiplier with no bound to hold it
+    (d_i = ∞) counts in full, as stationarity. The product, not min(|μ_i|, d_i): on the gait steps (gradients
+    ~1e-5) the latter is ~1e-5 at IPOPT's own converged points, and would demand far more than IPOPT does."""
+    distance = np.where(multipliers > 0, np.abs(upper - values), np.abs(values - lower))
+    return float(np.max(np.abs(multipliers) * np.minimum(distance, 1.0), initial=0.0))
+
+
+class Iterate:
+    """The state of one solve: the point with its derivatives and multipliers, and what the later layers keep."""
+
+    def __init__(self, options: SQP, evaluator: NLPEvaluator, x0: np.ndarray, deadline: Deadline) -> None:
+        self.o = options
+        self.evaluator = evaluator
+        self.deadline = deadline
+        nlp = evaluator.nlp
+        if x0.size != nlp.n_variables:
+            raise ValueError(f"the initial guess has {x0.size} values, the NLP {nlp.n_variables} variables")
+        self.lin = Linearization(nlp)
+        self.n, self.m = nlp.n_variables, nlp.n_constraints
+        self.dense = options.qp_solver not in qpsolvers.sparse_solvers
+        self.backends = QPBackends(options.qp_solver, options.fallback_qp_solver, options.qp_tolerance, deadline,
+                                   evaluator)
+        self.iteration = 0
+        self.lam = np.zeros(self.m)
+        self.weights = np.zeros(self.m)
+        """The ℓ1 merit's weight per row of g."""
+        self.filter: list[tuple[float, float]] = []
+        self.shift = 0.0
+        self.shift_growth = 0.5
+        """Factor from the last shift to the first one tried next (``LineSearch._l1_search``; the filter always
+        halves)."""
+        self.bfgs: np.ndarray | None = np.eye(self.n) if options.hessian == "bfgs" else None
+        self.bfgs_scaled = False
+        self.warm: QPOutcome | None = None
+        self.restoration: tuple[str, float] | None = None
+        """(why restoration started, θ on entry) while restoring."""
+        self.log = {"alpha": float("nan"), "regularization": 0.0, "qp_time": 0.0, "flags": ""}
+        self.acceptable = 0
+        """Consecutive iterates at the acceptable level, with their own multipliers or the QP's."""
+        self.streak = 0
+        """``acceptable`` before this iteration's test."""
+        self.x: np.ndarray | None = None
+        trial = self._trial(np.clip(x0, nlp.lbx, nlp.ubx))
+        if trial is None:
+            raise FloatingPointError("the objective or constraints are not finite at the initial point")
+        self._accept(trial)
+        self.lam = self._least_squares_multipliers()
+        theta0 = max(1.0, trial.theta)
+        self.theta_max, self.theta_min = 1e4 * theta0, 1e-4 * theta0
+
+    def _kkt(self, lam: np.ndarray | None = None) -> tuple[float, float, float]:
+        """(max constraint violation, stationarity/complementarity residual, IPOPT's dual scaling s_d) at x, with
+        the multipliers ``lam`` (the current ones by default)."""
+        lin = self.lin
+        lam = self.lam if lam is None else lam
+        bound_multipliers = -(self.grad + self.jac.T @ lam)
+        dual = max(_complementarity(bound_multipliers, self.x, lin.lbx, lin.ubx),
+                   _complementarity(lam, self.g, lin.lbg, lin.ubg))
+        total = np.sum(np.abs(lam)) + np.sum(np.abs(bound_multipliers))
+        scale = max(100.0, total / max(1, self.n + self.m)) / 100.0
+        return lin.max_violation(self.g), dual, scale
+
+    def _failure(self, detail: str) -> SolverResult:
+        """ERROR, or CONVERGED when the iteration cannot continue from a point at the acceptable level."""
+        if self.acceptable > 0:
+            return self._result(SolverStatus.CONVERGED, f"acceptable level, where {detail}")
+        return self._result(SolverStatus.ERROR, detail)
+
+    def _result(self, status: SolverStatus, detail: str) -> SolverResult:
+        if status in (SolverStatus.ERROR, SolverStatus.INFEASIBLE) and self.deadline.expired():  # a QP cut short
+            status, detail = SolverStatus.TIME_LIMIT, f"time limit {self.o.time_limit_s} s reached ({detail})"
+        qps = self.evaluator.evaluations["qp"]
+        message = f"SQP: {detail} ({self.o.qp_solver}: {qps} QPs in {self.backends.time:.3f} s)"
+        if self.o.print_level >= 1:
+            print(message)
+        return solver_result(status, message, self.x, self.evaluator, self.iteration, self.deadline, self.lam.copy())
+
+    def _print(self, violation: float, dual: float) -> None:
+        if self.o.print_level < 1:
+            return
+        log = self.log
+        penalty = f"{np.max(self.weights, initial=0.0):9.2e}" if self.o.merit == "l1" else f"{'-':>9}"
+        alpha = f"{log['alpha']:9.2e}" if np.isfinite(log["alpha"]) else f"{'-':>9}"
+        print(f"{self.iteration:5d} {self.f:15.8e} {violation:9.2e} {dual:9.2e} {alpha} {penalty} "
+              f"{1e3 * log['qp_time']:8.2f} {log['regularization']:8.1e} {log['flags']}")
+
+    def _infeasible(self, reason: str, why: str) -> SolverResult:
+        return self._result(SolverStatus.INFEASIBLE, f"{reason}; {why}: a local minimiser of the constraint "
+                                                     f"violation {self.theta:.3g} (ℓ1)")
+
+    def _trial(self, x: np.ndarray) -> Trial | None:
+        """f and g at x, or None where they are not finite (the line search then backtracks)."""
+        f = self.evaluator.objective(x)
+        g = self.evaluator.constraints(x)
+        if not (np.isfinite(f) and np.all(np.isfinite(g))):
+            return None
+        return Trial(x, f, g, self.lin.theta(g))
+
+    def _accept(self, trial: Trial) -> None:
+        """Move to ``trial``: derivatives there, and the BFGS update from the previous point with the current λ."""
+        grad = self.evaluator.gradient(trial.x)
+        jac = sp.csr_matrix(self.evaluator.jacobian(trial.x))
+        if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(jac.data))):
+            raise FloatingPointError("the derivatives are not finite at an accepted point")
+        if self.bfgs is not None and self.x is not None:
+            self._update_bfgs(trial.x - self.x, grad + jac.T @ self.lam - self.grad - self.jac.T @ self.lam)
+        self.x, self.f, self.g, self.theta, self.grad, self.jac = trial.x, trial.f, trial.g, trial.theta, grad, jac
+
+    def _least_squares_multipliers(self) -> np.ndarray:
+        """IPOPT's initial estimate: the equality multipliers minimising ‖∇f + J_Eᵀλ_E‖ (others zero), dropped when
+        larger than 1e3. Without it a linear objective would give the first QP no curvature at all."""
+        lam = np.zeros(self.m)
+        equality = self.lin.equality
+        if equality.size:
+            estimate = -np.linalg.lstsq(self.jac[equality].toarray().T, self.grad, rcond=None)[0]
+            if np.max(np.abs(estimate)) <= 1e3:
+                lam[equality] = estimate
+        return lam
+
+    def _update_bfgs(self, s: np.ndarray, y: np.ndarray) -> None:
+        """Powell's damped BFGS update: keeps the approximation positive definite whatever the curvature."""
+        if not self.bfgs_scaled and y @ s > 0:
+            self.bfgs = (y @ y) / (y @ s) * np.eye(self.n)
+            self.bfgs_scaled = True
+        self.bfgs = damped_bfgs_update(self.bfgs, s, y)

@@ -1,0 +1,81 @@
+"""The NLP's rows as ``qpsolvers`` sees them: sorted once into QP equalities and the finite sides of the other rows,
+with the violation measures the globalisations use."""
+
+from __future__ import annotations
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as sp
+
+from gaitbench.problem.nlp import NLP
+from plugins.solvers.sqp.backends import QPOutcome
+
+
+class Linearization:
+    """The NLP's rows sorted once into QP equalities and the finite sides of the other rows."""
+
+    def __init__(self, nlp: NLP) -> None:
+        self.lbg, self.ubg, self.lbx, self.ubx = nlp.lbg, nlp.ubg, nlp.lbx, nlp.ubx
+        equal = (nlp.lbg == nlp.ubg) & np.isfinite(nlp.lbg)
+        self.equality = np.flatnonzero(equal)
+        self.upper = np.flatnonzero(~equal & np.isfinite(nlp.ubg))
+        self.lower = np.flatnonzero(~equal & np.isfinite(nlp.lbg))
+        self.m = nlp.n_constraints
+        self.upper_only = np.setdiff1d(self.upper, self.lower)
+        self.lower_only = np.setdiff1d(self.lower, self.upper)
+        eq, up, lo = self.equality, self.upper, self.lower
+        self.select_equality = sp.csr_matrix((np.ones(eq.size), (np.arange(eq.size), eq)), shape=(eq.size, self.m))
+        self.select_inequality = sp.csr_matrix((np.concatenate([np.ones(up.size), -np.ones(lo.size)]),
+                                                (np.arange(up.size + lo.size), np.concatenate([up, lo]))),
+                                               shape=(up.size + lo.size, self.m))
+        """Row selections: the QP's A and G as products with the Jacobian, far cheaper than fancy indexing."""
+        self.bounded = bool(np.isfinite(nlp.lbx).any() or np.isfinite(nlp.ubx).any())
+
+    @property
+
+    def unconstrained(self) -> bool:
+        return not (self.bounded or self.equality.size or self.upper.size or self.lower.size)
+
+    def violations(self, g: np.ndarray) -> np.ndarray:
+        """How far each row is outside lbg ≤ g ≤ ubg."""
+        return np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0)
+
+    def theta(self, g: np.ndarray) -> float:
+        """ℓ1 violation of lbg ≤ g ≤ ubg."""
+        return float(np.sum(self.violations(g)))
+
+    def max_violation(self, g: np.ndarray) -> float:
+        return float(max(np.max(self.lbg - g, initial=0.0), np.max(g - self.ubg, initial=0.0)))
+
+    def problem(self, P, q: np.ndarray, jacobian: sp.csr_matrix, g: np.ndarray, lb: np.ndarray | None,
+                ub: np.ndarray | None, dense: bool) -> qpsolvers.Problem:
+        """min ½dᵀPd + qᵀd s.t. lbg ≤ g + jacobian·d ≤ ubg, lb ≤ d ≤ ub, in ``qpsolvers`` form."""
+        eq, up, lo = self.equality, self.upper, self.lower
+        A = (self.select_equality @ jacobian).tocsc() if eq.size else None
+        b = self.lbg[eq] - g[eq] if eq.size else None
+        G = (self.select_inequality @ jacobian).tocsc() if up.size + lo.size else None
+        h = np.concatenate([self.ubg[up] - g[up], g[lo] - self.lbg[lo]]) if G is not None else None
+        if dense:
+            P = P.toarray() if sp.issparse(P) else P
+            A = None if A is None else A.toarray()
+            G = None if G is None else G.toarray()
+        else:
+            P = sp.csc_matrix(P)
+        return qpsolvers.Problem(P, q, G, h, A, b, lb, ub)
+
+    def bounds(self, x: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Bounds on the step d keeping lbx ≤ x + d ≤ ubx (None when no variable is bounded)."""
+        if not self.bounded:
+            return None, None
+        return self.lbx - x, self.ubx - x
+
+    def multipliers(self, outcome: QPOutcome) -> np.ndarray:
+        """λ_g from the QP duals: y for equalities, +z on upper sides, −z on lower sides."""
+        lam = np.zeros(self.m)
+        if self.equality.size:
+            lam[self.equality] = outcome.y
+        if self.upper.size or self.lower.size:
+            lam[self.upper] += outcome.z[:self.upper.size]
+            lam[self.lower] -= outcome.z[self.upper.size:]
+        return lam
+

@@ -1,0 +1,110 @@
+"""The ``sqp`` solver plugin's face: its options, checked when it is built, and the solve that reports every
+failure as a status."""
+
+from __future__ import annotations
+
+import numpy as np
+import qpsolvers
+
+from gaitbench.problem.nlp import NLP
+from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
+from gaitbench.solve.solver import SolverResult, SolverStatus
+from plugins.solvers.sqp.run import Run
+
+_HESSIANS = ("exact", "bfgs")
+_MERITS = ("l1", "filter")
+
+
+class SQP:
+    """Line-search SQP with QP subproblems solved through ``qpsolvers``; see the package docstring for the method.
+
+    Shared options: ``max_iterations`` (QP-based steps, restoration steps included), ``time_limit_s`` (checked
+    once per iteration and passed on to the backends that take one; ``None`` for none), ``tolerance`` (on the
+    constraint violation, max-norm, and on the stationarity/complementarity residual scaled as IPOPT does),
+    ``print_level`` (≥ 1: one log line per iteration).
+
+    Specific options, with defaults:
+
+    - ``qp_solver="piqp"``: a name in ``qpsolvers.available_solvers``. PIQP (proximal interior point, sparse) is the
+      default because it did best on the gait steps: with the exact Hessian and the ℓ1 merit it converged from
+      both starts of both N = 20 steps and solved every standard problem, and it takes sparse matrices, so its cost
+      grows with the problem's nonzeros rather than with n³. The convexified Hessians of the gait steps are
+      ill-conditioned (curvature ~1e-5 along the torques next to augmentation terms ~1e4): DAQP and quadprog are
+      exact and fastest while they cope (DAQP: 5 iterations, 0.03 s from near the DMOC optimum, against PIQP's
+      31 and 0.25 s at the acceptable level) but cycle or report false infeasibility at N = 50, Clarabel failed one
+      N = 20 start, OSQP stops at its iteration limit, ProxQP reports false infeasibility, and HiGHS fails on free
+      variables and spends minutes on one gait QP.
+    - ``fallback_qp_solver="clarabel"``: the backend that solves again, cold, a QP the first one failed
+      (``"none"`` for none).
+    - ``qp_tolerance=1e-10``: the backend's accuracy settings (``_TOLERANCE_KEYWORDS``; quadprog has none).
+    - ``hessian="exact"``: or ``"bfgs"`` (damped BFGS).
+    - ``merit="l1"``: or ``"filter"``.
+    - ``second_order_correction=True``: try one second-order correction when the full step is rejected.
+    - ``acceptable_tolerance=1e-6``: IPOPT's ``acceptable_tol``: a solve also converges when the violation and the
+      KKT residual stay below it for 15 consecutive iterations, or when the iteration cannot continue (QP or line
+      search failure) from such a point: interior-point backends are accurate to ~1e-10 relative, which on the
+      gait steps (multipliers ~30 times constraint gradients ~7000) bounds the attainable stationarity near 1e-8.
+
+    A bad option value raises ValueError at construction (the CLI reports it).
+    """
+
+    name = "sqp"
+
+    def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
+                 print_level: int = 0, qp_solver: str = "piqp", qp_tolerance: float = 1e-10,
+                 hessian: str = "exact", merit: str = "l1", second_order_correction: bool = True,
+                 acceptable_tolerance: float = 1e-6, fallback_qp_solver: str | None = "clarabel") -> None:
+        if qp_solver not in qpsolvers.available_solvers:
+            raise ValueError(f"unknown QP solver {qp_solver!r}; available: "
+                             f"{', '.join(sorted(qpsolvers.available_solvers))}")
+        fallback_qp_solver = None if fallback_qp_solver in (None, "none") else fallback_qp_solver
+        if fallback_qp_solver is not None and fallback_qp_solver not in qpsolvers.available_solvers:
+            raise ValueError(f"unknown fallback QP solver {fallback_qp_solver!r}; available: "
+                             f"{', '.join(sorted(qpsolvers.available_solvers))}")
+        if hessian not in _HESSIANS:
+            raise ValueError(f"unknown hessian {hessian!r}; choose one of {', '.join(_HESSIANS)}")
+        if merit not in _MERITS:
+            raise ValueError(f"unknown merit {merit!r}; choose one of {', '.join(_MERITS)}")
+        if max_iterations < 0 or min(tolerance, qp_tolerance, acceptable_tolerance) <= 0:
+            raise ValueError("max_iterations must be ≥ 0, the tolerances > 0")
+        self.max_iterations = int(max_iterations)
+        self.time_limit_s = time_limit_s
+        self.tolerance = float(tolerance)
+        self.print_level = int(print_level)
+        self.qp_solver = qp_solver
+        self.fallback_qp_solver = fallback_qp_solver
+        self.qp_tolerance = float(qp_tolerance)
+        self.hessian = hessian
+        self.merit = merit
+        self.second_order_correction = bool(second_order_correction)
+        self.acceptable_tolerance = max(float(acceptable_tolerance), self.tolerance)
+        self._arguments = {"max_iterations": max_iterations, "time_limit_s": time_limit_s, "tolerance": tolerance,
+                           "print_level": print_level, "qp_solver": qp_solver, "qp_tolerance": qp_tolerance,
+                           "hessian": hessian, "merit": merit, "second_order_correction": second_order_correction,
+                           "acceptable_tolerance": acceptable_tolerance, "fallback_qp_solver": fallback_qp_solver}
+
+    def remedies(self) -> list[tuple[str, SQP]]:
+        """Variants for the walk's retry ladder, each another path through the same NLP: the filter instead of the
+        ℓ1 merit, and Clarabel's QPs instead of PIQP's. On forward walks they solve steps the default stops on
+        (HS N = 20, step 2: the filter; DMOC N = 50, step 2: Clarabel; both at the iteration limit by default)."""
+        variants = []
+        if self.merit != "filter":
+            variants.append(("filter", SQP(**{**self._arguments, "merit": "filter"})))
+        if self.qp_solver != "clarabel":
+            variants.append(("clarabel", SQP(**{**self._arguments, "qp_solver": "clarabel",
+                                                "fallback_qp_solver": self.qp_solver})))
+        return variants
+
+    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
+        """Solve from ``initial_guess``; every failure, including exceptions, becomes a status."""
+        deadline = Deadline(self.time_limit_s)
+        x0 = np.asarray(initial_guess, dtype=float).ravel()
+        run = None
+        try:
+            run = Run(self, NLPEvaluator(nlp, parameters), x0, deadline)
+            return run.solve()
+        except Exception as error:  # the Solver protocol reports failures, it never raises them
+            if run is None:
+                return error_result(error, x0, deadline)
+            return solver_result(SolverStatus.ERROR, f"SQP: {type(error).__name__}: {error}", run.x,
+                                 run.evaluator, run.iteration, deadline, run.lam.copy())

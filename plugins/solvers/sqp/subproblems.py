@@ -1,0 +1,73 @@
+"""The QP subproblems of an iteration: the SQP QP itself, its elastic version, and the multipliers read off them."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg
+
+from plugins.solvers.sqp.backends import QPOutcome
+from plugins.solvers.sqp.hessian import Model, convexify, working_set
+from plugins.solvers.sqp.iterate import Iterate
+
+
+class Subproblems(Iterate):
+    """The iterate, with the QPs it poses."""
+
+    def _model(self) -> Model:
+        """This iteration's QP matrix; see the package docstring for the convexification."""
+        if self.bfgs is not None:
+            return Model(self.bfgs, self.bfgs, np.zeros(0, dtype=int), np.zeros(0), 0.0)
+        H = sp.csc_matrix(self.evaluator.hessian_lagrangian(self.x, 1.0, self.lam))
+        if not np.all(np.isfinite(H.data)):
+            raise FloatingPointError("the Hessian of the Lagrangian is not finite")
+        model, self.shift = convexify(H, self.shift, self.shift_growth, self.jac,
+                                      lambda: working_set(self.lin, self.x, self.g, self.lam))
+        return model
+
+    def _qp(self, model: Model, g: np.ndarray, warm: QPOutcome | None) -> QPOutcome:
+        """The SQP subproblem with the constraints' constant term ``g`` (g(x), or g(x+d) − J d for a correction)."""
+        if self.lin.unconstrained:  # the Newton system itself: no backend needed
+            P = model.P
+            step = (scipy.sparse.linalg.spsolve(sp.csc_matrix(P), -self.grad) if sp.issparse(P)
+                    else scipy.linalg.cho_solve(scipy.linalg.cho_factor(P), -self.grad))
+            return QPOutcome(True, "unconstrained", step, np.zeros(0), np.zeros(0), None)
+        lb, ub = self.lin.bounds(self.x)
+        problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense)
+        return self.backends.solve(problem, warm, self.log)
+
+    def _elastic_qp(self, P, q: np.ndarray, weight: float) -> QPOutcome:
+        """min ½dᵀPd + qᵀd + W·Σ(p + n) s.t. lbg ≤ g + J d − p + n ≤ ubg, bounds on x + d, p, n ≥ 0: always
+        feasible, with multipliers bounded by W; the result's ``x`` is d alone."""
+        n, m = self.n, self.m
+        jacobian = sp.hstack([self.jac, -sp.eye(m), sp.eye(m)], format="csr")
+        lb, ub = self.lin.bounds(self.x)
+        lb = np.concatenate([np.full(n, -np.inf) if lb is None else lb, np.zeros(2 * m)])
+        ub = np.concatenate([np.full(n, np.inf) if ub is None else ub, np.full(2 * m, np.inf)])
+        q = np.concatenate([q, np.full(2 * m, weight)])
+        P = sp.csc_matrix(P)
+        elastic_curvature = 1e-6 * max(1.0, weight, float(np.max(P.diagonal())))  # strictly convex (quadprog)
+        P = sp.block_diag([P, elastic_curvature * sp.eye(2 * m)], format="csc")
+        outcome = self.backends.solve(self.lin.problem(P, q, jacobian, self.g, lb, ub, self.dense), None, self.log)
+        if outcome.solved:
+            outcome.x = outcome.x[:n]
+            outcome.z_box = None if outcome.z_box is None else outcome.z_box[:n]
+        return outcome
+
+    def _multipliers(self, outcome: QPOutcome, model: Model) -> np.ndarray:
+        """λ_g from the QP duals, with the augmented rows corrected (package docstring)."""
+        if self.lin.unconstrained:
+            return np.zeros(self.m)
+        lam = self.lin.multipliers(outcome)
+        if model.rows.size:  # only rows active in this QP: the others keep their (zero) QP multiplier
+            lin, rows = self.lin, model.rows
+            value = self.g[rows] + self.jac[rows] @ outcome.x
+            tolerance = 1e-7 * (1.0 + np.abs(value))
+            active = (np.abs(value - lin.ubg[rows]) <= tolerance) | (np.abs(value - lin.lbg[rows]) <= tolerance)
+            lam[rows[active]] += model.weights[active] * (value - self.g[rows])[active]
+            # A one-sided row the augmented QP holds active where H's own QP would not comes back with a multiplier
+            # of the wrong sign (on the gait steps, clearance rows at 1e-2): it is not active for H, so zero.
+            lam[lin.upper_only] = np.maximum(lam[lin.upper_only], 0.0)
+            lam[lin.lower_only] = np.minimum(lam[lin.lower_only], 0.0)
+        return lam
