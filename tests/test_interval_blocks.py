@@ -7,8 +7,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from gaitbench.problem import compiled as compiled_module
 from gaitbench.plugins import load_registry
+from gaitbench.problem import compiled as compiled_module
 from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
 from gaitbench.problem.nlp import NLPBuilder
 
