@@ -7,11 +7,12 @@ Run:    .venv/bin/python benchmarks/acot_regression.py            (compare; exit
                         (what a solver option does to the results: the same comparison, with the option on every case)
 
 The case set is ``benchmarks/suites/regression.toml``, solved in this process case by case with the suite
-runner's own ``run_case``, so every layer a suite run goes through (builds, caches, strategies, verification) is
-exercised. A case differs when its status changes or when its ACOT (the verified one for decrease-and-conquer) or
-its claimed ACOT moves by more than ``--tolerance``: IPOPT stops at a KKT error of 1e-8, so a faster core that
-computes the same problem lands within about that of the same optimum. Each comparison is appended to
-``benchmarks/results/acot_regression.jsonl`` with the commit it ran at, so the history of checks is kept.
+runner's own ``run_case`` and one build cache, as a suite's worker solves its cases, so every layer a suite run goes
+through (builds, caches, strategies, verification) is exercised. A case differs when its status changes or when its
+ACOT (the verified one for decrease-and-conquer) or its claimed ACOT moves by more than ``--tolerance``: IPOPT stops
+at a KKT error of 1e-8, so a faster core that computes the same problem lands within about that of the same
+optimum. Each comparison is appended to ``benchmarks/results/acot_regression.jsonl`` with the commit it ran at, so
+the history of checks is kept.
 
 Rounding band. These step problems do not determine their solution beyond rounding: the cost is the total
 variation of mechanical energy, whose optima form a continuum (docs/deviations.md, "Net hip power"), and IPOPT's
@@ -37,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.run.provenance import provenance
 from gaitbench.run.runner import run_case
@@ -54,12 +56,13 @@ def solve_cases(solver_options: dict | None = None) -> dict[str, dict]:
     rows keep the suite's keys, so they compare with the baseline)."""
     suite = load_suite(SUITE)
     rows = {}
+    builds = BuildCache()
     for case in suite.cases:
         solved = case
         if solver_options:
             solver = dataclasses.replace(case.solver, options={**case.solver.options, **solver_options})
             solved = dataclasses.replace(case, solver=solver)
-        outcome = run_case(solved)
+        outcome = run_case(solved, builds)
         rows[case.key] = {"case": case.label, "status": outcome.status, "message": outcome.message,
                           "wall_time_s": round(outcome.wall_time_s, 3),
                           **{name: outcome.metrics.get(name) for name in (*COMPARED, "iterations")}}

@@ -56,7 +56,6 @@ from gaitbench.run.store import load_results
 from gaitbench.run.suite import load_suite
 from gaitbench.solve.solver import prepare
 from gaitbench.solve.walk import WalkProblem, solve_and_verify
-from plugins.strategies.decrease_and_conquer import release_sections
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "performance.json"
@@ -214,7 +213,7 @@ def walks_part(registry) -> list[dict]:
             runs = [("one-phase", {}), ("decrease-and-conquer", {"workers": 1}),
                     ("decrease-and-conquer", {"workers": 2})]
             for strategy, options in runs:
-                release_sections()  # each walk builds its sections, as the first D&C case of a worker does
+                # a new problem: each walk builds its sections, as the first D&C case of a worker does
                 problem = WalkProblem(experiment, registry.create("transcription", name),
                                       registry.create("solver", "ipopt"), n_nodes, steps=WALK_STEPS)
                 started = time.perf_counter()

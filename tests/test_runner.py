@@ -147,6 +147,21 @@ def test_crashed_and_hung_workers_fail_only_their_case(tmp_path, faulty_plugins,
     assert rows[cases[2].key]["status"] == "solved"
 
 
+def test_a_local_worker_runs_decrease_and_conquer_s_sectional_pool(tmp_path: Path) -> None:
+    """``--jobs`` and the strategy's ``workers`` together: a case worker starts its own pool of sectional workers,
+    and the walk is the one solved sequentially in this process."""
+    def case(workers: int) -> Case:
+        return Case(PluginChoice("forward"), 8, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
+                    PluginChoice("decrease-and-conquer", {"polish": False, "workers": workers}), steps=1,
+                    method=f"DC workers={workers}", time_limit_s=60)
+
+    run_suite(suite_of([case(2)]), tmp_path / "pool", LocalPoolExecutor(1))
+    run_suite(suite_of([case(1)]), tmp_path / "here", InProcessExecutor())
+    (pooled,), (here,) = rows_by_key(tmp_path / "pool").values(), rows_by_key(tmp_path / "here").values()
+    assert pooled["status"] == "solved", pooled["message"]
+    assert pooled["claimed_acot"] == here["claimed_acot"] and pooled["strategy_details"] == here["strategy_details"]
+
+
 def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:
     good = walk_case(8)
     case = Case(good.experiment, 8, good.transcription, good.solver, PluginChoice("one-phase", {"bogus_option": 1}))

@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
+from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
@@ -22,7 +23,6 @@ from plugins.strategies.decrease_and_conquer import (
     DecreaseAndConquer,
     NodeValues,
     PointCosts,
-    release_sections,
 )
 
 NAN = np.nan
@@ -202,17 +202,18 @@ def test_parallel_sectional_solves_give_the_sequential_walk(forward):
         DecreaseAndConquer(workers=0)
 
 
-def test_later_walks_in_a_process_build_only_the_sections_not_built_yet(forward, monkeypatch):
+def test_walks_sharing_a_build_cache_build_only_the_sections_not_built_yet(forward, monkeypatch):
     from gaitbench.problem.transcription import Transcription
 
-    release_sections()
     built, build = [], Transcription._build
     monkeypatch.setattr(Transcription, "_build",
                         lambda self, structure: built.append(structure) or build(self, structure))
+    builds = BuildCache()  # a suite worker's
 
-    def walk(n, **options):
+    def walk(n, cache=builds, **options):
         problem = WalkProblem(forward, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"),
-                              n, steps=1, options=dataclasses.replace(ProblemOptions(limits=forward.limits), **options))
+                              n, steps=1, options=dataclasses.replace(ProblemOptions(limits=forward.limits), **options),
+                              builds=cache)
         built.clear()
         result = DecreaseAndConquer(polish=False).solve(problem)
         return result, sorted(structure.n_nodes for structure in built if structure.phase == "second")
@@ -221,8 +222,8 @@ def test_later_walks_in_a_process_build_only_the_sections_not_built_yet(forward,
     assert sizes == [3, 4, 5, 6, 7, 8]  # the sections k0 = 2 … 6, and the complete step
     shared, sizes = walk(10)
     assert sizes == [9, 10]  # the 3 … 8-node sections: built by the walk at N = 8 (8 nodes: its complete step)
-    release_sections()
-    alone, _ = walk(10)
+    alone, sizes = walk(10, cache=BuildCache())
+    assert sizes == [3, 4, 5, 6, 7, 8, 9, 10]  # a walk of its own builds everything
     for key in ("candidates", "failed_sections", "selection", "candidate_cots", "chosen", "claimed_cot"):
         assert shared.steps[0].details[key] == alone.steps[0].details[key], key
     walk(8, torque_regularization=1e-3)  # other problem options: other structures, and the kept ones are dropped

@@ -24,8 +24,10 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 
+from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.runner import CaseOutcome, failed_outcome, run_case
+from gaitbench.solve.parallel import ProcessExpired, WorkerPool
 
 EXECUTORS = ("inprocess", "local", "dask")
 
@@ -49,12 +51,15 @@ class InProcessExecutor:
     jobs = 1
 
     def run(self, cases: Iterable[Case]) -> Iterator[CaseOutcome]:
+        builds = BuildCache()  # this process's, for the run
         for case in cases:
-            yield run_case(case)
+            yield run_case(case, builds)
 
 
 class LocalPoolExecutor:
-    """A pool of ``jobs`` long-lived worker processes (Pebble), which can stop a case and replace its worker."""
+    """A pool of ``jobs`` long-lived worker processes (:class:`~gaitbench.solve.parallel.WorkerPool`), which can
+    stop a case and replace its worker. Each worker keeps what its walks build for its next cases (a
+    :class:`~gaitbench.problem.build_cache.BuildCache`)."""
 
     name = "local"
 
@@ -64,22 +69,17 @@ class LocalPoolExecutor:
         self.jobs = jobs
 
     def run(self, cases: Iterable[Case]) -> Iterator[CaseOutcome]:
-        import multiprocessing
         from concurrent.futures import FIRST_COMPLETED, wait
 
-        from pebble import ProcessPool
-
         # spawn, not fork: the parent has threads (progress display, SQLite), which fork would copy mid-state
-        pool = ProcessPool(max_workers=self.jobs, context=multiprocessing.get_context("spawn"),
-                           initializer=_worker_started)
-        upcoming = iter(cases)
-        running = {}
+        with WorkerPool(self.jobs, state=BuildCache, start="spawn") as pool:
+            upcoming = iter(cases)
+            running = {}
 
-        def fill() -> None:
-            while len(running) < self.jobs and (case := next(upcoming, None)) is not None:
-                running[pool.schedule(run_case, (case,), timeout=hard_limit(case))] = case
+            def fill() -> None:
+                while len(running) < self.jobs and (case := next(upcoming, None)) is not None:
+                    running[pool.schedule(run_case, case, timeout=hard_limit(case))] = case
 
-        try:
             fill()
             while running:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
@@ -87,14 +87,9 @@ class LocalPoolExecutor:
                 fill()  # the freed workers start their next cases while these are recorded
                 for future, case in finished:
                     yield _pool_outcome(future, case)
-        finally:
-            pool.stop()
-            pool.join()
 
 
 def _pool_outcome(future, case: Case) -> CaseOutcome:
-    from pebble import ProcessExpired
-
     try:
         return future.result()
     except FutureTimeout:
@@ -103,32 +98,6 @@ def _pool_outcome(future, case: Case) -> CaseOutcome:
         return failed_outcome(case, "crashed", _exit_message(error.exitcode))
     except Exception as error:  # the outcome could not be sent back (e.g. unpicklable)
         return failed_outcome(case, "error", f"{type(error).__name__}: {error}")
-
-
-def _worker_started() -> None:
-    """Pool worker initializer: ignore a SIGTERM that comes while the worker is already exiting.
-
-    Pebble stops a pool by closing its channels (idle workers then exit on their own) and sending each worker
-    SIGTERM, whose handler ends the process at once (``os._exit``). Landing in the middle of a worker's own exit,
-    it cut the multiprocessing finalizers short between unlinking a semaphore that a plugin had created (pyomo
-    makes one on import) and telling the resource tracker, which then warned of "leaked semaphore objects" after
-    clean runs. A worker already exiting finishes by itself (Pebble kills it if it takes more than 3 s); any
-    other SIGTERM (a case past its time limit) still ends it at once.
-    """
-    from multiprocessing import util
-
-    stop_now = signal.getsignal(signal.SIGTERM)
-
-    def on_sigterm(signum: int, frame) -> None:
-        if util.is_exiting():
-            return
-        if callable(stop_now):
-            stop_now(signum, frame)
-        else:
-            signal.signal(signal.SIGTERM, signal.SIG_DFL)
-            os.kill(os.getpid(), signal.SIGTERM)
-
-    signal.signal(signal.SIGTERM, on_sigterm)
 
 
 class DaskExecutor:
@@ -182,10 +151,11 @@ class DaskExecutor:
 class CaseServer:
     """A long-lived child process that runs one Dask worker's cases one at a time, as a local-pool worker does.
 
-    A subprocess rather than multiprocessing because Dask's worker processes are daemonic and may not have
-    multiprocessing children. The child keeps what a walk builds (sectional NLPs, derived interval functions) for
-    the worker's next cases, and Python starts once per worker, not once per case (docs/performance.md,
-    "Executors").
+    A subprocess rather than a :class:`~gaitbench.solve.parallel.WorkerPool` because Dask's worker processes are
+    daemonic (unless the cluster is configured otherwise) and may not have multiprocessing children, and because the
+    child must not inherit :data:`DASK_ONLY_ENVIRONMENT`. The child keeps what a walk builds (sectional NLPs in its
+    :class:`~gaitbench.problem.build_cache.BuildCache`, derived interval functions) for the worker's next
+    cases, and Python starts once per worker, not once per case (docs/performance.md, "Executors").
     A case that crashes or outlives :func:`hard_limit` costs only the child, which the next case replaces.
     """
 
@@ -275,10 +245,11 @@ def _exit_message(code: int | None) -> str:
 def _serve(reply_fd: int) -> None:
     """The child's loop: for each line "case path<TAB>outcome path" on stdin, run the case, write its outcome, and
     report on ``reply_fd``. It ends when its server closes stdin or kills it."""
+    builds = BuildCache()
     for line in sys.stdin:
         given, returned = line.rstrip("\n").split("\t")
         case = pickle.loads(Path(given).read_bytes())
-        Path(returned).write_bytes(pickle.dumps(run_case(case)))
+        Path(returned).write_bytes(pickle.dumps(run_case(case, builds)))
         os.write(reply_fd, b"\n")
 
 

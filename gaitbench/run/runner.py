@@ -17,6 +17,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import provenance
 from gaitbench.run.store import ResultStore, case_file
@@ -50,13 +51,14 @@ class CaseOutcome:
         return self.status != "solved"
 
 
-def run_case(case: Case) -> CaseOutcome:
-    """Solve one case's walk (and track it if the case asks), in this process."""
+def run_case(case: Case, builds: BuildCache | None = None) -> CaseOutcome:
+    """Solve one case's walk (and track it if the case asks), in this process, keeping what its strategy builds in
+    ``builds`` for the next cases (a worker's) or, without it, for this case alone."""
     started = time.perf_counter()
     metrics: dict[str, Any] = {}
     files: dict[str, bytes] = {}
     try:
-        walk = _solve_walk(case)
+        walk = _solve_walk(case, builds or BuildCache())
         metrics |= walk_metrics(walk)
         files |= _saved_files(walk, WALK_FILE)
         status = "solved" if walk.complete else "incomplete"
@@ -75,7 +77,7 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
     return CaseOutcome(case, status, message, wall_time_s)
 
 
-def _solve_walk(case: Case) -> WalkResult:
+def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.walk import WalkProblem
 
@@ -90,7 +92,7 @@ def _solve_walk(case: Case) -> WalkResult:
     objective = registry.create("objective", case.objective.name, **case.objective.options)
     options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
     problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
-                          objective=objective)
+                          objective=objective, builds=builds)
     return strategy.solve(problem)
 
 

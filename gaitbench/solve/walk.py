@@ -21,6 +21,7 @@ from gaitbench.model.energetics import average_cot
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.terrain import StepCheck
+from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory
@@ -181,7 +182,9 @@ def trajectory_arrays(trajectory: StepTrajectory, prefix: str) -> dict[str, np.n
 @dataclass(frozen=True)
 class WalkProblem:
     """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
-    transcription and one solver, under the given problem options, for the given objective."""
+    transcription and one solver, under the given problem options, for the given objective. ``builds`` keeps
+    what a strategy builds beyond the walk's own steps for later walks: this walk's alone unless its runner
+    passes one it keeps (a suite's worker)."""
 
     experiment: Experiment
     transcription: Transcription
@@ -190,6 +193,7 @@ class WalkProblem:
     steps: int | None = None
     options: ProblemOptions | None = None
     objective: Objective = NET_POWER
+    builds: BuildCache = field(default_factory=BuildCache, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import multiprocessing
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 
@@ -32,10 +31,11 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.model.energetics import candidate_cot
-from gaitbench.problem.gait_problem import StepData, StepStructure, role_robot_vector, sectional_structure
+from gaitbench.problem.gait_problem import StepData, role_robot_vector, sectional_structure
 from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
-from gaitbench.problem.transcription import TranscribedStep, Transcription
+from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.solve.parallel import WorkerPool
 from gaitbench.solve.solver import SolverResult, prepare
 from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import verify_step
@@ -152,36 +152,35 @@ class DecreaseAndConquer:
 
 
 class SectionalSolves:
-    """The sectional problems k0 = 2 … N−2 of a walk: each NLP built once, solved for every step.
+    """The sectional problems k0 = 2 … N−2 of a walk: each NLP built once (or kept from an earlier walk, through
+    the walk's :class:`~gaitbench.problem.build_cache.BuildCache`), solved for every step.
 
-    With ``workers`` > 1 the solves of a step run in a pool of forked processes. Forking, rather than sending
-    the problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures
-    that do not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once
-    rather than once per worker. A process that is itself
-    a daemon (a suite's local pool worker) cannot have children: give the suite ``--jobs`` or the strategy
-    ``workers``, not both.
+    With ``workers`` > 1 the solves of a step run in a pool of forked workers
+    (:class:`~gaitbench.solve.parallel.WorkerPool`), each holding this object. Forking, rather than sending the
+    problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures that do
+    not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once rather than
+    once per worker. In a suite run each case worker starts its own pool, so ``--jobs`` × ``workers`` processes
+    share the machine's cores.
     """
 
     def __init__(self, problem: WalkProblem, workers: int = 1) -> None:
         structure = problem.structure("second")
         self.starts = list(range(2, problem.n_nodes - 1))
-        builder = sectional_builder(problem.transcription, structure)
+        builder = problem.builds.builder(problem.transcription, structure)
         self.built: dict[int, TranscribedStep] = {
             k0: builder.build(sectional_structure(structure, k0)) for k0 in self.starts}
         self.solver = problem.solver
-        self._pool: ProcessPoolExecutor | None = None
+        self._pool: WorkerPool[SectionalSolves] | None = None
         if workers > 1 and len(self.starts) > 1:
             for built in self.built.values():  # built once here and inherited, not once per worker
                 prepare(self.solver, built.nlp)
-            global _FORKED
-            _FORKED = self  # what the forked workers see: workers start on first submit, after this is set
-            self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
+            self._pool = WorkerPool(workers, state=lambda: self, start="fork")  # forks on the first solve
 
     def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]]) -> list[SolverResult]:
         """Solve (k0, parameters, initial guess) tasks; results in the tasks' order."""
         if self._pool is None:
             return [self.solve_one(task) for task in tasks]
-        return list(self._pool.map(_solve_forked, tasks))
+        return self._pool.map(_solve_section, tasks)
 
     def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
         k0, parameters, guess = task
@@ -192,41 +191,12 @@ class SectionalSolves:
 
     def __exit__(self, *exc_info: object) -> None:
         if self._pool is not None:
-            self._pool.shutdown()
+            self._pool.close()
 
 
-_FORKED: SectionalSolves | None = None
-
-
-def _solve_forked(task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
-    return _FORKED.solve_one(task)
-
-
-_SECTION_BUILDERS: list[Transcription] = []
-"""Per process, the transcription instances whose sectional builds later walks reuse: one per configuration."""
-
-
-def sectional_builder(transcription: Transcription, structure: StepStructure) -> Transcription:
-    """The instance that builds this walk's sections, kept for the walks this process runs next.
-
-    A section of M nodes is the step structure of M nodes whatever the walk's N, so a suite's worker, running
-    D&C at N = 10, 20, ..., builds only the sizes it has not built yet, and the NLPs come with their built
-    solvers. It keeps only the sections of the walk's problem options (another experiment's limits make other
-    structures), so it holds at most the sections of its largest N per transcription: what that walk needed anyway.
-    """
-    builder = next((kept for kept in _SECTION_BUILDERS if kept.builds_like(transcription)), None)
-    if builder is None:
-        _SECTION_BUILDERS.append(builder := transcription)
-    for kept in _SECTION_BUILDERS:
-        kept.keep_builds(lambda section: (section.options, section.objective)
-                                         == (structure.options, structure.objective))
-    return builder
-
-
-def release_sections() -> None:
-    """Drop the sections kept for later walks, and their memory: the next walk builds its own, as a fresh
-    process would (how ``benchmarks/performance.py`` times each walk as a case of its own)."""
-    _SECTION_BUILDERS.clear()
+def _solve_section(task: tuple[int, np.ndarray, np.ndarray], sections: SectionalSolves) -> SolverResult:
+    """A sectional solve in a forked worker, which holds the walk's :class:`SectionalSolves`."""
+    return sections.solve_one(task)
 
 
 def _label(start: int) -> str:
