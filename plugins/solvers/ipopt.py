@@ -130,7 +130,7 @@ class Ipopt:
         return [("adaptive-mu", Ipopt(**{**self._arguments, "mu_strategy": "adaptive"}))]
 
     def prepare(self, nlp: NLP) -> None:
-        """Build the ``nlpsol`` for ``nlp`` now (see :meth:`gaitbench.solve.solver.Solver.prepare`)."""
+        """Build the ``nlpsol`` for ``nlp`` now (see :class:`gaitbench.contracts.Solver`, its optional ``prepare``)."""
         self._solver(nlp)
 
     def _solver(self, nlp: NLP) -> ca.Function:

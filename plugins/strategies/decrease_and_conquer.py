@@ -283,7 +283,7 @@ class Patch:
 
     def trajectory(self, stance: int, h: float) -> StepTrajectory:
         """The patch as a step trajectory: cubic Hermite angles through the nodal (q, q̇), linear rates and
-        torques (:func:`~gaitbench.problem.transcription.nodal_trajectory`), the reading a saved walk's patchwork
+        torques (:func:`~gaitbench.problem.trajectory.nodal_trajectory`), the reading a saved walk's patchwork
         gets back."""
         return nodal_trajectory(np.arange(len(self.q)) * h, self.q, self.dq, self.tau, self.push_off, stance)
 
