@@ -273,7 +273,8 @@ class Uno:
                              multipliers=np.asarray(result.constraint_dual_solution, dtype=float) / c)
 
     def prepare(self, nlp: NLP) -> None:
-        """Build the unopy model and solver for ``nlp`` now (see :class:`gaitbench.contracts.Solver`, its optional ``prepare``)."""
+        """Build the unopy model and solver for ``nlp`` now (see :class:`gaitbench.contracts.Solver`, its optional
+        ``prepare``)."""
         self._built(nlp, NLPEvaluator(nlp, np.zeros(nlp.p.numel())))
 
     def _built(self, nlp: NLP, evaluator: NLPEvaluator) -> _Built:
