@@ -33,7 +33,7 @@ from gaitbench.problem.objective import Objective
 if TYPE_CHECKING:
     import numpy as np
 
-    from gaitbench.control.tracking import StepInfo
+    from gaitbench.control.step_info import StepInfo
     from gaitbench.problem.gait_problem import StepStructure
     from gaitbench.problem.nlp import NLP
     from gaitbench.problem.transcription import TranscribedStep
@@ -112,7 +112,7 @@ class Strategy(Protocol):
 class Controller(Protocol):
     """A tracking control law (a ``controller`` plugin, built as ``factory(model, reference, **options)`` with the
     :class:`~gaitbench.model.mechanics.BipedModel` the walk was solved with and the
-    :class:`~gaitbench.control.tracking.Reference` it tracks)."""
+    :class:`~gaitbench.control.reference.Reference` it tracks)."""
 
     def torque(self, t: float, q: np.ndarray, dq: np.ndarray, disturbance: np.ndarray, step: StepInfo) -> np.ndarray:
         """Hip torques (τ1, τ2) at local time ``t`` (s) of ``step``, from the measured configuration ``q`` and the

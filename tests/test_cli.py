@@ -245,7 +245,7 @@ def test_the_solve_spinner_counts_the_steps_and_ends_on_the_walk(invoke, monkeyp
     """It used to end on "solving step 4 of 3": the step after the last."""
     from contextlib import contextmanager
 
-    from gaitbench.cli import main as cli
+    from gaitbench.cli import solve_command as cli
 
     shown = []
 

@@ -235,7 +235,7 @@ def test_a_dc_walk_stored_without_its_polished_trajectory_shows_the_patchwork(st
 
 
 def test_tracking_section_from_track_files(store, tmp_path):
-    """A synthetic track.json/npz in the format of gaitbench.control.tracking.TrackingResult.save."""
+    """A synthetic track.json/npz in the format of gaitbench.control.results.TrackingResult.save."""
     copy = tmp_path / "tracked"
     shutil.copytree(store, copy)
     with sqlite3.connect(copy / "results.sqlite") as db:

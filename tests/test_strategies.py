@@ -165,14 +165,14 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
 def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):
     """The verified trajectory, each step re-solved from the chosen patchwork, is in the outcome and in the walk's
     NPZ beside the patchwork, and comes back from it (what the report draws and tracking follows)."""
-    from gaitbench.control.tracking import load_walk
+    from gaitbench.solve.walk_file import load_walk, write_walk
 
     for step in walk.steps:
         assert step.polished is not None and step.polished.solved and step.verified is step.polished
         assert step.polished.verification.cot == step.details["polished"]["cot"]
         assert step.polished.verification.max_defect <= DYNAMICS_TOLERANCE
         assert step.details["polished"]["max_defect"] == step.polished.verification.max_defect
-    path = walk.save(tmp_path / "walk.json")
+    path = write_walk(walk, tmp_path / "walk.json")
     with np.load(path.with_suffix(".npz")) as arrays:
         for step in walk.steps:
             prefix = f"step{step.index:02d}"

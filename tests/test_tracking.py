@@ -11,18 +11,15 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
-from gaitbench.control.tracking import (
-    SERIES_KEYS,
-    FallCriteria,
-    Reference,
-    TrackingInputError,
-    load_walk,
-    track,
-    track_walk,
-)
+from gaitbench.control.closed_loop import track
+from gaitbench.control.falls import FallCriteria
+from gaitbench.control.reference import Reference
+from gaitbench.control.results import SERIES_KEYS
+from gaitbench.control.tracking import track_walk
 from gaitbench.plugins import UnknownPluginError, load_registry
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk import WalkProblem
+from gaitbench.solve.walk_file import WalkFileError, load_walk, write_walk
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
@@ -44,7 +41,7 @@ def reference(walk):
 
 @pytest.fixture(scope="module")
 def saved(walk, tmp_path_factory):
-    return walk.save(tmp_path_factory.mktemp("walk") / "forward.json")
+    return write_walk(walk, tmp_path_factory.mktemp("walk") / "forward.json")
 
 
 def run(reference, controller="thesis", observer="thesis", disturbance="friction", *, controller_options=None,
@@ -188,14 +185,14 @@ def test_stored_walk_gives_the_same_reference_and_a_complete_record(walk, refere
 
 
 def test_bad_inputs_name_the_file_and_the_fix(saved, tmp_path):
-    with pytest.raises(TrackingInputError, match="no such result file.*gaitbench solve"):
+    with pytest.raises(WalkFileError, match="no such result file.*gaitbench solve"):
         load_walk(tmp_path / "missing.json", REGISTRY)
     orphan = tmp_path / "orphan.json"
     orphan.write_text(saved.read_text())
-    with pytest.raises(TrackingInputError, match=r"orphan\.json.*forward\.npz is missing"):
+    with pytest.raises(WalkFileError, match=r"orphan\.json.*forward\.npz is missing"):
         load_walk(orphan, REGISTRY)
     (tmp_path / "broken.json").write_text('{"experiment": "forward"}')
-    with pytest.raises(TrackingInputError, match="broken.json: not a walk result, missing"):
+    with pytest.raises(WalkFileError, match="broken.json: not a walk result, missing"):
         load_walk(tmp_path / "broken.json", REGISTRY)
     with pytest.raises(UnknownPluginError, match="unknown controller 'nope'"):
         track_walk(saved, controller="nope", registry=REGISTRY)
@@ -237,15 +234,15 @@ def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tm
     assert walk.complete, walk.failure
     verified, claimed = walk.strategy_details["verified_acot"], walk.strategy_details["claimed_acot"]
     assert abs(verified - claimed) > 1e-4  # measured: the patchwork claims less than its polished trajectory costs
-    saved = walk.save(tmp_path / "dc.json")
+    saved = write_walk(walk, tmp_path / "dc.json")
     for source in (walk, saved):
-        result = track_walk(source, "thesis", "ideal", "none", registry=REGISTRY, experiment=experiment)
+        result = track_walk(source, "thesis", "ideal", "none", registry=REGISTRY)
         assert result.walk["trajectory"] == "polished"
         assert result.acot_reference == pytest.approx(verified, rel=1e-9)
     reference = Reference.from_walk(walk, experiment)
     np.testing.assert_array_equal(reference.steps[0].q_nodes, walk.steps[0].polished.trajectory.q)
 
     unpolished = DecreaseAndConquer(polish=False).solve(problem)
-    result = track_walk(unpolished, "thesis", "ideal", "none", registry=REGISTRY, experiment=experiment)
+    result = track_walk(unpolished, "thesis", "ideal", "none", registry=REGISTRY)
     assert result.walk["trajectory"] == "walk"
     assert result.acot_reference == pytest.approx(unpolished.strategy_details["claimed_acot"], rel=1e-9)

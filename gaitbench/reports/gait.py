@@ -1,7 +1,7 @@
 """One stored gait: its time series, ground reactions and push-off impulses, figures, and a stick-figure animation.
 
-The walk is read from the store (``cases/<key>/walk.json`` + ``walk.npz``, written by
-:meth:`gaitbench.solve.walk.WalkResult.save`). Times are made global (each step starts where the previous one ended).
+The walk is read from the store (``cases/<key>/walk.json`` + ``walk.npz``, a walk file of
+:mod:`gaitbench.solve.walk_file`). Times are made global (each step starts where the previous one ended).
 Ground reactions are computed from the stored nodal trajectory with the 4-DOF model's exact constraint force
 (:meth:`gaitbench.model.mechanics.BipedModel.forward_dynamics`, DECISIONS §2); the 2-DOF First-Phase model pins its
 stance foot and defines no ground reaction, and the report says so instead of inventing one.
@@ -12,11 +12,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gaitbench.reports.figures import Figure, legend_below, render, slug, subplots
+
+if TYPE_CHECKING:
+    from gaitbench.solve.walk_file import WalkFile
 
 FRAME_RATE = 30.0
 """Frames per second of the stick-figure animation (nodal values linearly interpolated)."""
@@ -78,28 +81,24 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
     """
     from gaitbench.model.mechanics import BipedModel
     from gaitbench.plugins import load_registry
-    from gaitbench.solve.walk import POLISHED
+    from gaitbench.solve.walk_file import POLISHED, read_walk
 
-    store_dir = Path(store_dir)
-    path = store_dir / case["walk_path"]
-    data = json.loads(path.read_text())
-    arrays = {}
-    if "trajectories" in data:
-        with np.load(path.parent / data["trajectories"]) as npz:
-            arrays = {key: npz[key] for key in npz.files}
+    walk = read_walk(Path(store_dir) / case["walk_path"])
     registry = registry or load_registry()
-    options = case["experiment_options"] if isinstance(case["experiment_options"], dict) else {}
-    experiment = registry.create("experiment", data["experiment"], **options)
-    phase = data.get("phase", "second")
+    if walk.version is None:  # an unversioned walk file holds no experiment options; the store row does
+        options = case["experiment_options"] if isinstance(case["experiment_options"], dict) else {}
+        experiment = registry.create("experiment", walk.header["experiment"], **options)
+    else:
+        experiment = walk.experiment(registry)
+    phase = walk.header.get("phase", "second")
     notes = []
     model = BipedModel(experiment.robot, 4) if phase == "second" else None
     if model is None:
         notes.append("Ground reactions: not shown. This walk uses the 2-DOF First-Phase model, whose stance foot is "
                      "pinned; gaitbench's model defines no ground reaction for it (the 4-DOF model does).")
     footholds = experiment.terrain.footholds()
-    own = _steps(data["steps"], arrays, lambda step: step)
-    polished = _steps(data["steps"][:len(own)], arrays, lambda step: (step.get("details") or {}).get(POLISHED),
-                      POLISHED)
+    own = _steps(walk, walk.steps, lambda step: step)
+    polished = _steps(walk, walk.steps[:len(own)], lambda step: (step.get("details") or {}).get(POLISHED), POLISHED)
     overlay: list[GaitStep] = []
     trajectory = "walk"
     if own and len(polished) == len(own):
@@ -134,21 +133,21 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
                 trajectory=trajectory)
 
 
-def _steps(stored: list[dict], arrays: dict[str, np.ndarray], figures, name: str = "") -> list[GaitStep]:
-    """The walk's steps with arrays under ``stepNN[_name]_*``, on global times (each step starts where the one before
-    ended), up to the first without; ``figures(step)`` is the dict holding the step's COT, push-off impulse, max
-    defect and resim error."""
+def _steps(walk: WalkFile, records: list[dict], figures, name: str = "") -> list[GaitStep]:
+    """The walk's steps with arrays (``name``: ``polished`` for the polished trajectories'), on global times (each
+    step starts where the one before ended), up to the first without; ``figures(step)`` is the dict holding the
+    step's COT, push-off impulse, max defect and resim error."""
     steps, start = [], 0.0
-    for step in stored:
-        prefix = f"step{int(step['index']):02d}" + (f"_{name}" if name else "")
+    for step in records:
+        arrays = walk.step_arrays(int(step["index"]), name)
         numbers = figures(step)
-        if f"{prefix}_q" not in arrays or not isinstance(numbers, dict):
+        if "q" not in arrays or not isinstance(numbers, dict):
             break
-        t = np.asarray(arrays[f"{prefix}_t"], dtype=float)
-        tau_t = np.asarray(arrays[f"{prefix}_tau_t"], dtype=float)
-        q, dq = np.asarray(arrays[f"{prefix}_q"], dtype=float), np.asarray(arrays[f"{prefix}_dq"], dtype=float)
-        tau = np.asarray(arrays[f"{prefix}_tau"], dtype=float).reshape(len(tau_t), -1)
-        push_off = float(np.asarray(arrays[f"{prefix}_push_off"]).ravel()[0]) if f"{prefix}_push_off" in arrays \
+        t = np.asarray(arrays["t"], dtype=float)
+        tau_t = np.asarray(arrays["tau_t"], dtype=float)
+        q, dq = np.asarray(arrays["q"], dtype=float), np.asarray(arrays["dq"], dtype=float)
+        tau = np.asarray(arrays["tau"], dtype=float).reshape(len(tau_t), -1)
+        push_off = float(np.asarray(arrays["push_off"]).ravel()[0]) if "push_off" in arrays \
             else numbers.get("push_off_impulse")
         steps.append(GaitStep(int(step["index"]), int(step["stance"]), start + t, q, dq, start + tau_t, tau, push_off,
                               numbers.get("cot"), numbers.get("max_defect"), numbers.get("resim_error")))

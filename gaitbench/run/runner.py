@@ -60,13 +60,13 @@ def run_case(case: Case, builds: BuildCache | None = None) -> CaseOutcome:
     try:
         walk = _solve_walk(case, builds or BuildCache())
         metrics |= walk_metrics(walk)
-        files |= _saved_files(walk, WALK_FILE)
+        files |= _walk_files(walk)
         status = "solved" if walk.complete else "incomplete"
         message = "" if walk.complete else (walk.failure or "the walk stopped early")
         if case.tracking is not None and walk.complete:
             tracking = _track(case, walk)
             metrics |= tracking_metrics(tracking)
-            files |= _saved_files(tracking, TRACK_FILE)
+            files |= _saved_files(tracking.save, TRACK_FILE)
     except Exception as error:  # a failing plugin is this case's result, not the run's end
         status, message = "error", _describe(error)
     return CaseOutcome(case, status, message, time.perf_counter() - started, metrics, files, provenance())
@@ -93,22 +93,29 @@ def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
     problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
                           objective=objective, builds=builds)
-    return strategy.solve(problem)
+    walk = strategy.solve(problem)
+    walk.experiment_options, walk.strategy_options = dict(case.experiment.options), dict(case.strategy.options)
+    return walk
 
 
 def _track(case: Case, walk):
     from gaitbench.control.tracking import track_walk
 
-    stage, registry = case.tracking, _registry(case)
-    experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
+    stage = case.tracking
     return track_walk(walk, controller=stage.controller, observer=stage.observer, disturbance=stage.disturbance,
-                      options=stage.options, registry=registry, experiment=experiment)
+                      options=stage.options, registry=_registry(case))
 
 
-def _saved_files(result, name: str) -> dict[str, bytes]:
-    """The files ``result.save`` writes (JSON and its NPZ), read back as bytes for the trip to the store."""
+def _walk_files(walk) -> dict[str, bytes]:
+    from gaitbench.solve.walk_file import write_walk
+
+    return _saved_files(lambda path: write_walk(walk, path), WALK_FILE)
+
+
+def _saved_files(save: Callable[[Path], Path], name: str) -> dict[str, bytes]:
+    """The files ``save`` writes (JSON and its NPZ) at ``name``, read back as bytes for the trip to the store."""
     with tempfile.TemporaryDirectory(prefix="gaitbench-save-") as directory:
-        result.save(Path(directory) / name)
+        save(Path(directory) / name)
         return {path.name: path.read_bytes() for path in Path(directory).iterdir()}
 
 

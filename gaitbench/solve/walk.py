@@ -8,11 +8,9 @@ solved before it are kept.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -109,6 +107,11 @@ class WalkResult:
     """The :class:`ProblemOptions` the walk was solved under, every field (limits included)."""
     objective: str = NET_POWER.name
     """The objective every COT of the walk is measured in (:meth:`gaitbench.problem.objective.Objective.describe`)."""
+    experiment_options: dict = field(default_factory=dict)
+    """The options the experiment was built with, so that a saved walk is tracked on the same experiment; set by
+    whoever built the plugins (``gaitbench solve``, the suite runner)."""
+    strategy_options: dict = field(default_factory=dict)
+    """The options the strategy was built with (set like :attr:`experiment_options`)."""
 
     @property
     def failure(self) -> str | None:
@@ -127,9 +130,11 @@ class WalkResult:
     def as_dict(self) -> dict:
         return {
             "experiment": self.experiment,
+            "experiment_options": self.experiment_options,
             "transcription": self.transcription,
             "solver": self.solver,
             "strategy": self.strategy,
+            "strategy_options": self.strategy_options,
             "objective": self.objective,
             "N": self.N,
             "phase": self.phase,
@@ -142,41 +147,6 @@ class WalkResult:
             "problem_options": self.problem_options,
             "steps": [step.as_dict() for step in self.steps],
         }
-
-    def save(self, path: str | Path) -> Path:
-        """Write the result as JSON and the trajectories beside it as NPZ (referenced from the JSON)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        arrays = {}
-        for step in self.steps:
-            prefix = f"step{step.index:02d}"
-            if step.trajectory is not None:
-                arrays |= trajectory_arrays(step.trajectory, prefix)
-            if step.polished is not None and step.polished.trajectory is not None:
-                arrays |= trajectory_arrays(step.polished.trajectory, f"{prefix}_{POLISHED}")
-        data = self.as_dict()
-        if arrays:
-            npz = path.with_suffix(".npz")
-            np.savez_compressed(npz, **arrays)
-            data["trajectories"] = npz.name
-        path.write_text(json.dumps(data, indent=2, default=_json_default))
-        return path
-
-
-POLISHED = "polished"
-"""The middle of the NPZ names of a polished step's arrays: ``step01_polished_q`` beside ``step01_q``."""
-
-
-def trajectory_arrays(trajectory: StepTrajectory, prefix: str) -> dict[str, np.ndarray]:
-    """The NPZ arrays of one step trajectory: ``<prefix>_t``, ``_q``, ``_dq``, ``_tau``, ``_tau_t``, ``_push_off``."""
-    return {
-        f"{prefix}_t": trajectory.times,
-        f"{prefix}_q": trajectory.q,
-        f"{prefix}_dq": trajectory.dq,
-        f"{prefix}_tau": trajectory.tau,
-        f"{prefix}_tau_t": trajectory.control_times,
-        f"{prefix}_push_off": np.array([trajectory.push_off]),
-    }
 
 
 @dataclass(frozen=True)
@@ -383,11 +353,3 @@ def next_step_state(model: BipedModel, trajectory: StepTrajectory) -> np.ndarray
         dq, _ = model.push_off(q, dq, trajectory.push_off, trajectory.stance)
     strike = model.heel_strike(q, dq, trajectory.stance)
     return np.r_[strike.q[:2], strike.dq[:2]]
-
-
-def _json_default(value):
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"cannot serialize {type(value).__name__}")

@@ -1,6 +1,6 @@
 """Tracking controllers of the thesis's Chapter 4 (ch4-control.md §1–3; DECISIONS §9), and a PD baseline.
 
-Each is built as ``factory(model, reference, **options)`` and tracks :class:`gaitbench.control.tracking.Reference`.
+Each is built as ``factory(model, reference, **options)`` and tracks :class:`gaitbench.control.reference.Reference`.
 
 Gains (DECISIONS §8: the thesis's values were lost). The model-based laws impose ë + K_v ė + K_p e = 0 on each
 leg; the defaults K_p = 900 s⁻², K_v = 60 s⁻¹ make it critically damped at ω_n = 30 rad/s (4.8 Hz): well above the
@@ -15,7 +15,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.control.tracking import Reference, StepInfo, inverse_dynamics, model_terms
+from gaitbench.control.dynamics import inverse_dynamics, model_terms
+from gaitbench.control.reference import Reference
+from gaitbench.control.step_info import StepInfo
 from gaitbench.model.mechanics import BipedModel
 
 DEFAULT_KP = 900.0

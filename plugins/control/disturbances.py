@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.control.tracking import StepInfo
+from gaitbench.control.step_info import StepInfo
 from gaitbench.model.experiment import Experiment
 
 

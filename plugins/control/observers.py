@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.control.tracking import StepInfo, held_foot_acceleration
+from gaitbench.control.dynamics import held_foot_acceleration
+from gaitbench.control.step_info import StepInfo
 from gaitbench.model.mechanics import BipedModel
 
 DEFAULT_L = 500.0

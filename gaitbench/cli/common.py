@@ -1,0 +1,73 @@
+"""What the command modules share: plain printing, KEY=VALUE plugin options, and building a plugin so that every
+failure is a usage error naming the option to fix."""
+
+from __future__ import annotations
+
+import click
+from rich.console import Console
+from rich.text import Text
+
+from gaitbench.plugins import PluginConflictError, UnknownPluginError
+
+
+def print_plain(console: Console, message: str, style: str) -> None:
+    """Print plain text: no markup parsing (paths and messages may contain brackets), no hard line wraps."""
+    console.print(Text(message, style=style), soft_wrap=True)
+
+
+
+def parse_options(pairs: tuple[str, ...], option: str) -> dict[str, object]:
+    """KEY=VALUE pairs with numbers and true/false converted, for plugin factories."""
+    options: dict[str, object] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key:
+            raise click.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint=option)
+        value: object = text
+        for convert in (int, float):
+            try:
+                value = convert(text)
+                break
+            except ValueError:
+                continue
+        if text.lower() in ("true", "false"):
+            value = text.lower() == "true"
+        options[key.replace("-", "_")] = value
+    return options
+
+
+OPTION_OF_KIND = {"experiment": "'--experiment' / '-e'", "transcription": "'--transcription' / '-t'",
+                  "solver": "'--solver' / '-s'", "strategy": "'--strategy' / '-S'", "objective": "'--objective'",
+                  "controller": "'--controller'",
+                  "observer": "'--observer'", "disturbance": "'--disturbance'"}
+"""The option that names a plugin of each kind, for usage errors."""
+
+OPTIONS_OF_KIND = {"experiment": "'--experiment-option'", "solver": "'-o' / '--solver-option'",
+                   "strategy": "'-x' / '--strategy-option'",
+                   "objective": "'--objective-option'",
+                   "controller": "'-c' / '--controller-option'", "observer": "'--observer-option'",
+                   "disturbance": "'--disturbance-option'"}
+"""The option that passes a plugin's own options, for usage errors."""
+
+
+def create(ctx: click.Context, kind: str, name: str, *args, **options):
+    """Build a plugin, or stop with a usage error that names what is available or what was wrong. ``args`` are what
+    gaitbench passes the factory itself (a controller's model and reference); ``options`` are checked first
+    (:func:`gaitbench.options.check_options`), as a suite's are."""
+    from gaitbench.options import OptionError, check_options
+
+    try:
+        check_options(ctx.obj.registry.get(kind, name).factory, options, kind=kind, injected=len(args))
+        return ctx.obj.registry.create(kind, name, *args, **options)
+    except (UnknownPluginError, PluginConflictError) as exc:
+        raise click.BadParameter(str(exc), param_hint=OPTION_OF_KIND.get(kind)) from None
+    except OptionError as exc:
+        raise click.BadParameter(f"{kind} {name!r}, option {exc.option}: {exc.message}",
+                                 param_hint=OPTIONS_OF_KIND.get(kind)) from None
+    except (TypeError, ValueError) as exc:
+        raise click.BadParameter(f"cannot build {kind} {name!r} with options {options}: {exc}",
+                                 param_hint=OPTION_OF_KIND.get(kind)) from None
+
+
+def fmt(value, spec: str) -> str:
+    return "—" if value is None else format(value, spec)

@@ -1,0 +1,298 @@
+"""The walk file: one solved walk on disk, and the only code that writes or parses one.
+
+A walk file is a JSON header with one record per step (:meth:`WalkResult.as_dict`) and, beside it, an NPZ of the
+step trajectories (``stepNN_t``, ``_q``, ``_dq``, ``_tau``, ``_tau_t``, ``_push_off``; a polished step's own under
+``stepNN_polished_*``), named in the header under ``trajectories``. ``gaitbench solve --out`` and the suite runner
+write it; ``gaitbench track`` and the reports read it.
+
+Versions (``format_version`` in the header):
+
+- 1: the header names everything the walk was solved under, so a reader rebuilds the same problem: the experiment
+  and its options, the problem options, the strategy and its options.
+- none: files written before the format was versioned. They hold no experiment or strategy options, and are read
+  with the defaults, as they always were.
+
+A file with a version this gaitbench does not know is refused, naming the file and the version.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gaitbench.model.experiment import Experiment, Limits
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.plugins import PluginRegistry, load_registry
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, legs_to_roles
+from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
+from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.solve.verify import StepVerification
+from gaitbench.solve.walk import StepOutcome, WalkResult, next_step_state
+
+WALK_FORMAT_VERSION = 1
+"""The version :func:`write_walk` writes; :func:`read_walk` reads it and every older one."""
+
+POLISHED = "polished"
+"""The middle of the NPZ names of a polished step's arrays: ``step01_polished_q`` beside ``step01_q``."""
+
+REQUIRED_KEYS = ("experiment", "transcription", "solver", "strategy", "N", "phase", "steps")
+
+
+class WalkFileError(ValueError):
+    """A walk file that cannot be read (missing, unreadable, incomplete, or of an unknown version); the message names
+    the file and the fix."""
+
+
+def write_walk(walk: WalkResult, path: str | Path) -> Path:
+    """Write ``walk`` as JSON at ``path``, its trajectories beside it as NPZ (named in the JSON); returns ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {}
+    for step in walk.steps:
+        prefix = f"step{step.index:02d}"
+        if step.trajectory is not None:
+            arrays |= _trajectory_arrays(step.trajectory, prefix)
+        if step.polished is not None and step.polished.trajectory is not None:
+            arrays |= _trajectory_arrays(step.polished.trajectory, f"{prefix}_{POLISHED}")
+    header = {"format_version": WALK_FORMAT_VERSION, **walk.as_dict()}
+    if arrays:
+        npz = path.with_suffix(".npz")
+        np.savez_compressed(npz, **arrays)
+        header["trajectories"] = npz.name
+    path.write_text(json.dumps(header, indent=2, default=_json_default))
+    return path
+
+
+def _trajectory_arrays(trajectory: StepTrajectory, prefix: str) -> dict[str, np.ndarray]:
+    return {
+        f"{prefix}_t": trajectory.times,
+        f"{prefix}_q": trajectory.q,
+        f"{prefix}_dq": trajectory.dq,
+        f"{prefix}_tau": trajectory.tau,
+        f"{prefix}_tau_t": trajectory.control_times,
+        f"{prefix}_push_off": np.array([trajectory.push_off]),
+    }
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot serialize {type(value).__name__}")
+
+
+@dataclass(frozen=True)
+class WalkFile:
+    """A walk file as stored: its header, each step's record, and the trajectories' arrays by NPZ name.
+
+    The reports draw from the nodal arrays; :meth:`result` rebuilds the :class:`WalkResult`, with each step's
+    trajectory interpolated by its transcription, for tracking.
+    """
+
+    path: Path
+    version: int | None
+    """``format_version``; None for a file written before the format was versioned."""
+    header: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def steps(self) -> list[dict[str, Any]]:
+        return self.header["steps"]
+
+    @property
+    def experiment_options(self) -> dict[str, Any]:
+        return dict(self.header.get("experiment_options") or {})
+
+    @property
+    def strategy_options(self) -> dict[str, Any]:
+        return dict(self.header.get("strategy_options") or {})
+
+    def step_arrays(self, index: int, name: str = "") -> dict[str, np.ndarray]:
+        """Step ``index``'s arrays (``name``: ``polished`` for its polished trajectory's), keyed ``t``, ``q``, ...;
+        empty when the file holds none."""
+        prefix = f"step{index:02d}" + (f"_{name}" if name else "") + "_"
+        return {key[len(prefix):]: value for key, value in self.arrays.items() if key.startswith(prefix)
+                and (name or not key[len(prefix):].startswith(f"{POLISHED}_"))}
+
+    def experiment(self, registry: PluginRegistry | None = None) -> Experiment:
+        """The experiment the walk was solved for, built with its options."""
+        registry = registry or load_registry()
+        return registry.create("experiment", self.header["experiment"], **self.experiment_options)
+
+    def problem_options(self, experiment: Experiment) -> ProblemOptions:
+        """The problem options the walk was solved under; an unversioned file's are taken as the defaults, as they
+        always were."""
+        stored = self.header.get("problem_options")
+        if self.version is None or not stored:
+            return ProblemOptions(limits=experiment.limits)
+        known = {item.name for item in fields(ProblemOptions)}
+        unknown = sorted(set(stored) - known)
+        if unknown:
+            raise WalkFileError(f"{self.path}: unknown problem options {', '.join(unknown)}")
+        limits = dict(stored.get("limits") or {})
+        if "angle_bounds" in limits:
+            limits["angle_bounds"] = tuple(limits["angle_bounds"])
+        return replace(ProblemOptions(limits=Limits(**limits)), **{k: v for k, v in stored.items() if k != "limits"})
+
+    def result(self, registry: PluginRegistry | None = None) -> tuple[WalkResult, Experiment]:
+        """The walk's solved steps (a prefix of the walk), each trajectory rebuilt with its transcription's
+        interpolant from the stored nodal values, and the experiment it was solved for."""
+        rerun = _rerun(self.path)
+        if "trajectories" not in self.header:
+            raise WalkFileError(f"{self.path}: holds no trajectories (no solved step, or saved without its NPZ); "
+                                f"{rerun}")
+        registry = registry or load_registry()
+        data = self.header
+        experiment = self.experiment(registry)
+        options = self.problem_options(experiment)
+        transcription = registry.create("transcription", data["transcription"])
+        n_nodes, phase = int(data["N"]), data["phase"]
+        built = transcription.build(StepStructure(phase, n_nodes, options))
+        model = BipedModel(experiment.robot, 4 if phase == "second" else 2)
+        walk = WalkResult(experiment=data["experiment"], transcription=data["transcription"], solver=data["solver"],
+                          strategy=data["strategy"], N=n_nodes, phase=phase,
+                          requested_steps=int(data.get("requested_steps", len(data["steps"]))),
+                          wall_time_s=float(data.get("wall_time_s", 0.0)),
+                          strategy_details=data.get("strategy_details", {}),
+                          problem_options=asdict(options),
+                          objective=data.get("objective", WalkResult.objective),
+                          experiment_options=self.experiment_options, strategy_options=self.strategy_options)
+        npz = self.path.parent / data["trajectories"]
+        for step in data["steps"]:
+            arrays = self.step_arrays(int(step["index"]))
+            if "q" not in arrays or step.get("cot") is None:
+                break
+            try:
+                if "chosen" in (step.get("details") or {}):  # decrease and conquer's patchwork: no own interpolant
+                    nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
+                    trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
+                                                  int(step["stance"]))
+                else:
+                    trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, arrays)
+            except KeyError as exc:
+                raise WalkFileError(f"{npz}: step {step['index']} lacks {exc.args[0]!r}; {rerun}") from None
+            outcome = StepOutcome(int(step["index"]), int(step["stance"]), step["status"], step["message"], None,
+                                  trajectory, _verification(step), next_state=next_step_state(model, trajectory),
+                                  details=step.get("details") or {})
+            polished = outcome.details.get(POLISHED)
+            own = self.step_arrays(outcome.index, POLISHED)
+            if "q" in own and isinstance(polished, dict) and polished.get("cot") is not None:
+                try:
+                    polished_trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, own)
+                except KeyError as exc:
+                    raise WalkFileError(f"{npz}: step {step['index']} lacks {POLISHED}_{exc.args[0]}; "
+                                        f"{rerun}") from None
+                outcome.polished = StepOutcome(outcome.index, outcome.stance, polished["status"], "polished", None,
+                                               polished_trajectory, _verification(polished),
+                                               next_state=next_step_state(model, polished_trajectory))
+            walk.steps.append(outcome)
+        if not walk.steps:
+            raise WalkFileError(f"{self.path}: no solved step ({data.get('failure')}); solve the walk again")
+        return walk, experiment
+
+
+def read_walk(path: str | Path) -> WalkFile:
+    """Parse the walk file at ``path`` and the NPZ beside it.
+
+    Raises :class:`WalkFileError` naming the file and the fix when the JSON or its NPZ is missing, unreadable or not
+    a walk, or when its format version is one this gaitbench does not know.
+    """
+    path = Path(path)
+    rerun = _rerun(path)
+    if not path.is_file():
+        raise WalkFileError(f"{path}: no such result file; {rerun}")
+    try:
+        header = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise WalkFileError(f"{path}: not a readable walk result ({exc}); {rerun}") from None
+    if not isinstance(header, dict):
+        header = {}
+    version = header.get("format_version")
+    if version is not None and (isinstance(version, bool) or version not in range(1, WALK_FORMAT_VERSION + 1)):
+        raise WalkFileError(f"{path}: walk file format version {version!r} is unknown to this gaitbench, which reads "
+                            f"versions up to {WALK_FORMAT_VERSION}; read it with the gaitbench that wrote it, or "
+                            f"{rerun}")
+    missing = [key for key in REQUIRED_KEYS if key not in header]
+    if missing:
+        raise WalkFileError(f"{path}: not a walk result, missing {', '.join(missing)}; {rerun}")
+    arrays: dict[str, np.ndarray] = {}
+    if "trajectories" in header:
+        npz = path.parent / header["trajectories"]
+        if not npz.is_file():
+            raise WalkFileError(f"{path}: its trajectories file {npz} is missing; keep the .npz beside the JSON or "
+                                f"{rerun}")
+        try:
+            with np.load(npz) as stored:
+                arrays = {key: stored[key] for key in stored.files}
+        except (OSError, ValueError) as exc:
+            raise WalkFileError(f"{npz}: unreadable trajectories ({exc}); {rerun}") from None
+    return WalkFile(path, version, header, arrays)
+
+
+def load_walk(path: str | Path, registry: PluginRegistry | None = None) -> tuple[WalkResult, Experiment]:
+    """The walk in the file at ``path``, ready to track, and its experiment (:meth:`WalkFile.result`)."""
+    return read_walk(path).result(registry)
+
+
+def _rerun(path: Path) -> str:
+    return f"write it with `gaitbench solve ... --out {path}`"
+
+
+def _verification(step: dict) -> StepVerification:
+    """A step's stored verification (a step record, or its ``details["polished"]``); figures a file written before
+    they were recorded lacks are NaN."""
+    return StepVerification(**{key: float(step[key]) if step.get(key) is not None else math.nan for key in (
+        "max_defect", "resim_error", "resim_max_error", "hip_energy", "push_off_energy", "cot")})
+
+
+def _rebuild_trajectory(built: TranscribedStep, transcription: str, experiment: Experiment, step: dict,
+                        arrays: dict[str, np.ndarray]) -> StepTrajectory:
+    """The transcription's interpolant of stored nodal values: its variables are sampled from a seed that returns
+    exactly the stored values where the transcription samples (nodes for states, the control grid for torques)."""
+    index, stance = int(step["index"]), int(step["stance"])
+    times, q, dq, tau, tau_t = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau", "tau_t"))
+    push_off = float(np.asarray(arrays["push_off"]).ravel()[0])
+    h = float(times[1] - times[0])
+    geometry = experiment.terrain.steps[index - 1]
+    data = StepData(experiment.robot, stance, np.r_[q[0], dq[0]], geometry.D, geometry.theta, h)
+    p = data.parameter_vector()
+    roles = [legs_to_roles(values, stance) for values in (q, dq, tau)]
+    seed = _nodal_seed(times, *roles, tau_t)
+    discretization = built.discretization
+    interpolant = discretization.interpolant(discretization.guess(seed, p), p)
+    trajectory = StepTrajectory(times=times, q=q, dq=dq, tau=tau, control_times=tau_t, push_off=push_off,
+                                stance=stance, _interpolant=interpolant)
+    mismatch = max(float(np.max(np.abs(np.r_[trajectory.state(t)] - np.r_[q[k], dq[k]])))
+                   for k, t in enumerate(times))
+    if mismatch > 1e-8 * (1 + float(np.max(np.abs(dq)))):
+        raise WalkFileError(f"step {index}: the stored nodes do not fit the {transcription} transcription's "
+                            f"interpolant (off by {mismatch:.1e}); was it saved by another transcription?")
+    return trajectory
+
+
+def _nodal_seed(times: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, tau_t: np.ndarray) -> Seed:
+    """Stored values as a :data:`~gaitbench.problem.trajectory.Seed`: exact at nodes; torques linear between
+    control times when there is one per node, constant per interval when there is one per interval (DMOC)."""
+    h = float(times[1] - times[0])
+    per_interval = len(tau_t) == len(times) - 1
+
+    def seed(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        k = int(round(t / h))
+        if abs(t - k * h) <= 1e-9 * h and 0 <= k < len(times):
+            angles, rates = q[k], dq[k]
+        else:
+            angles = np.array([np.interp(t, times, q[:, j]) for j in range(2)])
+            rates = np.array([np.interp(t, times, dq[:, j]) for j in range(2)])
+        if per_interval:
+            torque = tau[int(np.clip(np.floor(t / h), 0, len(tau_t) - 1))]
+        else:
+            torque = np.array([np.interp(t, tau_t, tau[:, j]) for j in range(2)])
+        return angles, rates, torque
+
+    return seed
