@@ -46,7 +46,7 @@ import os, time
 from gaitbench.solve.parallel import WorkerPool
 
 def hang(item, state):
-    print(os.getpid(), flush=True)
+    os.write(1, f"{os.getpid()}\\n".encode())  # one write: two workers' lines must not interleave
     time.sleep(3600)
 
 pool = WorkerPool(2, state=lambda: None, start="fork")
