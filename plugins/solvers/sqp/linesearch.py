@@ -36,23 +36,6 @@ class LineSearch(Subproblems):
         self.lam = lam
         self._accept(trial)
 
-    def _multipliers(self, outcome: QPOutcome, model: Model) -> np.ndarray:
-        """λ_g from the QP duals, with the augmented rows corrected (module docstring)."""
-        if self.lin.unconstrained:
-            return np.zeros(self.m)
-        lam = self.lin.multipliers(outcome)
-        if model.rows.size:  # only rows active in this QP: the others keep their (zero) QP multiplier
-            lin, rows = self.lin, model.rows
-            value = self.g[rows] + self.jac[rows] @ outcome.x
-            tolerance = 1e-7 * (1.0 + np.abs(value))
-            active = (np.abs(value - lin.ubg[rows]) <= tolerance) | (np.abs(value - lin.lbg[rows]) <= tolerance)
-            lam[rows[active]] += model.weights[active] * (value - self.g[rows])[active]
-            # A one-sided row the augmented QP holds active where H's own QP would not comes back with a multiplier
-            # of the wrong sign (on the gait steps, clearance rows at 1e-2): it is not active for H, so zero.
-            lam[lin.upper_only] = np.maximum(lam[lin.upper_only], 0.0)
-            lam[lin.lower_only] = np.minimum(lam[lin.lower_only], 0.0)
-        return lam
-
     def _correction(self, model: Model, d: np.ndarray, trial: Trial | None) -> tuple[Trial, QPOutcome] | None:
         """A second-order correction step from x, when the full step ``trial`` was rejected and did not reduce θ."""
         if not self.o.second_order_correction or trial is None or trial.theta < self.theta:
