@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sqlite3
@@ -18,8 +19,9 @@ from click.testing import CliRunner
 
 import gaitbench
 from gaitbench.cli.main import main
+from gaitbench.run import executors
 from gaitbench.run.case import Case, PluginChoice
-from gaitbench.run.executors import CaseServer, DaskExecutor, InProcessExecutor, LocalPoolExecutor
+from gaitbench.run.executors import DaskExecutor, ExecutorError, InProcessExecutor, LocalPoolExecutor
 from gaitbench.run.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_case, run_suite
 from gaitbench.run.store import DATABASE, ResultStore
 from gaitbench.run.store_schema import CASE_COLUMNS, StoreError
@@ -289,6 +291,14 @@ def _stored(store: Path) -> int:
         return 0
 
 
+def _written_json(path: Path) -> bool:
+    try:
+        json.loads(path.read_text())
+        return True
+    except (OSError, ValueError):
+        return False
+
+
 def test_dask_cluster_on_loopback_gives_the_local_rows(tmp_path: Path, local_store: Path) -> None:
     scheduler_file = tmp_path / "scheduler.json"
     dask = str(Path(sys.executable).with_name("dask"))
@@ -299,12 +309,13 @@ def test_dask_cluster_on_loopback_gives_the_local_rows(tmp_path: Path, local_sto
     worker = None
     try:
         deadline = time.monotonic() + 60
-        while not scheduler_file.exists() and time.monotonic() < deadline:
+        while not _written_json(scheduler_file) and time.monotonic() < deadline:  # it appears before it is whole
             time.sleep(0.2)
-        address = __import__("json").loads(scheduler_file.read_text())["address"]
+        address = json.loads(scheduler_file.read_text())["address"]
         assert address.startswith("tcp://127.0.0.1:")
         worker = subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
-                                  env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                  env=env | {"DASK_DISTRIBUTED__WORKER__DAEMON": "False"},
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         store = tmp_path / "dask-store"
         summary = run_suite(suite_of([walk_case(8), walk_case(10)]), store, DaskExecutor(address))
         assert summary.solved == 2
@@ -320,37 +331,49 @@ def test_dask_cluster_on_loopback_gives_the_local_rows(tmp_path: Path, local_sto
             assert distributed[key][column] == local[key][column], column
 
 
-def test_a_case_server_keeps_its_child_without_the_nanny_s_malloc_trimming(monkeypatch) -> None:
-    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ for its workers; the cases' child must not inherit it (it slowed the
-    walks by up to 30 %), must keep the thread limits, and must serve the next case too."""
+def test_a_cluster_of_daemonic_workers_is_refused_with_the_fix(tmp_path: Path) -> None:
+    """Dask's default workers may not start the process a case runs in: say so before any case is claimed."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with pytest.raises(ExecutorError, match="DASK_DISTRIBUTED__WORKER__DAEMON=False"):
+            run_suite(suite_of([walk_case(8)]), tmp_path / "store", DaskExecutor(cluster.scheduler_address))
+    assert _stored(tmp_path / "store") == 0
+
+
+@pytest.fixture
+def dask_task_pool():
+    """The Dask task's pool of this thread, closed after the test (a Dask worker thread keeps it for its life)."""
+    yield
+    if hasattr(executors._POOLS, "pool"):
+        executors._POOLS.pool.close()
+        del executors._POOLS.pool
+
+
+def _environment(item: object, state: object) -> dict[str, str]:
+    return dict(os.environ)
+
+
+def test_a_dask_task_s_process_lacks_the_nanny_s_malloc_trimming(dask_task_pool, monkeypatch) -> None:
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ for its workers; the process running their cases must not inherit
+    it (it slowed the walks by up to 30 %), must keep the thread limits, and must serve the next case too."""
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
-    server = CaseServer()
-    try:
-        assert server.run(walk_case(8)).status == "solved"
-        child = server.pid
-        environment = Path(f"/proc/{child}/environ").read_bytes().split(b"\0")
-        assert not any(entry.startswith(b"MALLOC_TRIM_THRESHOLD_=") for entry in environment)
-        assert b"OPENBLAS_NUM_THREADS=1" in environment
-        assert server.run(walk_case(10)).status == "solved"
-        assert server.pid == child
-    finally:
-        server.stop()
+    assert executors.run_case_pooled(walk_case(8)).status == "solved"
+    environment = executors._POOLS.pool.schedule(_environment, None).result()
+    assert "MALLOC_TRIM_THRESHOLD_" not in environment and environment["OPENBLAS_NUM_THREADS"] == "1"
+    assert executors.run_case_pooled(walk_case(10)).status == "solved"
 
 
-def test_a_case_server_replaces_a_child_that_crashed_or_hung(faulty_plugins, monkeypatch) -> None:
+def test_a_dask_task_s_process_is_replaced_after_a_crash_or_a_hang(dask_task_pool, faulty_plugins,
+                                                                    monkeypatch) -> None:
     monkeypatch.setattr("gaitbench.run.executors.hard_limit", lambda case: 15.0)
     dirs = (str(faulty_plugins),)
-    server = CaseServer()
-    try:
-        crashed = server.run(walk_case(8, "crash", dirs))
-        assert crashed.status == "crashed" and "SIGKILL" in crashed.message
-        hung = server.run(walk_case(8, "hang", dirs))
-        assert hung.status == "timeout" and "worker was stopped" in hung.message
-        assert server.pid is None
-        assert server.run(walk_case(8, plugin_dirs=dirs)).status == "solved"
-    finally:
-        server.stop()
+    crashed = executors.run_case_pooled(walk_case(8, "crash", dirs))
+    assert crashed.status == "crashed" and "SIGKILL" in crashed.message
+    hung = executors.run_case_pooled(walk_case(8, "hang", dirs))
+    assert hung.status == "timeout" and "worker was stopped" in hung.message
+    assert executors.run_case_pooled(walk_case(8, plugin_dirs=dirs)).status == "solved"
 
 
 def test_runs_commands_list_show_and_export(local_store: Path, tmp_path: Path) -> None:

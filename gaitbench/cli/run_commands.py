@@ -46,6 +46,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
     Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
     """
+    from gaitbench.run.executors import ExecutorError
     from gaitbench.run.runner import RunRefused, run_suite
     from gaitbench.run.store_schema import StoreError
     from gaitbench.run.suite import SuiteError, load_suite
@@ -79,7 +80,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, on_start=progress.start, on_outcome=progress.advance,
                                 on_elsewhere=progress.elsewhere)
-        except (RunRefused, StoreError) as error:
+        except (RunRefused, StoreError, ExecutorError) as error:
             raise click.ClickException(str(error)) from None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"

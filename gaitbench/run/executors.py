@@ -11,18 +11,12 @@ has its process stopped and is recorded as ``timeout``. A worker that dies takes
 
 from __future__ import annotations
 
-import contextlib
+import multiprocessing
 import os
-import pickle
-import select
 import signal
-import subprocess
-import sys
-import tempfile
 import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import TimeoutError as FutureTimeout
-from pathlib import Path
 
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
@@ -32,9 +26,9 @@ from gaitbench.solve.parallel import ProcessExpired, WorkerPool
 EXECUTORS = ("inprocess", "local", "dask")
 
 DASK_ONLY_ENVIRONMENT = ("MALLOC_TRIM_THRESHOLD_",)
-"""Variables a Dask nanny sets for its worker (``distributed.nanny.pre-spawn-environ``) that a case's child process
-does not inherit. glibc trimming its heap at 64 kB lets Dask report a worker's memory, but it made the walks' many
-small allocations 5–30 % slower (docs/performance.md, "Executors")."""
+"""Variables a Dask nanny sets for its worker (``distributed.nanny.pre-spawn-environ``) that the process running
+its cases does not inherit. glibc trimming its heap at 64 kB lets Dask report a worker's memory, but it made the
+walks' many small allocations 5–30 % slower (docs/performance.md, "Executors")."""
 
 
 def hard_limit(case: Case) -> float | None:
@@ -103,9 +97,13 @@ def _pool_outcome(future, case: Case) -> CaseOutcome:
 class DaskExecutor:
     """Cases as tasks on a Dask cluster: an existing one at ``scheduler``, or a local one of ``jobs`` workers.
 
-    Each task runs its case in a long-lived child process of the Dask worker (:class:`CaseServer`), so a case that
-    crashes or hangs costs that case and not the worker; the workers need gaitbench and the suite's plugins
-    installed, and plugin directories at the same paths.
+    Each Dask worker thread runs its cases in a one-process :class:`~gaitbench.solve.parallel.WorkerPool` of its
+    own, as the local executor does, so a case that crashes or hangs costs that case and not the Dask worker, and
+    the pool's process keeps what its walks build for the next case. That process is a child of the Dask worker,
+    which Dask allows only of workers that are not daemonic: the local cluster is started so, and the workers of
+    an existing cluster need ``distributed.worker.daemon: false`` (the environment variable
+    ``DASK_DISTRIBUTED__WORKER__DAEMON=False`` where they start). The workers need gaitbench and the suite's
+    plugins installed, and plugin directories at the same paths.
     """
 
     name = "dask"
@@ -115,15 +113,20 @@ class DaskExecutor:
         self.jobs = jobs
 
     def run(self, cases: Iterable[Case]) -> Iterator[CaseOutcome]:
+        import dask
         from distributed import Client, LocalCluster
         from distributed import as_completed as dask_completed
 
         cluster = None
         if self.scheduler is None:
-            cluster = LocalCluster(n_workers=self.jobs, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+            with dask.config.set({"distributed.worker.daemon": False}):
+                cluster = LocalCluster(n_workers=self.jobs, threads_per_worker=1, processes=True,
+                                       dashboard_address=None)
         try:
             with Client(self.scheduler or cluster, timeout="30s") as client:
+                daemonic = [address for address, flag in client.run(_daemonic).items() if flag]
+                if daemonic:
+                    raise ExecutorError(_daemonic_message(daemonic))
                 upcoming = iter(cases)
                 running = {}
                 completed = dask_completed()
@@ -131,7 +134,7 @@ class DaskExecutor:
                 def fill() -> None:  # as many cases as the cluster has threads now (workers may come and go)
                     slots = max(self.jobs, sum(client.nthreads().values()))
                     while len(running) < slots and (case := next(upcoming, None)) is not None:
-                        future = client.submit(run_case_served, case, key=f"case-{case.key}", pure=False)
+                        future = client.submit(run_case_pooled, case, key=f"case-{case.key}", pure=False)
                         running[future] = case
                         completed.add(future)
 
@@ -148,84 +151,34 @@ class DaskExecutor:
                 cluster.close()
 
 
-class CaseServer:
-    """A long-lived child process that runs one Dask worker's cases one at a time, as a local-pool worker does.
-
-    A subprocess rather than a :class:`~gaitbench.solve.parallel.WorkerPool` because Dask's worker processes are
-    daemonic (unless the cluster is configured otherwise) and may not have multiprocessing children, and because the
-    child must not inherit :data:`DASK_ONLY_ENVIRONMENT`. The child keeps what a walk builds (sectional NLPs in its
-    :class:`~gaitbench.problem.build_cache.BuildCache`, derived interval functions) for the worker's next
-    cases, and Python starts once per worker, not once per case (docs/performance.md, "Executors").
-    A case that crashes or outlives :func:`hard_limit` costs only the child, which the next case replaces.
-    """
-
-    def __init__(self) -> None:
-        self._child: subprocess.Popen | None = None
-        self._replies = -1  # read end of the pipe on which the child reports each finished case
-        self._errors = tempfile.TemporaryFile()  # the child's stderr during the current case, for a crash's last words
-
-    @property
-    def pid(self) -> int | None:
-        return None if self._child is None else self._child.pid
-
-    def run(self, case: Case) -> CaseOutcome:
-        with tempfile.TemporaryDirectory(prefix="gaitbench-case-") as directory:
-            given, returned = Path(directory) / "case.pickle", Path(directory) / "outcome.pickle"
-            given.write_bytes(pickle.dumps(case))
-            child = self._running()
-            os.ftruncate(self._errors.fileno(), 0)  # the child writes at the shared offset, now 0 again
-            os.lseek(self._errors.fileno(), 0, os.SEEK_SET)
-            try:
-                child.stdin.write(f"{given}\t{returned}\n")
-                child.stdin.flush()
-            except BrokenPipeError:  # it died after its last case: the read below sees the end of its pipe
-                pass
-            limit = hard_limit(case)
-            if not select.select([self._replies], [], [], limit)[0]:
-                self.stop()
-                return failed_outcome(case, "timeout", _timeout_message(case), limit or 0.0)
-            if not os.read(self._replies, 1) or not returned.exists():  # the child died with the case
-                code = child.wait()
-                errors = os.pread(self._errors.fileno(), os.fstat(self._errors.fileno()).st_size, 0)
-                detail = errors.decode(errors="replace").strip().splitlines()[-1:]
-                self.stop()
-                return failed_outcome(case, "crashed", _exit_message(code) + "".join(f": {line}" for line in detail))
-            return pickle.loads(returned.read_bytes())
-
-    def stop(self) -> None:
-        """End the child (killing it if it is still busy); the next case starts a new one."""
-        if self._child is not None:
-            self._child.kill()
-            self._child.wait()
-            with contextlib.suppress(BrokenPipeError):
-                self._child.stdin.close()
-            os.close(self._replies)
-            self._child = None
-
-    def _running(self) -> subprocess.Popen:
-        if self._child is not None and self._child.poll() is not None:
-            self.stop()
-        if self._child is None:
-            self._replies, reply_end = os.pipe()
-            self._child = subprocess.Popen([sys.executable, "-m", "gaitbench.run.executors", str(reply_end)],
-                                           stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self._errors,
-                                           text=True, env=_child_environment(), pass_fds=(reply_end,))
-            os.close(reply_end)
-        return self._child
+class ExecutorError(Exception):
+    """Cases cannot run where they were sent; the message says how to fix it."""
 
 
-_SERVERS = threading.local()
+_POOLS = threading.local()
 
 
-def run_case_served(case: Case) -> CaseOutcome:
-    """The Dask task: ``case`` run by this worker thread's :class:`CaseServer`."""
-    if not hasattr(_SERVERS, "server"):
-        _SERVERS.server = CaseServer()
-    return _SERVERS.server.run(case)
+def run_case_pooled(case: Case) -> CaseOutcome:
+    """The Dask task: ``case`` run in this worker thread's one-process pool, stopped past :func:`hard_limit`."""
+    if multiprocessing.current_process().daemon:  # a worker that joined after the run checked them
+        from distributed import get_worker
+
+        return failed_outcome(case, "error", _daemonic_message([get_worker().address]))
+    if not hasattr(_POOLS, "pool"):
+        for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
+            os.environ.pop(name, None)
+        _POOLS.pool = WorkerPool(1, state=BuildCache, start="spawn")
+    return _pool_outcome(_POOLS.pool.schedule(run_case, case, timeout=hard_limit(case)), case)
 
 
-def _child_environment() -> dict[str, str]:
-    return {name: value for name, value in os.environ.items() if name not in DASK_ONLY_ENVIRONMENT}
+def _daemonic() -> bool:
+    return multiprocessing.current_process().daemon
+
+
+def _daemonic_message(workers: list[str]) -> str:
+    return (f"Dask worker(s) {', '.join(workers)} are daemonic, and a daemonic process may not start the process "
+            "each case runs in; start the workers with DASK_DISTRIBUTED__WORKER__DAEMON=False in their environment "
+            "(or distributed.worker.daemon: false in their Dask configuration)")
 
 
 def _timeout_message(case: Case) -> str:
@@ -240,18 +193,3 @@ def _exit_message(code: int | None) -> str:
         except ValueError:
             pass
     return f"worker process exited with status {code}"
-
-
-def _serve(reply_fd: int) -> None:
-    """The child's loop: for each line "case path<TAB>outcome path" on stdin, run the case, write its outcome, and
-    report on ``reply_fd``. It ends when its server closes stdin or kills it."""
-    builds = BuildCache()
-    for line in sys.stdin:
-        given, returned = line.rstrip("\n").split("\t")
-        case = pickle.loads(Path(given).read_bytes())
-        Path(returned).write_bytes(pickle.dumps(run_case(case, builds)))
-        os.write(reply_fd, b"\n")
-
-
-if __name__ == "__main__":
-    _serve(int(sys.argv[1]))
