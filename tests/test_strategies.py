@@ -15,6 +15,7 @@ from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import WalkProblem
@@ -136,6 +137,39 @@ def test_sections_are_completed_from_the_candidates_starting_earlier():
 @pytest.fixture(scope="module")
 def forward():
     return REGISTRY.create("experiment", "forward")
+
+
+class PolishCalledInfeasibleOnce:
+    """IPOPT, except that the second solve of one NLP, on a one-step walk decrease-and-conquer's polish of the
+    complete problem, is called infeasible once, as IPOPT called stairs N = 30 step 6's; its remedy is IPOPT."""
+
+    name = "polish-called-infeasible-once"
+
+    def __init__(self) -> None:
+        self.ipopt = REGISTRY.create("solver", "ipopt")
+        self.solves: dict[int, int] = {}
+        self.failed = False
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.solves[id(nlp)] = self.solves.get(id(nlp), 0) + 1
+        if self.solves[id(nlp)] == 2 and not self.failed:
+            self.failed = True
+            return SolverResult(SolverStatus.INFEASIBLE, "infeasible (scripted)", np.asarray(initial_guess), np.nan,
+                                np.nan, 3, 0.0, 0.0)
+        return self.ipopt.solve(nlp, parameters, initial_guess)
+
+    def remedies(self):
+        return [("use-ipopt", self.ipopt)]
+
+
+def test_a_polish_called_infeasible_climbs_the_solver_s_remedies_from_its_own_seed(forward):
+    solver = PolishCalledInfeasibleOnce()
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"), solver, 8, steps=1)
+    walk = DecreaseAndConquer().solve(problem)
+    details = walk.steps[0].details
+    assert solver.failed and details["polished"]["status"] == "converged"
+    assert [retry["remedy"] for retry in details["retries"]] == ["polish:use-ipopt"]  # no first-phase reseed
+    assert walk.strategy_details["verified_acot"] == pytest.approx(details["polished"]["cot"])
 
 
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])

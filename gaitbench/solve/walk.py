@@ -286,13 +286,15 @@ fails in its restoration phase has often only started badly. A time limit is fin
 
 
 def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
-                       seed: Seed | None = None, phase: str = "second") -> StepOutcome:
+                       seed: Seed | None = None, phase: str = "second", reseed: bool = True) -> StepOutcome:
     """:func:`solve_and_verify`, and when the solve fails with a :data:`RETRIED_STATUSES` status, the retry
     ladder (docs/solvers.md, "Retries") until a rung solves the step:
 
     1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess;
-    2. ``first-phase-seed`` (4-DOF steps only): the step's 2-DOF First-Phase problem solved, and the 4-DOF problem
-       started from its trajectory, with the solver and then each of its remedies.
+    2. ``first-phase-seed`` (4-DOF steps only, and only with ``reseed``): the step's 2-DOF First-Phase problem
+       solved, and the 4-DOF problem started from its trajectory, with the solver and then each of its remedies.
+       A caller whose result means "the optimum near *this* seed" (decrease-and-conquer's polish) passes
+       ``reseed=False``.
 
     Every rung tried is recorded in the outcome's ``details["retries"]`` (remedy, status, iterations, time), and
     the first attempt's status in ``details["first_attempt"]``; a step that still fails keeps the first failure's
@@ -302,7 +304,7 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     if outcome.solved or outcome.status not in RETRIED_STATUSES:
         return outcome
     first_attempt, retries = outcome, []
-    for remedy, attempt in _ladder(problem, index, built, data, seed, phase):
+    for remedy, attempt in _ladder(problem, index, built, data, seed, phase, reseed):
         retry = attempt()
         retries.append({"remedy": remedy, **retry.summary()})
         if retry.solved:
@@ -316,12 +318,12 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
 
 
 def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
-            phase: str):
+            phase: str, reseed: bool):
     """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
     remedies = solver_remedies(problem.solver)
     for name, variant in remedies:
         yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
-    if phase != "second":
+    if phase != "second" or not reseed:
         return
     first_phase: list[StepOutcome] = []
 

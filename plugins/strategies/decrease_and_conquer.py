@@ -44,7 +44,6 @@ from gaitbench.solve.walk import (
     WalkProblem,
     WalkResult,
     next_step_state,
-    solve_and_verify,
     solve_with_retries,
     walk_step_by_step,
 )
@@ -140,10 +139,15 @@ class DecreaseAndConquer:
         }
         polished = None
         if self.polish:
-            polished = solve_and_verify(problem, index, complete_built, data, seed=trajectory.seed())
+            # IPOPT calls some of these feasible problems infeasible from a good start (stairs, N = 30, step 6): the
+            # solver's own remedies from the same seed, never another seed, which would polish another trajectory
+            polished = solve_with_retries(problem, index, complete_built, data, seed=trajectory.seed(), reseed=False)
+            polish_retries = [{**retry, "remedy": f"polish:{retry['remedy']}"}
+                              for retry in polished.details.get("retries", [])]
             details["polished"] = polished.summary() | (
                 {key: value for key, value in polished.verification.as_dict().items() if key != "cot"}
                 if polished.verification else {})
+            details["retries"] = details["retries"] + polish_retries  # counted with the walk's other retries
         message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
                                           f"fails verification: dynamics residual {verification.max_defect:.2e}")
         return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
