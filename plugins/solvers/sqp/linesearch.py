@@ -14,11 +14,6 @@ ARMIJO = 1e-4
 MIN_STEP = 1e-10
 
 
-def _growth(ratio: float) -> float:
-    """The factor from this shift to the next one, by the model's actual-to-predicted decrease ratio."""
-    return 0.5 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
-
-
 class LineSearch(Subproblems):
     """The iterate and its QPs, with the searches along a QP step."""
 
@@ -58,10 +53,9 @@ class LineSearch(Subproblems):
             lam[lin.lower_only] = np.minimum(lam[lin.lower_only], 0.0)
         return lam
 
-    def _correction(self, model: Model, d: np.ndarray, trial: Trial | None,
-                    always: bool = False) -> tuple[Trial, QPOutcome] | None:
-        """A second-order correction step from x, when the full step ``trial`` did not reduce θ (or ``always``)."""
-        if not self.o.second_order_correction or trial is None or (trial.theta < self.theta and not always):
+    def _correction(self, model: Model, d: np.ndarray, trial: Trial | None) -> tuple[Trial, QPOutcome] | None:
+        """A second-order correction step from x, when the full step ``trial`` was rejected and did not reduce θ."""
+        if not self.o.second_order_correction or trial is None or trial.theta < self.theta:
             return None
         outcome = self._qp(model, trial.g - self.jac @ d, self.warm)
         if not outcome.solved:
@@ -84,52 +78,27 @@ class LineSearch(Subproblems):
         # rounding in φ itself: in f, and in each g_i (relative to its magnitude) times its weight
         slack = 10 * np.finfo(float).eps * (max(1.0, abs(self.f)) + self.weights @ (1.0 + np.abs(self.g)))
         # Levenberg–Marquardt control of the shift: the ratio of φ's actual to its model's decrease for the full
-        # step, and whether it raised θ (``_raises_violation``), say whether the shifted model was trusted too much
-        # (a ratio below ¼ quadruples the next shift) or not
+        # step says whether the shifted model was trusted too much (a ratio below ¼ doubles the next shift) or not
         predicted = -derivative - 0.5 * (d @ (model.curvature @ d))
-
-        def ratio(point: Trial | None, accepted: bool) -> float:
-            # a rejected full step, or one that raised θ, was trusted too much, whatever the ratio at rounding level
-            if not accepted or self._raises_violation(point):
-                return 0.0
-            return (merit - phi(point)) / predicted if predicted > 100 * slack else 1.0
-
-        def take(point: Trial, alpha: float, outcome: QPOutcome | None = None):
-            self.log["alpha"] = alpha
-            if outcome is not None:
-                self.log["flags"] += "s"
-            return point, outcome
-
         alpha = 1.0
         while alpha >= MIN_STEP:
             trial = self._trial(self._clip(self.x + alpha * d))
             accepted = trial is not None and phi(trial) <= merit + ARMIJO * alpha * derivative + slack
-            if alpha == 1.0:
-                self.shift_growth = _growth(ratio(trial, accepted))
-                # a full step rejected by φ, or accepted although it raised θ, is corrected once, when that lowers
-                # θ and is accepted by φ: along the gait costs' curved valleys this keeps the step long without
-                # leaving a violation behind
-                if not accepted or self._raises_violation(trial):
-                    corrected = self._correction(model, d, trial, always=accepted)
-                    if corrected is not None:
-                        point, outcome = corrected
-                        if (phi(point) <= merit + ARMIJO * derivative + slack
-                                and (not accepted or point.theta < trial.theta)):
-                            self.shift_growth = _growth(ratio(point, True))
-                            return take(point, 1.0, outcome)
+            if alpha == 1.0:  # a rejected full step was trusted too much, whatever the ratio at rounding level
+                ratio = (merit - phi(trial)) / predicted if accepted and predicted > 100 * slack else float(accepted)
+                self.shift_growth = 0.5 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
             if accepted:
-                return take(trial, alpha)
+                self.log["alpha"] = alpha
+                return trial, None
+            if alpha == 1.0:
+                corrected = self._correction(model, d, trial)
+                if corrected is not None:
+                    point, outcome = corrected
+                    if phi(point) <= merit + ARMIJO * derivative + slack:
+                        self.log["alpha"], self.log["flags"] = 1.0, self.log["flags"] + "s"
+                        return point, outcome
             alpha /= 2
         return None
-
-    def _raises_violation(self, trial: Trial) -> bool:
-        """Whether a step at least doubles θ, to above the acceptable level: the test of the constraints' model that
-        φ cannot make where its weights follow multipliers near zero (forward HS N = 50, step 4: full steps took θ
-        from 4e-6 to 6 for decreases of f by 1e-4 each, then slid along the cost's flat valley, θ falling 2 % an
-        iteration, to the iteration limit). Below the acceptable level the projection step ends such iterates; far
-        from feasibility smaller rises of the ℓ1 θ are common and harmless (forward HS N = 50, step 1: 139
-        iterations instead of 39 when any rise counted)."""
-        return trial.theta > 2 * self.theta and self.lin.max_violation(trial.g) > self.o.acceptable_tolerance
 
     def _acceptable_to_filter(self, trial: Trial) -> bool:
         return trial.theta <= self.theta_max and all(trial.theta < theta or trial.f < f for theta, f in self.filter)
