@@ -2,6 +2,7 @@
 
 import importlib.util
 import json
+import sys
 from pathlib import Path
 
 from gaitbench.run.case import Case, PluginChoice
@@ -132,3 +133,24 @@ def test_the_recorded_summary_is_the_rendering_of_the_recorded_results(monkeypat
 
     results = json.loads(performance.RESULTS.read_text())
     assert summary_markdown(results) == performance.SUMMARY.read_text()
+
+
+def _scaling_module():
+    spec = importlib.util.spec_from_file_location("scaling", BENCHMARKS / "scaling.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclass looks its module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_scaling_model_schedules_as_the_runner_hands_out_cases():
+    import pandas as pd
+
+    model = _scaling_module()
+    # largest N first, store order among equal N: 5, 4, 3, 3, 3 on two workers finish at 10 (bound 9: 18 / 2)
+    cases = pd.DataFrame({"N": [10, 30, 20, 10, 10], "wall_time_s": [3.0, 5.0, 4.0, 3.0, 3.0],
+                          "key": ["a", "b", "c", "d", "e"]})
+    assert list(model.schedule_order(cases)["key"]) == ["b", "c", "a", "d", "e"]
+    two, eight = model.scaling(cases, (2, 8))
+    assert (two.makespan_s, two.bound_s) == (10.0, 9.0)
+    assert (eight.makespan_s, eight.bound_s, eight.efficiency) == (5.0, 5.0, 1.0)  # the longest case bounds it
