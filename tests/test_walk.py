@@ -1,6 +1,7 @@
 """Per-step gait problems solved and verified, multi-step chaining, and the solve command."""
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -105,6 +106,22 @@ def test_a_failed_step_ends_the_walk_keeping_the_solved_steps():
     walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(max_iterations=5), 21, steps=2))
     assert not walk.complete and walk.acot is None
     assert walk.failure.startswith("step 1: iteration_limit")
+
+
+def test_a_walk_whose_time_runs_out_stops_at_the_next_step_and_keeps_the_steps_it_solved():
+    """A case past its time limit used to run on until its process was stopped, losing every solved step."""
+    experiment = REGISTRY.create("experiment", "forward")
+    solved = []
+
+    def on_step(outcome):  # the time runs out as step 1 is solved
+        solved.append(outcome)
+        object.__setattr__(problem, "deadline", time.monotonic())
+
+    problem = WalkProblem(experiment, HermiteSimpson(), Ipopt(), 10, steps=3, deadline=time.monotonic() + 3600)
+    walk = OnePhase().solve(problem, on_step=on_step)
+    assert [step.status for step in walk.steps] == ["converged", "time_limit"]
+    assert walk.failure == "step 2: time limit: the walk's time ran out before step 2"
+    assert "back_up" not in walk.steps[1].details  # a time limit is final: no dead-end back-up
 
 
 def test_infeasible_geometry_is_reported_before_solving():

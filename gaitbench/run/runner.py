@@ -91,8 +91,9 @@ def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
     objective = registry.create("objective", case.objective.name, **case.objective.options)
     options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
+    deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s
     problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
-                          objective=objective, builds=builds)
+                          objective=objective, builds=builds, deadline=deadline)
     walk = strategy.solve(problem)
     walk.experiment_options, walk.strategy_options = dict(case.experiment.options), dict(case.strategy.options)
     return walk

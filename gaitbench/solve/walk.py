@@ -164,6 +164,10 @@ class WalkProblem:
     options: ProblemOptions | None = None
     objective: Objective = NET_POWER
     builds: BuildCache = field(default_factory=BuildCache, compare=False, repr=False)
+    deadline: float | None = field(default=None, compare=False)
+    """``time.monotonic()`` at which the walk's time runs out (a suite case's time limit): a step that would start
+    later is not started, and the walk stops there with ``time_limit``, keeping the steps it solved, instead of
+    running on until its process is stopped and losing them all."""
 
     def __post_init__(self) -> None:
         if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
@@ -232,12 +236,16 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
     index = 1
     while index <= problem.n_steps:
         check = checks[index - 1]
-        if check.ok:
+        if problem.deadline is not None and time.monotonic() >= problem.deadline:
+            outcome = StepOutcome(index, problem.experiment.stance_leg(index), SolverStatus.TIME_LIMIT.value,
+                                  f"time limit: the walk's time ran out before step {index}")
+        elif check.ok:
             outcome = solve_step(problem, index, states[index - 1])
         else:
             outcome = StepOutcome(index, problem.experiment.stance_leg(index), "infeasible_geometry",
                                   "; ".join(check.problems))
-        if not outcome.solved and check.ok and back_up is not None and index > 1 and index - 1 not in backed_up:
+        dead_end = check.ok and outcome.status != SolverStatus.TIME_LIMIT.value  # a time limit is final
+        if not outcome.solved and dead_end and back_up is not None and index > 1 and index - 1 not in backed_up:
             backed_up.add(index - 1)
             replaced = walk.steps[-1]
             previous = back_up(problem, index - 1, states[index - 2])
