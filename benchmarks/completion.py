@@ -3,8 +3,10 @@
 Run:    .venv/bin/gaitbench run benchmarks/suites/complete-walks.toml --jobs 2
         .venv/bin/python benchmarks/completion.py results/complete-walks --out benchmarks/results/complete_walks.md
 
-Per experiment and method: how many walks walked every step, the N of those that stopped with the cause, step and
-status recorded by the store, the solve retries the walks needed (docs/solvers.md, "Retries") and the steps solved
+Per experiment and method: how many walks walked every step, how many of those have a verified ACOT (a One Phase
+walk's steps are each verified; a Decrease & Conquer walk's figure is its polished steps', so a polish that fails
+leaves its walk complete but unverified), the N of those that stopped with the cause, step and status recorded by
+the store, the solve retries the walks needed (docs/solvers.md, "Retries") and the steps solved
 again after a dead end (back-ups, docs/deviations.md "Dead ends"). Every figure is
 read from the store; the table names the commits the cases ran at.
 """
@@ -17,19 +19,21 @@ from pathlib import Path
 import pandas as pd
 
 from gaitbench import load_results
+from gaitbench.reports.case_frame import prepare
 
 
 def completion_table(frame: pd.DataFrame) -> pd.DataFrame:
     """One row per experiment and method: walks, complete walks, retries, wall time, and the walks that stopped."""
     rows = []
-    for (experiment, method), group in frame.groupby(["experiment", "method"], sort=True):
-        complete = group["status"] == "solved"
+    for (experiment, method), group in prepare(frame).groupby(["experiment", "method"], sort=True):
+        complete = group["complete"]
         stopped = group[~complete].sort_values("N")
         rows.append({
             "experiment": experiment,
             "method": method,
             "walks": len(group),
             "complete": int(complete.sum()),
+            "verified": int((complete & group["verified_acot"].notna()).sum()),
             "steps solved": int(group["steps_solved"].fillna(0).sum()),
             "retries": int(pd.to_numeric(group["retries"], errors="coerce").fillna(0).sum()),
             "back-ups": int(pd.to_numeric(group.get("back_ups"), errors="coerce").fillna(0).sum())
@@ -57,11 +61,13 @@ def render(store: Path) -> str:
     commits = sorted({row.get("git_commit", "?") for row in frame["provenance"] if isinstance(row, dict)})
     table = completion_table(frame)
     total, complete = int(table["walks"].sum()), int(table["complete"].sum())
+    verified = int(table["verified"].sum())
     lines = [
         f"# Completion: {store.name}",
         "",
-        f"{complete} of {total} walks complete ({100 * complete / total:.0f} %). Rendered by "
-        f"`benchmarks/completion.py` from the store; cases ran at {', '.join(commits)}.",
+        f"{complete} of {total} walks complete ({100 * complete / total:.0f} %), {verified} of them with a verified "
+        f"ACOT ({100 * verified / total:.0f} % of the walks). Rendered by `benchmarks/completion.py` from the store; "
+        f"cases ran at {', '.join(commits)}.",
         "",
         markdown_table(table),
         "",

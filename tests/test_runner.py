@@ -125,6 +125,12 @@ def test_store_round_trip_and_messages(tmp_path: Path) -> None:
         gaitbench.load_results(tmp_path / "missing")
 
 
+def _checkout_commit() -> str:
+    root = Path(__file__).resolve().parents[1]
+    return subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                          check=True).stdout.strip()
+
+
 def test_local_pool_records_real_walks(local_store: Path) -> None:
     rows = rows_by_key(local_store)
     assert len(rows) == 2
@@ -133,6 +139,7 @@ def test_local_pool_records_real_walks(local_store: Path) -> None:
         assert row["acot"] == pytest.approx(row["cot_steps"][0]) and row["acot"] > 0
         assert row["max_defect"] < 1e-6
         assert row["provenance"]["packages"]["casadi"]
+        assert row["provenance"]["git_commit"].split("+")[0] == _checkout_commit()  # which code computed it
         walk = (local_store / row["walk_path"]).read_text()
         assert '"complete": true' in walk and (local_store / row["walk_path"]).with_suffix(".npz").exists()
 

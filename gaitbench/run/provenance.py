@@ -48,7 +48,7 @@ def package_versions() -> dict[str, str | None]:
 
 def git_commit() -> str | None:
     """The commit of the gaitbench source tree (``+dirty`` with uncommitted changes), or None outside a checkout."""
-    source = Path(__file__).resolve().parent.parent
+    source = Path(__file__).resolve().parents[2]  # the checkout: gaitbench/run/provenance.py is three levels down
     if not (source / ".git").exists():
         return None
     try:
