@@ -43,9 +43,13 @@ class BFGS:
 def qp_hessian(form: NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
                 damping: float) -> tuple[sp.csc_matrix, float, sp.csc_matrix]:
     """∇²L(x, u⁺) + δI made positive definite as ``sqp`` does: δ = max(damping, 1e-10 max|H|), then the least
-    ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with a
-    shift growing ×4. Returns H, the augmentation's factor (for the multiplier correction) and H without the
-    augmentation (for the KKT test)."""
+    ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with δ
+    growing ×4 from there, so that it stays within 4× of the least shift that works. Returns H, the augmentation's
+    factor (for the multiplier correction) and H without the augmentation (for the KKT test).
+
+    Along the thesis cost's flat valleys ∇²L has no curvature, so δ sets the QP's step length there (d = −g/δ): a
+    shift that jumped to 1e-8·max|H| made forward step 2 (HS, N = 50) crawl by full steps that lowered the merit by
+    ~1e-6 each, twice the model's decrease, for 250 iterations, to the iteration limit."""
     multipliers = u.copy()
     multipliers[: form.n_inequalities] = np.maximum(multipliers[: form.n_inequalities], 0.0)
     lagrangian = form.hessian(x, multipliers)
@@ -62,13 +66,13 @@ def qp_hessian(form: NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
         augmented = (shifted + rho * size * gram).tocsc()
         if positive_definite(augmented):
             return augmented, rho * size, shifted
-    augmentation, shift = 100.0 * size, max(shift, 1e-8 * size)
+    augmentation = 100.0 * size
     while shift <= SHIFT_RANGE[1] * size:
+        shift *= 4
         base = (lagrangian + shift * sp.eye(form.n)).tocsc()
         candidate = (base + augmentation * gram).tocsc()
         if positive_definite(candidate):
             return candidate, augmentation, base
-        shift *= 4
     raise Breakdown("the Hessian of the Lagrangian cannot be made positive definite")
 
 
