@@ -15,9 +15,11 @@ from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative
 import plugins.solvers.fsqp as fsqp
 import plugins.solvers.fsqp.solver as fsqp_solver
 from gaitbench.problem.nlp import NLPBuilder
-from gaitbench.solve.evaluation import Deadline
+from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solve.solver import SolverStatus
 from plugins.solvers.fsqp import FSQP
+from plugins.solvers.fsqp.form import NLPForm
+from plugins.solvers.fsqp.hessian import qp_hessian
 from plugins.solvers.ipopt import Ipopt
 
 
@@ -240,6 +242,34 @@ def test_qp_subproblem_solves_a_forward_gait_step_to_ipopts_optimum():
     assert result.constraint_violation <= 1e-6
     assert solver.log[0].phase == "feasibility"
     assert all(_inequality_excess(problem, record.x) <= 1e-6 for record in solver.log if record.phase == "main")
+
+
+def test_qp_hessian_shifts_no_more_than_the_least_shift_that_convexifies():
+    """A direction with slight negative curvature (−1e-9) that no working row covers needs a shift just above 1e-9.
+    The shift sets the QP's step on the thesis cost's flat valleys, so it must stay near that least one (within the
+    ×4 grid), not jump to 1e-8·max|H|: that made forward step 2 (HS, N = 50) crawl to the iteration limit."""
+    _, augmentation, base = _qp_hessian_of(-1e-9)
+    assert augmentation > 0
+    assert 0 < base[1, 1] <= 3e-9
+
+
+def test_qp_hessian_leaves_a_flat_direction_nearly_unshifted():
+    """No curvature along x₂: the shift is the QP's only curvature there, so it must be tiny (1e-14·max|H|), not the
+    1e-10·max|H| the pivot test used to demand."""
+    _, augmentation, base = _qp_hessian_of(0.0)
+    assert augmentation == 0
+    assert 0 < base[1, 1] <= 1e-12
+
+
+def _qp_hessian_of(curvature: float):
+    """qp_hessian of min ½x₁² + ½ curvature·x₂² s.t. x₁ = 0, at 0, without damping."""
+    b = NLPBuilder()
+    x = b.variable("x", (2, 1))
+    b.constrain("line", x[0])
+    nlp = b.build(ca.SX.sym("p", 0), 0.5 * x[0] ** 2 + 0.5 * curvature * x[1] ** 2)
+    at = np.zeros(2)
+    form = NLPForm(NLPEvaluator(nlp, np.zeros(0)), at, "gradient")
+    return qp_hessian(form, at, np.zeros(form.m), form.jacobian(at)[form.equalities], 0.0)
 
 
 def test_registered_as_a_solver_plugin():

@@ -16,6 +16,13 @@ _AUGMENTATION = 1e2
 SHIFT_RANGE = (1e-8, 1e10)
 """Smallest and largest shift δ of the exact-Hessian convexification, relative to its largest diagonal entry."""
 
+_QP_SHIFT_FLOOR = 1e-14
+"""The ``qp`` subproblem's least shift, relative to max|∇²L| (see :func:`qp_hessian`)."""
+
+_QP_PIVOT = 1e-15
+"""Least LDLᵀ pivot of the ``qp`` subproblem's H, relative to its largest diagonal entry: the augmentation makes
+that entry ~100·max|∇²L|, so the default 1e-12 refused any shift below ~1e-10·max|∇²L|."""
+
 
 class BFGS:
     """Dense damped BFGS (Powell): yᵀs ≥ 0.2 sᵀHs is enforced by mixing y with Hs, so H stays positive definite."""
@@ -42,33 +49,38 @@ class BFGS:
 
 def qp_hessian(form: NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
                 damping: float) -> tuple[sp.csc_matrix, float, sp.csc_matrix]:
-    """∇²L(x, u⁺) + δI made positive definite as ``sqp`` does: δ = max(damping, 1e-10 max|H|), then the least
-    ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with a
-    shift growing ×4. Returns H, the augmentation's factor (for the multiplier correction) and H without the
-    augmentation (for the KKT test)."""
+    """∇²L(x, u⁺) + δI made positive definite as ``sqp`` does: δ = max(damping, 1e-14 max|H|), then the least
+    ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with δ
+    growing ×4 from there, so that it stays within 4× of the least shift that works. Returns H, the augmentation's
+    factor (for the multiplier correction) and H without the augmentation (for the KKT test).
+
+    Along the thesis cost's flat valleys ∇²L has no curvature, so δ sets the QP's step length there (d = −g/δ),
+    and the merit falls by twice the model's decrease. A shift that jumped to 1e-8·max|H| (``sqp``'s), or that the
+    pivot test held near 1e-10·max|H|, made forward step 2 (HS, N = 50) crawl by ~1e-6 of merit per iteration to
+    the iteration limit; the Levenberg–Marquardt damping still raises δ where the model reaches too far."""
     multipliers = u.copy()
     multipliers[: form.n_inequalities] = np.maximum(multipliers[: form.n_inequalities], 0.0)
     lagrangian = form.hessian(x, multipliers)
     if not np.all(np.isfinite(lagrangian.data)):
         raise Breakdown("NaN or infinite Hessian of the Lagrangian")
     size = max(1.0, float(np.max(np.abs(lagrangian.data), initial=0.0)))
-    shift = max(damping, 1e-10 * size)
+    shift = max(damping, _QP_SHIFT_FLOOR * size)
     shifted = (lagrangian + shift * sp.eye(form.n)).tocsc()
-    if positive_definite(shifted):
+    if positive_definite(shifted, _QP_PIVOT):
         return shifted, 0.0, shifted
     normals = sp.diags(1 / row_norms(rows)) @ rows
     gram = (normals.T @ normals).tocsc()
     for rho in (1.0, 10.0, 100.0, 1e3, 1e4):
         augmented = (shifted + rho * size * gram).tocsc()
-        if positive_definite(augmented):
+        if positive_definite(augmented, _QP_PIVOT):
             return augmented, rho * size, shifted
-    augmentation, shift = 100.0 * size, max(shift, 1e-8 * size)
+    augmentation = 100.0 * size
     while shift <= SHIFT_RANGE[1] * size:
+        shift *= 4
         base = (lagrangian + shift * sp.eye(form.n)).tocsc()
         candidate = (base + augmentation * gram).tocsc()
-        if positive_definite(candidate):
+        if positive_definite(candidate, _QP_PIVOT):
             return candidate, augmentation, base
-        shift *= 4
     raise Breakdown("the Hessian of the Lagrangian cannot be made positive definite")
 
 

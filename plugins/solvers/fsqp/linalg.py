@@ -72,10 +72,11 @@ def symmetric_pivots(matrix: sp.spmatrix) -> np.ndarray | None:
     return lu.U.diagonal()
 
 
-def positive_definite(matrix: sp.spmatrix) -> bool:
+def positive_definite(matrix: sp.spmatrix, threshold: float = 1e-12) -> bool:
+    """Whether every LDLᵀ pivot exceeds ``threshold`` × the largest diagonal entry (at least 1)."""
     pivots = symmetric_pivots(matrix)
     scale = max(1.0, float(np.max(np.abs(matrix.diagonal()), initial=0.0)))
-    return pivots is not None and bool(np.all(pivots > 1e-12 * scale))
+    return pivots is not None and bool(np.all(pivots > threshold * scale))
 
 
 def full_row_rank(rows: sp.csr_matrix, tolerance: float) -> bool:
