@@ -294,21 +294,25 @@ def test_gait_step_from_the_transcriptions_guess_ends_at_another_local_minimum()
 
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 22): the ℓ1 merit's weights do not see these rows' violation")
-def test_a_near_feasible_iterate_is_not_traded_for_a_large_violation():
-    """Forward HS N = 50, step 4, from the state an ``sqp`` walk reached it in. Once feasible (iteration 6), full
-    steps took the violation from 4e-6 to 3 by iteration 20 for decreases of f by 1e-4 (the ℓ1 weights of those rows
-    follow multipliers near zero), then slid back along the cost's flat valley, to the iteration limit. A change that
-    made such steps grow the shift and corrected them first passed this test but broke three others
-    (docs/solvers.md, "Full forward walks")."""
+@pytest.mark.slow
+def test_a_stationary_infeasible_iterate_is_projected_onto_the_constraints():
+    """Forward HS N = 50, step 4, from the state an ``sqp`` walk reached it in (IPOPT: 347 iterations, f = 0.2130).
+    The ℓ1 merit trades feasibility for f along the cost's flat valley (violation up to 20 by iteration 20); by
+    iteration ~200 the iterate is stationary (KKT residual ~1e-8) and the full steps that slide along the continuum
+    of optima lower the violation by only 2 % each. Projected only below the acceptable level, it reached the
+    500-iteration limit at violation 7e-5 (converged at 667 with a limit of 3000); projected at any violation,
+    it converges at iteration 209 (docs/solvers.md, "Full forward walks")."""
     registry = load_registry()
     problem = WalkProblem(registry.create("experiment", "forward"), registry.create("transcription", "hermite-simpson"),
                           Ipopt(), 50)
     built = problem.transcription.build(problem.structure("second", walked=True))
     data = problem.step_data(4, np.array([-np.pi / 6, np.pi / 6, 0.24373434, -0.88345295]))
-    result = SQP(max_iterations=30).solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
-    assert result.constraint_violation <= 1e-5  # 0.032 on main
-    assert result.objective < 0.2427  # f at the first near-feasible iterate
+    result = SQP().solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.iterations <= 300
+    assert result.constraint_violation <= 1e-8
+    assert result.objective < 0.2130
+
 
 @cache
 def _forward_walk(solver: str, transcription: str, n_nodes: int, steps: int):

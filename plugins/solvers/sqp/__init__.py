@@ -59,9 +59,9 @@ Globalisation (``merit``):
   1e6 or a step length below the filter's minimum start the restoration phase.
 
 After an elastic step the multipliers restart from least squares: the ones that made the QP fail would shape the
-next Hessians. At a stationary point (KKT residual below ``tolerance``) that is only slightly infeasible (below
-``acceptable_tolerance``), one Gauss–Newton projection onto the constraints (the restoration's QP below) is taken
-whole when it halves θ.
+next Hessians. At a stationary point (KKT residual below ``tolerance``, after iteration 0) that is infeasible, one
+Gauss–Newton projection onto the constraints (the restoration's QP below) is taken whole when it halves θ: at
+such a point the QP steps slide along the continuum of optima and cut the violation by only a few per cent each.
 
 Restoration phase (the filter's, and the ℓ1 merit's when even the elastic QP fails): Gauss–Newton steps on θ (the
 elastic QP with P = I, no objective and W = 1e4, so the least-norm step that reduces the linearised violation most

@@ -67,9 +67,12 @@ def convexify(H: sp.csc_matrix, shift: float, shift_growth: float, jacobian: sp.
     raise FloatingPointError("no shift up to 1e10·max|H| makes the Hessian of the Lagrangian positive definite")
 
 
-def working_set(lin: Linearization, x: np.ndarray, g: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def working_set(lin: Linearization, x: np.ndarray, g: np.ndarray, lam: np.ndarray,
+                bound_multipliers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(rows, bounds) to augment: the equalities, the inequality rows that are violated, within 1e-6 of a bound
-    or carry a multiplier, and the variables within 1e-8 of a bound."""
+    or carry a multiplier, and the variables within 1e-8 of a bound whose multiplier does not push them off it.
+    Augmented, such a variable could not leave its bound: forward HS N = 50, step 6, a torque 5e-6 from its lower
+    bound with a multiplier of the upper sign held the KKT residual at 3.7e-6 for 1,300 iterations."""
     significant = 1e-6 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))  # interior-point duals never
     near = 1e-6 * (1.0 + np.abs(np.where(np.isfinite(lin.ubg), lin.ubg, 0.0)))  # vanish on inactive rows
     upper = lin.upper[(g[lin.upper] >= lin.ubg[lin.upper] - near[lin.upper])
@@ -78,7 +81,8 @@ def working_set(lin: Linearization, x: np.ndarray, g: np.ndarray, lam: np.ndarra
     lower = lin.lower[(g[lin.lower] <= lin.lbg[lin.lower] + near[lin.lower])
                       | (lam[lin.lower] < -significant)]
     rows = np.unique(np.concatenate([lin.equality, upper, lower]))
-    at_bound = (x - lin.lbx <= 1e-8 * (1.0 + np.abs(x))) | (lin.ubx - x <= 1e-8 * (1.0 + np.abs(x)))
+    at_bound = (((x - lin.lbx <= 1e-8 * (1.0 + np.abs(x))) & (bound_multipliers <= 0))
+                | ((lin.ubx - x <= 1e-8 * (1.0 + np.abs(x))) & (bound_multipliers >= 0)))
     return rows, np.flatnonzero(at_bound)
 
 

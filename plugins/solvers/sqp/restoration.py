@@ -1,5 +1,5 @@
 """Feasibility restoration: Gauss–Newton steps on the violation θ when the QP cannot give a step, and the projection
-that ends a stationary but slightly infeasible iterate (package docstring, "Restoration phase")."""
+that ends a stationary but infeasible iterate (package docstring, "Restoration phase")."""
 
 from __future__ import annotations
 
@@ -18,10 +18,11 @@ class Restoration(LineSearch):
     """The line searches, with restoration for when they have no step to search along."""
 
     def _projection_step(self) -> bool:
-        """At a stationary point that is only slightly infeasible, one Gauss–Newton step onto the constraints (the
-        restoration's QP), taken whole when it reduces the violation, multipliers kept. Without it the iterates can
-        slide along the flat valleys of the thesis cost, each full step leaving a violation ~1e-6 behind it (forward
-        HS N = 50, step 5: iteration limit at KKT residual 9e-10, violation 1.3e-6)."""
+        """At a stationary but infeasible point, one Gauss–Newton step onto the constraints (the restoration's QP),
+        taken whole when it halves the violation, multipliers kept. Without it the iterates slide along the flat
+        valleys of the thesis cost, each full step leaving most of the violation behind it (forward HS N = 50:
+        step 5, iteration limit at KKT residual 9e-10, violation 1.3e-6; step 4, the violation falling 2 % an
+        iteration from 1e-2, 667 iterations instead of 209)."""
         outcome = self._elastic_qp(sp.eye(self.n, format="csc"), np.zeros(self.n), _RESTORATION_WEIGHT)
         if not outcome.solved:
             return False

@@ -33,7 +33,8 @@ class Run(Restoration):
             if violation <= self.o.tolerance and dual <= self.o.tolerance * scale and self.restoration is None:
                 return self._result(SolverStatus.CONVERGED, f"KKT residual {dual:.1e}, violation {violation:.1e}")
             level = self.o.acceptable_tolerance
-            if (self.restoration is None and dual <= self.o.tolerance * scale and violation <= level
+            # at iteration 0 the least-squares multipliers make x look stationary by construction
+            if (self.restoration is None and self.iteration > 0 and dual <= self.o.tolerance * scale
                     and self._projection_step()):
                 continue
             self.streak = self.acceptable

@@ -18,7 +18,8 @@ _MERITS = ("l1", "filter")
 class SQP:
     """Line-search SQP with QP subproblems solved through ``qpsolvers``; see the package docstring for the method.
 
-    Shared options: ``max_iterations`` (QP-based steps, restoration steps included), ``time_limit_s`` (checked
+    Shared options: ``max_iterations`` (QP-based steps, restoration steps included; 3000, IPOPT's default: forward
+    HS N = 50, step 6 of an ``sqp`` walk takes 965, IPOPT 1,852 from the same start), ``time_limit_s`` (checked
     once per iteration and passed on to the backends that take one; ``None`` for none), ``tolerance`` (on the
     constraint violation, max-norm, and on the stationarity/complementarity residual scaled as IPOPT does),
     ``print_level`` (≥ 1: one log line per iteration).
@@ -50,7 +51,7 @@ class SQP:
 
     name = "sqp"
 
-    def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
+    def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, qp_solver: str = "piqp", qp_tolerance: float = 1e-10,
                  hessian: str = "exact", merit: str = "l1", second_order_correction: bool = True,
                  acceptable_tolerance: float = 1e-6, fallback_qp_solver: str | None = "clarabel") -> None:

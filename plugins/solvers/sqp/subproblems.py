@@ -23,7 +23,8 @@ class Subproblems(Iterate):
         if not np.all(np.isfinite(H.data)):
             raise FloatingPointError("the Hessian of the Lagrangian is not finite")
         model, self.shift = convexify(H, self.shift, self.shift_growth, self.jac,
-                                      lambda: working_set(self.lin, self.x, self.g, self.lam))
+                                      lambda: working_set(self.lin, self.x, self.g, self.lam,
+                                                          -(self.grad + self.jac.T @ self.lam)))
         return model
 
     def _qp(self, model: Model, g: np.ndarray, warm: QPOutcome | None) -> QPOutcome:
