@@ -40,7 +40,8 @@ def completion_table(frame: pd.DataFrame) -> pd.DataFrame:
             if "back_ups" in group else 0,
             "case time (s)": round(float(group["wall_time_s"].sum()), 1),
             "stopped (N: cause at step, status)": "; ".join(
-                f"{int(row.N)}: {row.stop_cause} at {_step(row.stop_step)}, {row.stop_status}"
+                f"{int(row.N)}: {row.stop_cause} at {_step(row.stop_step)}, "
+                f"{row.stop_status if isinstance(row.stop_status, str) else row.status}"
                 for row in stopped.itertuples()) or "—",
         })
     return pd.DataFrame(rows)
