@@ -35,7 +35,6 @@ wall-clock time of this process.
 
 from __future__ import annotations
 
-import heapq
 import json
 import os
 import subprocess
@@ -45,7 +44,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from performance_summary import summary_markdown  # its sibling in benchmarks/
+from performance_summary import summary_markdown  # its siblings in benchmarks/
+from scaling import makespan
 
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import StepData, sectional_structure
@@ -364,10 +364,7 @@ def list_schedule(per_case: list[dict], jobs: int, order: list[Case]) -> float:
     """When ``jobs`` workers would finish the measured cases, each taking the next case of ``order`` as it frees
     up: a computed schedule, not a run."""
     times = {(row["experiment"], row["N"], row["method"]): row["wall_s"] for row in per_case}
-    free = [0.0] * jobs
-    for case in order:
-        heapq.heappush(free, heapq.heappop(free) + times[case.experiment.name, case.n_nodes, case.method])
-    return max(free)
+    return makespan([times[case.experiment.name, case.n_nodes, case.method] for case in order], jobs)
 
 
 def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
