@@ -26,13 +26,12 @@ _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
 """The backend keywords ``qp_tolerance`` sets. quadprog (a dual active-set method solving to machine precision) has
 none, nor have backends not listed here."""
 
-_BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000},
-                                     "piqp": {"preconditioner_iter": 0, "max_iter": 100}}
+_BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000}, "piqp": {"max_iter": 100}}
 """Fixed extra options. OSQP's ADMM alone reaches tight tolerances slowly; its polishing step solves the
-identified active set's equality QP exactly. PIQP's Ruiz preconditioner left its dual residual at 1e-2–5 after
-its 250 iterations on most QPs of the later gait steps (forward HS N = 100, step 2: 31 of 50 QPs, 190 ms each,
-before Clarabel solved them again); unscaled, it solves 37 of them, and those it solves take ≤ 50 iterations
-(90 %), so 100 iterations bound what a failure costs before the fallback (issue 22, branch ``sqp-speed``)."""
+identified active set's equality QP exactly. PIQP solves the gait QPs it solves at all in at most 95 iterations
+(forward step 2, HS N = 100, and step 1, DMOC N = 100, 113 QPs); on the others (31 of 50 late-step QPs) it ends
+at its limit with a dual residual of 1e-2–5 whatever the limit, so 100 iterations instead of 250 bound what such a
+failure costs (190 ms at HS N = 100) before the fallback solves the QP (branch ``sqp-speed``)."""
 
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
