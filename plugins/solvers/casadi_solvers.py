@@ -5,10 +5,13 @@ Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and o
 
 - ``blocksqp``: blockSQP, filter line-search SQP with block-wise quasi-Newton Hessians;
 - ``fatrop``: FATROP, an interior-point method for optimal control (IPOPT's algorithm on a stage-wise Riccati
-  factorization), here on the NLP as one dense stage (see :class:`Fatrop`).
+  factorization), on the NLP rewritten in stage-wise form (``stagewise=true``) or as one dense stage (the
+  default; see :class:`Fatrop`).
 
-Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC, 20–150× slower than IPOPT; on the
-harder upward-slope step 1, without the torque tie-break, both fail (docs/solvers.md has the measurements).
+Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC at N = 20, blockSQP and dense FATROP
+20–150× slower than IPOPT; on the harder upward-slope step 1, without the torque tie-break, both fail. Stage-wise
+FATROP solves forward step 1 at N = 20 and 50 (4–9× IPOPT's time, most of it CasADi's interpreted derivatives) and
+the upward-slope step 1 at N = 20, but not forward step 1 at N = 100 (docs/solvers.md has the measurements).
 CasADi's ``sqpmethod`` and ``feasiblesqpmethod`` were plugins here too and were removed (issue 22): on forward
 step 1 neither reaches a solution with any QP solver or Hessian option CasADi 3.8 offers (docs/solvers.md,
 "Removed").
