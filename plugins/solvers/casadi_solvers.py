@@ -247,8 +247,9 @@ class Fatrop(CasadiMethod):
 
     - ``stagewise=True``: the NLP is rewritten in stage-wise form (:mod:`gaitbench.problem.stagewise`: each stage's
       own variables as controls, copies of earlier ones and of the global variables as states, gap-closing rows
-      that carry the copies) and FATROP is given its structure (``N``, ``nx``, ``nu``, ``ng``), or with
-      ``structure_detection="auto"`` left to find it; the solution is mapped back, so the result is the NLP's own.
+      that carry the copies) and FATROP is given its structure (``N``, ``nx``, ``nu``, ``ng``); the solution is
+      mapped back, so the result is the NLP's own. ``structure_detection="auto"`` instead leaves the structure to
+      CasADi's detection, which misreads this form (docs/solvers.md): kept for comparison, not for use.
     - ``stagewise=False`` (default): with ``structure_detection="none"`` (default) the NLP is one stage with all
       variables as controls, which FATROP solves with a dense factorization (correct, without its speed-up).
       ``structure_detection="auto"`` (CasADi's detection, given which constraints are equalities) is for NLPs

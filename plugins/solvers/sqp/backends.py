@@ -31,7 +31,7 @@ _BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 200
 identified active set's equality QP exactly. PIQP solves the gait QPs it solves at all in at most 95 iterations
 (forward step 2, HS N = 100, and step 1, DMOC N = 100, 113 QPs); on the others (31 of 50 late-step QPs) it ends
 at its limit with a dual residual of 1e-2–5 whatever the limit, so 100 iterations instead of 250 bound what such a
-failure costs (190 ms at HS N = 100) before the fallback solves the QP (branch ``sqp-speed``)."""
+failure costs (190 ms at HS N = 100) before the fallback solves the QP (docs/solvers.md, the sqp section's "Speed")."""
 
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
