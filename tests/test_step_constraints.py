@@ -151,4 +151,19 @@ def test_a_step_that_fails_every_rung_names_them_and_the_walk_stops_there():
     step = walk.steps[0]
     # The First Phase fails with the same solver, so the first-phase seed cannot be tried further.
     assert [entry["remedy"] for entry in step.details["retries"]] == ["first-phase-seed"]
-    assert step.message == "infeasible: infeasible (scripted) (retried: first-phase-seed)"
+    assert step.details["retries"][0]["failed_in"] == "first phase"
+    assert step.message == ("infeasible: infeasible (scripted) "
+                            "(retried: first-phase-seed (its first phase: infeasible))")
+
+
+def test_a_first_phase_that_fails_ends_the_ladder_instead_of_being_recorded_once_per_remedy():
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailingFirst(remedies=False)
+    solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert not outcome.solved
+    rungs = outcome.details["retries"]
+    assert [entry["remedy"] for entry in rungs] == ["scripted-remedy", "first-phase-seed"]
+    assert "failed_in" not in rungs[0] and rungs[1]["failed_in"] == "first phase"

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -314,13 +314,14 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     first_attempt, retries = outcome, []
     for remedy, attempt in _ladder(problem, index, built, data, seed, phase, reseed):
         retry = attempt()
-        retries.append({"remedy": remedy, **retry.summary()})
+        retries.append({"remedy": remedy, **retry.summary(), **_failed_in(retry)})
         if retry.solved:
             outcome = retry
             break
     outcome.details = {**outcome.details, "first_attempt": first_attempt.summary(), "retries": retries}
     if not outcome.solved:
-        tried = ", ".join(entry["remedy"] for entry in retries) or "none applies"
+        tried = ", ".join(entry["remedy"] + (f" (its {entry['failed_in']}: {entry['status']})"
+                                             if "failed_in" in entry else "") for entry in retries) or "none applies"
         outcome.message = f"{first_attempt.message} (retried: {tried})"
     return outcome
 
@@ -341,12 +342,20 @@ def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: Step
             first_phase.append(solve_and_verify(problem, index, first, data, phase="first"))
         coarse = first_phase[0]
         if not coarse.solved:
-            return coarse
+            return replace(coarse, message=f"its 2-DOF First Phase: {coarse.message}",
+                           details={**coarse.details, "failed_in": "first phase"})
         return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), phase, variant)
 
     yield "first-phase-seed", lambda: seeded(None)
+    if not first_phase[0].solved:
+        return  # no seed: the remedies below would only repeat the First Phase's failure
     for name, variant in remedies:
         yield f"first-phase-seed+{name}", lambda variant=variant: seeded(variant)
+
+
+def _failed_in(outcome: StepOutcome) -> dict:
+    """Where a rung failed when it was not the 4-DOF solve itself (the First Phase that seeds it)."""
+    return {"failed_in": outcome.details["failed_in"]} if "failed_in" in outcome.details else {}
 
 
 def solver_remedies(solver: Solver) -> list[tuple[str, Solver]]:
