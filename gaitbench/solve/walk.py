@@ -216,17 +216,22 @@ class WalkProblem:
 StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
 """Solves step ``index`` from a (q1, q2, q̇1, q̇2) state; a solved outcome carries the next step's state."""
 
+BackUp = Callable[[WalkProblem, int, np.ndarray, Seed], "StepOutcome"]
+"""Solves step ``index`` again from its state, looking further ahead, started from ``seed``: the trajectory it is
+to replace."""
+
 
 def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
                       on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
-                      back_up: StepSolver | None = None) -> WalkResult:
+                      back_up: BackUp | None = None) -> WalkResult:
     """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
 
     A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
     steps before it are kept. With ``back_up``, a step that the solver cannot solve is first taken as a dead end
     the previous step walked into: that step is solved again by ``back_up`` (which looks further ahead) from its
-    own initial state, and the walk goes on from the new one. Each step is backed up at most once; the step that
-    was replaced is recorded in the new one's ``details["backed_up_from"]``.
+    own initial state, started from its own trajectory (feasible for it, and nearer one that leaves the next step
+    a way on than a blended guess is), and the walk goes on from the new one. Each step is backed up at most once;
+    the step that was replaced is recorded in the new one's ``details["backed_up_from"]``.
     """
     walk = problem.result(strategy, phase)
     started = time.perf_counter()
@@ -248,7 +253,7 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
         if not outcome.solved and dead_end and back_up is not None and index > 1 and index - 1 not in backed_up:
             backed_up.add(index - 1)
             replaced = walk.steps[-1]
-            previous = back_up(problem, index - 1, states[index - 2])
+            previous = back_up(problem, index - 1, states[index - 2], replaced.verified.trajectory.seed())
             if previous.solved:
                 previous.details = {**previous.details, "backed_up_from": {
                     **replaced.summary(), "dead_end": {"step": index, "message": outcome.message}}}
