@@ -18,7 +18,7 @@ from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.solve.walk import WalkProblem, next_step_state
 from plugins.strategies.decrease_and_conquer import (
     DYNAMICS_TOLERANCE,
     DecreaseAndConquer,
@@ -194,6 +194,32 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
     assert summary["verified_acot"] == pytest.approx(np.mean([s.details["polished"]["cot"] for s in walk.steps]))
     assert summary["candidates"] == sum(s.details["candidates"] for s in walk.steps)
     _the_polished_trajectory_is_kept_and_stored(walk, tmp_path)
+    _a_back_up_goes_on_from_the_polished_trajectory(problem, walk.steps[0])
+
+
+def _a_back_up_goes_on_from_the_polished_trajectory(problem, step):
+    from plugins.strategies.decrease_and_conquer import continue_from_polished
+
+    backed = continue_from_polished(problem, step)
+    assert backed.solved and backed.details["continued_from"] == "polished"
+    np.testing.assert_array_equal(backed.next_state, next_step_state(problem.model("second"),
+                                                                     step.polished.trajectory))
+    assert backed.trajectory is step.trajectory and backed.verification is step.verification
+    assert not continue_from_polished(problem, dataclasses.replace(step, polished=None)).solved
+
+
+@pytest.mark.slow
+def test_decrease_and_conquer_backs_up_a_patchwork_dead_end_onto_the_polished_trajectory():
+    """Upward slope, HS, N = 60 (a thesis-all case): from step 3's chosen patchwork, step 4's First Phase reaches
+    IPOPT's iteration limit with both μ strategies; the walk goes on from step 3's polished trajectory."""
+    upward = REGISTRY.create("experiment", "upward-slope")
+    problem = WalkProblem(upward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 60, steps=4)
+    walk = DecreaseAndConquer().solve(problem)
+    assert walk.complete, walk.failure
+    assert walk.steps[2].details["continued_from"] == "polished"
+    assert walk.steps[2].details["backed_up_from"]["dead_end"]["step"] == 4
+    assert not DecreaseAndConquer(back_up=False).solve(problem).complete
 
 
 def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):
