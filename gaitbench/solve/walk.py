@@ -307,7 +307,10 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     2. ``first-phase-seed`` (4-DOF steps only, and only with ``reseed``): the step's 2-DOF First-Phase problem
        solved, and the 4-DOF problem started from its trajectory, with the solver and then each of its remedies.
        A caller whose result means "the optimum near *this* seed" (decrease-and-conquer's polish) passes
-       ``reseed=False``.
+       ``reseed=False``;
+    3. each of the solver's last resorts (``solver.last_resorts()``; IPOPT: a small initial barrier parameter) from
+       the same guess: variants that solve where the others fail but often reach a worse optimum, so they come
+       after every other rung.
 
     Every rung tried is recorded in the outcome's ``details["retries"]`` (remedy, status, iterations, time), and
     the first attempt's status in ``details["first_attempt"]``; a step that still fails keeps the first failure's
@@ -334,11 +337,16 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
 def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
             phase: str, reseed: bool):
     """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
-    remedies = solver_remedies(problem.solver)
-    for name, variant in remedies:
+    for name, variant in solver_remedies(problem.solver):
         yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
-    if phase != "second" or not reseed:
-        return
+    if phase == "second" and reseed:
+        yield from _first_phase_rungs(problem, index, built, data)
+    for name, variant in solver_variants(problem.solver, "last_resorts"):
+        yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
+
+
+def _first_phase_rungs(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData):
+    """Rung 2: the 4-DOF step started from its First Phase's trajectory, with the solver and each remedy."""
     first_phase: list[StepOutcome] = []
 
     def seeded(variant: Solver | None) -> StepOutcome:
@@ -349,12 +357,12 @@ def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: Step
         if not coarse.solved:
             return replace(coarse, message=f"its 2-DOF First Phase: {coarse.message}",
                            details={**coarse.details, "failed_in": "first phase"})
-        return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), phase, variant)
+        return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), "second", variant)
 
     yield "first-phase-seed", lambda: seeded(None)
     if not first_phase[0].solved:
         return  # no seed: the remedies below would only repeat the First Phase's failure
-    for name, variant in remedies:
+    for name, variant in solver_remedies(problem.solver):
         yield f"first-phase-seed+{name}", lambda variant=variant: seeded(variant)
 
 
@@ -365,7 +373,12 @@ def _failed_in(outcome: StepOutcome) -> dict:
 
 def solver_remedies(solver: Solver) -> list[tuple[str, Solver]]:
     """The solver's variants worth a retry after a failed solve (its optional ``remedies()``), named."""
-    method = getattr(solver, "remedies", None)
+    return solver_variants(solver, "remedies")
+
+
+def solver_variants(solver: Solver, kind: str) -> list[tuple[str, Solver]]:
+    """The solver's named variants of one kind, ``remedies`` or ``last_resorts``: empty where it has none."""
+    method = getattr(solver, kind, None)
     return list(method()) if method is not None else []
 
 
