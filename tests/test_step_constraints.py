@@ -199,3 +199,18 @@ def test_small_mu_init_solves_the_stairs_first_step_that_diverges_at_n_140():
     assert outcome.solved and outcome.verification.max_defect < 1e-6
     assert [entry["remedy"] for entry in outcome.details["retries"]] == [
         "adaptive-mu", "first-phase-seed", "small-mu-init"]
+
+
+def test_a_look_ahead_window_tries_the_solver_s_last_resorts_after_its_remedies():
+    from gaitbench.solve.walk_chain import LookAhead
+
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailingFirst(remedies=False)
+    solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
+    solver.last_resorts = lambda: [("use-ipopt", Ipopt())]
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=2)
+    built = problem.transcription.build(problem.structure("second", walked=True))
+    outcome = LookAhead(built, 2, fallback=False).solve_step(problem, 1, problem.start_state())
+    assert outcome.solved
+    assert [attempt["remedy"] for attempt in outcome.details["look_ahead"]["attempts"]] == [
+        "none", "scripted-remedy", "use-ipopt"]

@@ -25,7 +25,14 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.problem.trajectory import Seed
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import StepOutcome, WalkProblem, next_step_state, solve_with_retries, solver_remedies
+from gaitbench.solve.walk import (
+    StepOutcome,
+    WalkProblem,
+    next_step_state,
+    solve_with_retries,
+    solver_remedies,
+    solver_variants,
+)
 
 INITIAL_STATE = PARAMETER_LAYOUT["initial_state"]
 
@@ -103,8 +110,10 @@ class WalkChain:
 class LookAhead:
     """One Phase with a receding horizon: step i is solved together with the next ``horizon − 1`` steps, and only
     step i is committed (DECISIONS §7). Each window starts from the previous window's later steps; its last step
-    from the blended guess. A window that fails after the solver's remedies falls back to step i alone, with the
-    retry ladder, and says so in the step's details (unless ``fallback`` is off: then the failure is returned).
+    from the blended guess. A window that fails after the solver's remedies and last resorts falls back to step i
+    alone, with the retry ladder, and says so in the step's details (unless ``fallback`` is off: then the failure
+    is returned). Upward slope, HS, N = 150: the back-up window of steps 5–6 from step 5's trajectory reached
+    IPOPT's 3000 iterations with both μ strategies, and converges in 420 with μ₀ = 1e-3 (its last resort).
 
     Chains are built once per window length and first stance leg, and kept for the walk.
     """
@@ -132,7 +141,9 @@ class LookAhead:
         guess = chain.guess(problem, index, known)
         started = time.perf_counter()
         attempts = []
-        for remedy, solver in [("", problem.solver), *solver_remedies(problem.solver)]:
+        variants = [("", problem.solver), *solver_remedies(problem.solver),
+                    *solver_variants(problem.solver, "last_resorts")]
+        for remedy, solver in variants:
             outcome = self._commit(problem, index, chain, solver, p, guess)
             attempts.append({"remedy": remedy or "none", **outcome.summary()})
             if outcome.solved:
