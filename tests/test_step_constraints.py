@@ -214,3 +214,15 @@ def test_a_look_ahead_window_tries_the_solver_s_last_resorts_after_its_remedies(
     assert outcome.solved
     assert [attempt["remedy"] for attempt in outcome.details["look_ahead"]["attempts"]] == [
         "none", "scripted-remedy", "use-ipopt"]
+
+
+def test_no_rung_starts_after_the_walk_s_deadline_and_the_step_ends_with_its_time_limit():
+    import time
+
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailingFirst()
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1, deadline=time.monotonic() - 1.0)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert solver.calls == 1 and outcome.status == "time_limit" and outcome.details["retries"] == []
+    assert outcome.message == "time limit: the walk's time ran out during step 1's retries (retried: none)"

@@ -169,6 +169,11 @@ class WalkProblem:
     later is not started, and the walk stops there with ``time_limit``, keeping the steps it solved, instead of
     running on until its process is stopped and losing them all."""
 
+    @property
+    def out_of_time(self) -> bool:
+        """Whether the walk's deadline has passed."""
+        return self.deadline is not None and time.monotonic() >= self.deadline
+
     def __post_init__(self) -> None:
         if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
             raise ValueError(f"steps = {self.steps}: the {self.experiment.name} experiment has "
@@ -241,7 +246,7 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
     index = 1
     while index <= problem.n_steps:
         check = checks[index - 1]
-        if problem.deadline is not None and time.monotonic() >= problem.deadline:
+        if problem.out_of_time:
             outcome = StepOutcome(index, problem.experiment.stance_leg(index), SolverStatus.TIME_LIMIT.value,
                                   f"time limit: the walk's time ran out before step {index}")
         elif check.ok:
@@ -250,7 +255,8 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
             outcome = StepOutcome(index, problem.experiment.stance_leg(index), "infeasible_geometry",
                                   "; ".join(check.problems))
         dead_end = check.ok and outcome.status != SolverStatus.TIME_LIMIT.value  # a time limit is final
-        if not outcome.solved and dead_end and back_up is not None and index > 1 and index - 1 not in backed_up:
+        if (not outcome.solved and dead_end and back_up is not None and index > 1 and index - 1 not in backed_up
+                and not problem.out_of_time):
             backed_up.add(index - 1)
             replaced = walk.steps[-1]
             previous = back_up(problem, index - 1, states[index - 2], replaced.verified.trajectory.seed())
@@ -312,6 +318,9 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
        the same guess: variants that solve where the others fail but often reach a worse optimum, so they come
        after every other rung.
 
+    A rung is not started once the walk's deadline has passed: the step then ends with ``time_limit``, which the
+    walk does not back up from (a suite case keeps the steps it solved instead of being stopped from outside).
+
     Every rung tried is recorded in the outcome's ``details["retries"]`` (remedy, status, iterations, time), and
     the first attempt's status in ``details["first_attempt"]``; a step that still fails keeps the first failure's
     message, with the rungs that were tried.
@@ -321,6 +330,10 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
         return outcome
     first_attempt, retries = outcome, []
     for remedy, attempt in _ladder(problem, index, built, data, seed, phase, reseed):
+        if problem.out_of_time:  # a rung started after the deadline could run a whole solve's limit past it
+            outcome = replace(first_attempt, status=SolverStatus.TIME_LIMIT.value,
+                              message=f"time limit: the walk's time ran out during step {index}'s retries")
+            break
         retry = attempt()
         retries.append({"remedy": remedy, **retry.summary(), **_failed_in(retry)})
         if retry.solved:
@@ -329,8 +342,8 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     outcome.details = {**outcome.details, "first_attempt": first_attempt.summary(), "retries": retries}
     if not outcome.solved:
         tried = ", ".join(entry["remedy"] + (f" (its {entry['failed_in']}: {entry['status']})"
-                                             if "failed_in" in entry else "") for entry in retries) or "none applies"
-        outcome.message = f"{first_attempt.message} (retried: {tried})"
+                                             if "failed_in" in entry else "") for entry in retries) or "none"
+        outcome.message = f"{outcome.message} (retried: {tried})"
     return outcome
 
 

@@ -144,6 +144,8 @@ class LookAhead:
         variants = [("", problem.solver), *solver_remedies(problem.solver),
                     *solver_variants(problem.solver, "last_resorts")]
         for remedy, solver in variants:
+            if attempts and problem.out_of_time:
+                break  # the step alone below then ends with the walk's time limit too
             outcome = self._commit(problem, index, chain, solver, p, guess)
             attempts.append({"remedy": remedy or "none", **outcome.summary()})
             if outcome.solved:
