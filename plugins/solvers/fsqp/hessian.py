@@ -74,7 +74,7 @@ def qp_hessian(form: NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
         augmented = (shifted + rho * size * gram).tocsc()
         if positive_definite(augmented, _QP_PIVOT):
             return augmented, rho * size, shifted
-    augmentation = 100.0 * size
+    augmentation = 1e4 * size
     while shift <= SHIFT_RANGE[1] * size:
         shift *= 4
         base = (lagrangian + shift * sp.eye(form.n)).tocsc()
