@@ -14,6 +14,7 @@ from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative
 
 import plugins.solvers.fsqp as fsqp
 import plugins.solvers.fsqp.solver as fsqp_solver
+from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solve.solver import SolverStatus
@@ -276,3 +277,28 @@ def test_registered_as_a_solver_plugin():
     (registration,) = fsqp.register_solvers()
     assert registration.name == "fsqp" == FSQP.name
     assert isinstance(registration.factory(max_iterations=5), FSQP)
+
+
+@pytest.mark.slow
+def test_qp_subproblem_walks_forward_step_2_dmoc_n50_to_ipopts_cot():
+    """Forward step 2, DMOC, N = 50, from the state fsqp's own step 1 ends in: the step where the 3-step walk used to
+    stop (iteration limit, crawling by ~1.5e-7 of merit per iteration, then a KKT test that never passed). Both
+    solvers from the same guess on the same NLP; fsqp's verified COT at most 5 % above IPOPT's."""
+    from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.walk import WalkProblem, solve_and_verify
+
+    registry = load_registry()
+    experiment, transcription = registry.create("experiment", "forward"), registry.create("transcription", "dmoc")
+    options = ProblemOptions(limits=experiment.limits)
+    walk = WalkProblem(experiment, transcription, FSQP(), 50, steps=3, options=options)
+    built = transcription.build(walk.structure("second", walked=True))
+    first = solve_and_verify(walk, 1, built, walk.step_data(1, walk.start_state()))
+    assert first.solved, first.message
+    data = walk.step_data(2, first.next_state)
+    step = solve_and_verify(walk, 2, built, data)
+    assert step.solved, step.message
+    assert step.solver_result.iterations <= 500
+    reference = solve_and_verify(WalkProblem(experiment, transcription, Ipopt(), 50, steps=3, options=options), 2,
+                                 built, data)
+    assert reference.solved, reference.message
+    assert step.verification.cot <= 1.05 * reference.verification.cot

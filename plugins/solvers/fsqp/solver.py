@@ -22,7 +22,8 @@ class FSQP:
     largest equality residual are both ≤ tolerance, in scaled units — d0 = 0 exactly at a KKT point, thesis
     Lemma 2; the digest's 1e-6 left HS039's equalities violated by 1e-7, and 1e-8 costs about one more iteration
     where the rate is superlinear), ``print_level`` (0 silent, ≥ 1 one line per iteration: F_c, ‖d0‖, step t,
-    penalty c_k, |J_k|, the NLP's largest violation, the direction taken).
+    penalty c_k, |J_k|, the NLP's largest violation, the direction taken; ≥ 2 also the parts of the ``qp``
+    subproblem's KKT error and the shift of its H).
 
     Method parameters, with the digest's [S] defaults (the thesis gives no values):
 
@@ -88,7 +89,9 @@ class FSQP:
     - d̃ = s − d, s the QP again with the rows linearised at x + d (second-order correction); the arc x + t d + t²d̃
       is searched with every inequality row ≤ ``tolerance`` (scaled units) and Armijo on the merit.
     - Converged when IPOPT's scaled KKT error, with the QP's multipliers, is below ``tolerance``, or below 1e-6 for
-      15 iterations (IPOPT's acceptable level).
+      15 iterations (IPOPT's acceptable level). The QP's multipliers belong to x + d, so the error is also taken
+      with them corrected by least squares over the rows the step holds (at x; signs and complementarity checked):
+      on the flat valleys ‖∇²L d‖ stays ~1e-5 while f no longer moves, which the first test never passes.
     - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; the
       Gauss–Newton step when that QP is inconsistent), until the inequalities hold and the equalities are within
       1e-6, so that the first QP is consistent.
