@@ -66,13 +66,23 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
             rows_g, rows_e = jacobian[general], jacobian[equal]
             lower = np.where(form.free, form.lbx - x, 0.0)
             upper = np.where(form.free, form.ubx - x, 0.0)
-            for _ in range(2):  # once more, convexified over the rows the QP holds, if rows it left were in W
+            passes = 0
+            while passes < 2:  # once more, convexified over the rows the QP holds, if rows it left were in W
                 hessian, augmentation, base = qp_hessian(form, x, multipliers, jacobian[working], damping)
                 qp = qpsolvers.Problem(hessian, gradient, rows_g.tocsc() if general.size else None,
                                        -c[general] if general.size else None,
                                        rows_e.tocsc() if equal.size else None, -c[equal] if equal.size else None,
                                        lower, upper)
-                solution = solve_qp(qp)
+                try:
+                    solution = solve_qp(qp)
+                except Breakdown:
+                    # A QP the backends cannot solve is ill-conditioned (augmentation/shift up to ~1e12 on the
+                    # flat valleys): solve it again with H shifted 100× more, up to 1e-2·max|∇²L|.
+                    size = max(1.0, float(np.max(np.abs(base.diagonal()), initial=0.0)))
+                    if damping >= 1e-2 * size:
+                        raise
+                    damping = max(100 * damping, SHIFT_RANGE[0] * size)
+                    continue
                 d = np.clip(x + solution.x, form.lbx, form.ubx) - x  # the QP's bounds hold to its tolerance
                 linear = c + jacobian @ d
                 held = np.intersect1d(working, np.flatnonzero(linear >= -_ACTIVE))  # kept at their bound
@@ -80,7 +90,7 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
                 loose = np.setdiff1d(working, held)
                 if not (augmentation and loose.size):
                     break
-                working = held
+                working, passes = held, passes + 1
             u = np.zeros(m)
             u[general] = solution.z if general.size else 0.0
             u[equal] = solution.y if equal.size else 0.0
