@@ -212,7 +212,7 @@ def _refined_error(form: NLPForm, x: np.ndarray, c: np.ndarray, jacobian: sp.csr
         remaining = residual - active.T @ correction
         correction += factor.solve(inner @ remaining[interior])
     remaining = residual - active.T @ correction
-    multipliers = u[rows] + correction
+    multipliers = u[rows] - correction  # ∇f + Jᵀ(u − Δ) + z = the remaining residual
     is_general = rows < form.n_general
     bound = z - remaining  # the bound multipliers that take up the rest on variables at a bound
     sign = max(np.max(-multipliers[is_general], initial=0.0), np.max(bound[lower & ~upper], initial=0.0),

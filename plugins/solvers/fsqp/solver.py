@@ -82,7 +82,9 @@ class FSQP:
       one their inequality form with ∇F_c gives. H = ∇²L + δI made positive definite as ``sqp`` does it (sparse LDLᵀ
       tests; the least ρ·max|H|·Σ âᵢâᵢᵀ over a working set of equalities, rows with multipliers and bounds within
       1e-6, then a shift), convexified once more over the rows the QP held if it left some of that working set; δ is
-      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease.
+      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease. A QP that both backends
+      fail on is solved again with δ 100× larger (up to 1e-2·max|H|): with ρ = 10⁴ and δ ~ 1e-8 its conditioning
+      reaches ~1e12 on the flat valleys.
     - The merit is f + Σ_E w_j|c_j| with Powell's per-row weights (``sqp``'s), raised together when d would not
       decrease it by ½dᵀHd: one penalty c ≥ max|π| + ρ dwarfed the gait objective (f ~ 1e-5) and every curvature
       error in the equalities cut the step.
