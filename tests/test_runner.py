@@ -103,6 +103,16 @@ def test_case_key_is_canonical() -> None:
     assert walk_case(8, tol=1e-6).key != walk_case(8, tol=1e-8).key
 
 
+def test_a_stopped_walk_is_run_again_only_when_asked(tmp_path: Path) -> None:
+    case = walk_case(8)
+    with ResultStore.create(tmp_path) as store:
+        store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
+        store.record_case(case_row(CaseOutcome(case, "incomplete", "step 3: infeasible", 1.0), "s", "r1"),
+                          {"walk.json": b"{}"})
+        assert store.finished_keys(retry_failed=True) == {case.key}  # the method's result, not the run's failure
+        assert store.finished_keys(retry_incomplete=True) == set()
+
+
 def test_store_round_trip_and_messages(tmp_path: Path) -> None:
     case = walk_case(8)
     outcome = CaseOutcome(case, "timeout", "stopped", 12.5, provenance={"hostname": "here"})
@@ -112,6 +122,7 @@ def test_store_round_trip_and_messages(tmp_path: Path) -> None:
         store.record_case(row, {"walk.json": b"{}"})
         assert store.finished_keys() == {case.key}
         assert store.finished_keys(retry_failed=True) == set()  # a timeout is the run's failure: retried
+        assert store.finished_keys(retry_incomplete=True) == {case.key}  # not a stopped walk
         assert store.resolve_run("r") == "r1"
         with pytest.raises(StoreError, match="'x' is not a run of this store; runs: r1"):
             store.resolve_run("x")

@@ -13,6 +13,7 @@ import casadi as ca
 import numpy as np
 import pytest
 import qpsolvers
+import scipy.sparse as sp
 from gait_steps import FORMER_QUADRATURE, gait_step
 from nlp_problems import (
     STANDARD_PROBLEMS,
@@ -28,10 +29,12 @@ from nlp_problems import (
 
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP, NLPBuilder
+from gaitbench.solve.evaluation import NLPEvaluator
 from gaitbench.solve.solver import SolverStatus
 from gaitbench.solve.walk import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
+from plugins.solvers.sqp.iterate import least_squares_multipliers
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -280,6 +283,26 @@ def test_gait_step_reaches_ipopts_optimum_from_near_it(transcription: str, backe
     assert abs(result.objective - problem.f_star) <= 1e-6 * problem.f_star
     assert result.constraint_violation <= 1e-8
     assert result.iterations <= 25
+
+
+@pytest.mark.parametrize("transcription", ["dmoc", "hermite-simpson"])
+def test_sparse_least_squares_multipliers_equal_the_dense_ones_on_a_gait_step(transcription: str):
+    """The first multipliers come from a sparse augmented system instead of a dense least squares: on a gait step's
+    equality rows (at the guess and at IPOPT's optimum) both give the same λ, and a repeated row, which makes the
+    system singular, still gets the dense minimum-norm answer."""
+    problem = gait_step(transcription, 20)
+    nlp = problem.nlp
+    equality = np.flatnonzero(nlp.lbg == nlp.ubg)
+    evaluator = NLPEvaluator(nlp, problem.parameters)
+    for x in (problem.x0, problem.x_star):
+        jacobian = sp.csr_matrix(evaluator.jacobian(x))[equality]
+        grad = evaluator.gradient(x)
+        dense = -np.linalg.lstsq(jacobian.toarray().T, grad, rcond=None)[0]
+        np.testing.assert_allclose(least_squares_multipliers(jacobian, grad), dense, rtol=1e-6,
+                                   atol=1e-9 * max(1.0, np.max(np.abs(dense))))
+        repeated = sp.vstack([jacobian, jacobian[:1]], format="csr")
+        dense = -np.linalg.lstsq(repeated.toarray().T, grad, rcond=None)[0]
+        np.testing.assert_allclose(least_squares_multipliers(repeated, grad), dense, atol=1e-9)
 
 
 def test_gait_step_from_the_transcriptions_guess_ends_at_another_local_minimum():

@@ -151,4 +151,51 @@ def test_a_step_that_fails_every_rung_names_them_and_the_walk_stops_there():
     step = walk.steps[0]
     # The First Phase fails with the same solver, so the first-phase seed cannot be tried further.
     assert [entry["remedy"] for entry in step.details["retries"]] == ["first-phase-seed"]
-    assert step.message == "infeasible: infeasible (scripted) (retried: first-phase-seed)"
+    assert step.details["retries"][0]["failed_in"] == "first phase"
+    assert step.message == ("infeasible: infeasible (scripted) "
+                            "(retried: first-phase-seed (its first phase: infeasible))")
+
+
+def test_a_first_phase_that_fails_ends_the_ladder_instead_of_being_recorded_once_per_remedy():
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailingFirst(remedies=False)
+    solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert not outcome.solved
+    rungs = outcome.details["retries"]
+    assert [entry["remedy"] for entry in rungs] == ["scripted-remedy", "first-phase-seed"]
+    assert "failed_in" not in rungs[0] and rungs[1]["failed_in"] == "first phase"
+
+
+def test_a_last_resort_comes_after_every_other_rung_from_the_same_guess():
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailingFirst(remedies=False)
+    solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
+    solver.last_resorts = lambda: [("use-ipopt", Ipopt())]
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert outcome.solved
+    assert [entry["remedy"] for entry in outcome.details["retries"]] == [
+        "scripted-remedy", "first-phase-seed", "use-ipopt"]
+
+
+def test_ipopt_s_last_resort_is_a_small_initial_barrier_parameter_unless_one_is_set():
+    (name, variant), = Ipopt().last_resorts()
+    assert name == "small-mu-init" and variant.options["ipopt"]["mu_init"] == 1e-3
+    assert Ipopt(mu_init=0.01).last_resorts() == []
+
+
+@pytest.mark.slow
+def test_small_mu_init_solves_the_stairs_first_step_that_diverges_at_n_140():
+    """Stairs, HS, N = 140, step 1 (a thesis-all case): IPOPT diverges from the blended guess with both μ
+    strategies, and the First Phase reaches its iteration limit, so only the last resort solves it."""
+    stairs = REGISTRY.create("experiment", "stairs")
+    problem = WalkProblem(stairs, HermiteSimpson(), Ipopt(), 140, steps=1)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert outcome.solved and outcome.verification.max_defect < 1e-6
+    assert [entry["remedy"] for entry in outcome.details["retries"]] == [
+        "adaptive-mu", "first-phase-seed", "small-mu-init"]

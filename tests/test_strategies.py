@@ -18,7 +18,7 @@ from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.solve.walk import WalkProblem, next_step_state
 from plugins.strategies.decrease_and_conquer import (
     DYNAMICS_TOLERANCE,
     DecreaseAndConquer,
@@ -194,6 +194,32 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
     assert summary["verified_acot"] == pytest.approx(np.mean([s.details["polished"]["cot"] for s in walk.steps]))
     assert summary["candidates"] == sum(s.details["candidates"] for s in walk.steps)
     _the_polished_trajectory_is_kept_and_stored(walk, tmp_path)
+    _a_back_up_goes_on_from_the_polished_trajectory(problem, walk.steps[0])
+
+
+def _a_back_up_goes_on_from_the_polished_trajectory(problem, step):
+    from plugins.strategies.decrease_and_conquer import continue_from_polished
+
+    backed = continue_from_polished(problem, step)
+    assert backed.solved and backed.details["continued_from"] == "polished"
+    np.testing.assert_array_equal(backed.next_state, next_step_state(problem.model("second"),
+                                                                     step.polished.trajectory))
+    assert backed.trajectory is step.trajectory and backed.verification is step.verification
+    assert not continue_from_polished(problem, dataclasses.replace(step, polished=None)).solved
+
+
+@pytest.mark.slow
+def test_decrease_and_conquer_backs_up_a_patchwork_dead_end_onto_the_polished_trajectory():
+    """Upward slope, HS, N = 60 (a thesis-all case): from step 3's chosen patchwork, step 4's First Phase reaches
+    IPOPT's iteration limit with both μ strategies; the walk goes on from step 3's polished trajectory."""
+    upward = REGISTRY.create("experiment", "upward-slope")
+    problem = WalkProblem(upward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 60, steps=4)
+    walk = DecreaseAndConquer().solve(problem)
+    assert walk.complete, walk.failure
+    assert walk.steps[2].details["continued_from"] == "polished"
+    assert walk.steps[2].details["backed_up_from"]["dead_end"]["step"] == 4
+    assert not DecreaseAndConquer(back_up=False).solve(problem).complete
 
 
 def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):
@@ -426,16 +452,36 @@ def test_look_ahead_and_back_up_walk_past_the_greedy_dead_end():
     assert "look_ahead" not in ahead.steps[-1].details  # the last step has nothing to look ahead to
 
 
+@pytest.mark.slow
+def test_a_back_up_started_from_the_step_it_replaces_walks_past_an_upward_slope_dead_end():
+    """Upward slope, HS, N = 90 (a thesis-all case): greedy step 4 leaves too little momentum for step 5, which no
+    rung solves (IPOPT calls it infeasible; with clearance off it converges in 133 iterations). Steps 4 and 5 as one
+    window from the blended guess reached IPOPT's 3000 iterations with both μ strategies (the stored case); started
+    from step 4's own trajectory the window converges (526 iterations, measured) and step 5 follows."""
+    upward = REGISTRY.create("experiment", "upward-slope")
+    problem = WalkProblem(upward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 90, steps=5)
+    walk = REGISTRY.create("strategy", "one-phase").solve(problem)
+    assert walk.complete, walk.failure
+    backed_up = [step for step in walk.steps if "backed_up_from" in step.details]
+    assert [step.index for step in backed_up] == [4]
+    assert backed_up[0].details["backed_up_from"]["dead_end"]["step"] == 5
+    assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
+
+
 def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
     """walk_step_by_step's back-up on made-up steps: step 3 is a dead end from the greedy step 2 only; step 5 from
-    every step 4, so its back-up fails and the walk stops there, naming the back-up."""
+    every step 4, so its back-up fails and the walk stops there, naming the back-up. Each back-up starts from the
+    trajectory of the step it replaces."""
     from gaitbench.solve.walk import StepOutcome, walk_step_by_step
 
     experiment = _short_slope(6)
     problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)
+    seeds = []
 
     def outcome(index, state, solved):
         return StepOutcome(index, experiment.stance_leg(index), "converged" if solved else "infeasible", "",
+                           trajectory=SimpleNamespace(seed=lambda: f"seed of step {index}") if solved else None,
                            verification=SimpleNamespace(cot=0.1, resim_error=0.0) if solved else None,
                            next_state=state + np.array([1.0, 0, 0, 0]) if solved else None)
 
@@ -444,7 +490,8 @@ def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
             return outcome(index, state, solved=state[1] > 0.5)  # only from the backed-up step 2
         return outcome(index, state, solved=index != 5)
 
-    def back_up(problem, index, state):
+    def back_up(problem, index, state, seed):
+        seeds.append(seed)
         result = outcome(index, state, solved=index == 2)
         if result.solved:
             result.next_state = state + np.array([1.0, 1.0, 0, 0])
@@ -454,6 +501,7 @@ def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
     assert [step.index for step in walk.steps] == [1, 2, 3, 4, 5]
     assert walk.steps[1].details["backed_up_from"]["dead_end"]["step"] == 3
     assert not walk.steps[-1].solved and walk.steps[-1].details["back_up"]["step"] == 4
+    assert seeds == ["seed of step 2", "seed of step 4"]
     assert walk_step_by_step(problem, "test", greedy).steps[-1].index == 3  # without back-up: the first dead end
 
 

@@ -233,6 +233,9 @@ class NLP:
     variable_blocks: dict[str, slice]
     constraint_blocks: dict[str, slice]
     interval_blocks: tuple[IntervalBlock, ...] = ()
+    variable_shapes: dict[str, tuple[int, int]] = field(default_factory=dict)
+    """(rows, columns) of each variable block as declared: a column is a grid node or interval, which is how the
+    stage-wise form (:mod:`gaitbench.problem.stagewise`) orders the variables by stage."""
     solver_cache: dict = field(default_factory=dict, repr=False)
     """Solvers keep their built instances here, keyed by their options, so re-solving costs no rebuild."""
 
@@ -322,7 +325,8 @@ class NLPBuilder:
                                 for names, function, z, parts in self._interval_blocks)
         return NLP(x=x, p=parameters, f=objective, g=g, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
                    variable_blocks=variable_blocks, constraint_blocks=constraint_blocks,
-                   interval_blocks=interval_blocks)
+                   interval_blocks=interval_blocks,
+                   variable_shapes={name: symbol.shape for name, symbol, _, _ in self._variables})
 
 
 def _interval_block(x: ca.SX, names: tuple[str, ...], function: ca.Function, z: ca.SX,

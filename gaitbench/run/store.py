@@ -266,13 +266,14 @@ class ResultStore:
 
     # --- cases ----------------------------------------------------------------------------------------------
 
-    def finished_keys(self, retry_failed: bool = False) -> set[str]:
-        """Keys of cases that need no new run: all stored ones, or the non-retryable ones with ``retry_failed``."""
+    def finished_keys(self, retry_failed: bool = False, retry_incomplete: bool = False) -> set[str]:
+        """Keys of cases that need no new run: all stored ones, less the run's failures with ``retry_failed`` and
+        the walks that stopped with ``retry_incomplete``."""
+        again = (RETRYABLE_STATUSES if retry_failed else ()) + (("incomplete",) if retry_incomplete else ())
         query = "SELECT case_key FROM cases"
-        if retry_failed:
-            query += f" WHERE status NOT IN ({', '.join('?' * len(RETRYABLE_STATUSES))})"
-            return {key for (key,) in self._db.execute(query, RETRYABLE_STATUSES)}
-        return {key for (key,) in self._db.execute(query)}
+        if again:
+            query += f" WHERE status NOT IN ({', '.join('?' * len(again))})"
+        return {key for (key,) in self._db.execute(query, again)}
 
     def case_runs(self) -> dict[str, str]:
         """The run id of every stored case (``""`` where a row has none): what :meth:`claim` expects."""

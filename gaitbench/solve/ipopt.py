@@ -32,6 +32,10 @@ IPOPT_STATUSES = {
 """IPOPT return statuses with a shared meaning; every other one (Restoration_Failed, Invalid_Number_Detected,
 Diverging_Iterates, ...) is an error."""
 
+SMALL_MU_INIT = 1e-3
+"""IPOPT's initial barrier parameter in the ``small-mu-init`` last resort of the retry ladder (its default is 0.1):
+both IPOPT plugins offer it."""
+
 IPOPT_OPTIONS_URL = "https://coin-or.github.io/Ipopt/OPTIONS.html"
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -216,17 +216,22 @@ class WalkProblem:
 StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
 """Solves step ``index`` from a (q1, q2, q̇1, q̇2) state; a solved outcome carries the next step's state."""
 
+BackUp = Callable[[WalkProblem, int, np.ndarray, Seed], "StepOutcome"]
+"""Solves step ``index`` again from its state, looking further ahead, started from ``seed``: the trajectory it is
+to replace."""
+
 
 def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
                       on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
-                      back_up: StepSolver | None = None) -> WalkResult:
+                      back_up: BackUp | None = None) -> WalkResult:
     """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
 
     A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
     steps before it are kept. With ``back_up``, a step that the solver cannot solve is first taken as a dead end
     the previous step walked into: that step is solved again by ``back_up`` (which looks further ahead) from its
-    own initial state, and the walk goes on from the new one. Each step is backed up at most once; the step that
-    was replaced is recorded in the new one's ``details["backed_up_from"]``.
+    own initial state, started from its own trajectory (feasible for it, and nearer one that leaves the next step
+    a way on than a blended guess is), and the walk goes on from the new one. Each step is backed up at most once;
+    the step that was replaced is recorded in the new one's ``details["backed_up_from"]``.
     """
     walk = problem.result(strategy, phase)
     started = time.perf_counter()
@@ -248,7 +253,7 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
         if not outcome.solved and dead_end and back_up is not None and index > 1 and index - 1 not in backed_up:
             backed_up.add(index - 1)
             replaced = walk.steps[-1]
-            previous = back_up(problem, index - 1, states[index - 2])
+            previous = back_up(problem, index - 1, states[index - 2], replaced.verified.trajectory.seed())
             if previous.solved:
                 previous.details = {**previous.details, "backed_up_from": {
                     **replaced.summary(), "dead_end": {"step": index, "message": outcome.message}}}
@@ -302,7 +307,10 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     2. ``first-phase-seed`` (4-DOF steps only, and only with ``reseed``): the step's 2-DOF First-Phase problem
        solved, and the 4-DOF problem started from its trajectory, with the solver and then each of its remedies.
        A caller whose result means "the optimum near *this* seed" (decrease-and-conquer's polish) passes
-       ``reseed=False``.
+       ``reseed=False``;
+    3. each of the solver's last resorts (``solver.last_resorts()``; IPOPT: a small initial barrier parameter) from
+       the same guess: variants that solve where the others fail but often reach a worse optimum, so they come
+       after every other rung.
 
     Every rung tried is recorded in the outcome's ``details["retries"]`` (remedy, status, iterations, time), and
     the first attempt's status in ``details["first_attempt"]``; a step that still fails keeps the first failure's
@@ -314,13 +322,14 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     first_attempt, retries = outcome, []
     for remedy, attempt in _ladder(problem, index, built, data, seed, phase, reseed):
         retry = attempt()
-        retries.append({"remedy": remedy, **retry.summary()})
+        retries.append({"remedy": remedy, **retry.summary(), **_failed_in(retry)})
         if retry.solved:
             outcome = retry
             break
     outcome.details = {**outcome.details, "first_attempt": first_attempt.summary(), "retries": retries}
     if not outcome.solved:
-        tried = ", ".join(entry["remedy"] for entry in retries) or "none applies"
+        tried = ", ".join(entry["remedy"] + (f" (its {entry['failed_in']}: {entry['status']})"
+                                             if "failed_in" in entry else "") for entry in retries) or "none applies"
         outcome.message = f"{first_attempt.message} (retried: {tried})"
     return outcome
 
@@ -328,11 +337,16 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
 def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
             phase: str, reseed: bool):
     """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
-    remedies = solver_remedies(problem.solver)
-    for name, variant in remedies:
+    for name, variant in solver_remedies(problem.solver):
         yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
-    if phase != "second" or not reseed:
-        return
+    if phase == "second" and reseed:
+        yield from _first_phase_rungs(problem, index, built, data)
+    for name, variant in solver_variants(problem.solver, "last_resorts"):
+        yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
+
+
+def _first_phase_rungs(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData):
+    """Rung 2: the 4-DOF step started from its First Phase's trajectory, with the solver and each remedy."""
     first_phase: list[StepOutcome] = []
 
     def seeded(variant: Solver | None) -> StepOutcome:
@@ -341,17 +355,30 @@ def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: Step
             first_phase.append(solve_and_verify(problem, index, first, data, phase="first"))
         coarse = first_phase[0]
         if not coarse.solved:
-            return coarse
-        return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), phase, variant)
+            return replace(coarse, message=f"its 2-DOF First Phase: {coarse.message}",
+                           details={**coarse.details, "failed_in": "first phase"})
+        return solve_and_verify(problem, index, built, data, coarse.trajectory.seed(), "second", variant)
 
     yield "first-phase-seed", lambda: seeded(None)
-    for name, variant in remedies:
+    if not first_phase[0].solved:
+        return  # no seed: the remedies below would only repeat the First Phase's failure
+    for name, variant in solver_remedies(problem.solver):
         yield f"first-phase-seed+{name}", lambda variant=variant: seeded(variant)
+
+
+def _failed_in(outcome: StepOutcome) -> dict:
+    """Where a rung failed when it was not the 4-DOF solve itself (the First Phase that seeds it)."""
+    return {"failed_in": outcome.details["failed_in"]} if "failed_in" in outcome.details else {}
 
 
 def solver_remedies(solver: Solver) -> list[tuple[str, Solver]]:
     """The solver's variants worth a retry after a failed solve (its optional ``remedies()``), named."""
-    method = getattr(solver, "remedies", None)
+    return solver_variants(solver, "remedies")
+
+
+def solver_variants(solver: Solver, kind: str) -> list[tuple[str, Solver]]:
+    """The solver's named variants of one kind, ``remedies`` or ``last_resorts``: empty where it has none."""
+    method = getattr(solver, kind, None)
     return list(method()) if method is not None else []
 
 

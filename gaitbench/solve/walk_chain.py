@@ -118,14 +118,18 @@ class LookAhead:
         self._carried: list[tuple[np.ndarray, Seed]] = []
         """The last window's later steps (initial state, trajectory as a seed): the next window's start."""
 
-    def solve_step(self, problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
+    def solve_step(self, problem: WalkProblem, index: int, state: np.ndarray, seed: Seed | None = None) -> StepOutcome:
+        """Step ``index`` from ``state``; ``seed`` starts it where the last window did not reach it (a back-up)."""
         count = min(self.horizon, problem.n_steps - index + 1)
         data = problem.step_data(index, state)
         if count == 1:
             return solve_with_retries(problem, index, self.built, data)
         chain = self._chain(data.stance, count)
         p = chain.parameters(problem, index, state)
-        guess = chain.guess(problem, index, self._known(state))
+        known = self._known(state)
+        if seed is not None and known[0][1] is None:
+            known[0] = (state, seed)
+        guess = chain.guess(problem, index, known)
         started = time.perf_counter()
         attempts = []
         for remedy, solver in [("", problem.solver), *solver_remedies(problem.solver)]:

@@ -5,10 +5,13 @@ Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and o
 
 - ``blocksqp``: blockSQP, filter line-search SQP with block-wise quasi-Newton Hessians;
 - ``fatrop``: FATROP, an interior-point method for optimal control (IPOPT's algorithm on a stage-wise Riccati
-  factorization), here on the NLP as one dense stage (see :class:`Fatrop`).
+  factorization), on the NLP rewritten in stage-wise form (``stagewise=true``) or as one dense stage (the
+  default; see :class:`Fatrop`).
 
-Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC, 20–150× slower than IPOPT; on the
-harder upward-slope step 1, without the torque tie-break, both fail (docs/solvers.md has the measurements).
+Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC at N = 20, blockSQP and dense FATROP
+20–150× slower than IPOPT; on the harder upward-slope step 1, without the torque tie-break, both fail. Stage-wise
+FATROP solves forward step 1 at N = 20 and 50 (4–9× IPOPT's time, most of it CasADi's interpreted derivatives) and
+the upward-slope step 1 at N = 20, but not forward step 1 at N = 100 (docs/solvers.md has the measurements).
 CasADi's ``sqpmethod`` and ``feasiblesqpmethod`` were plugins here too and were removed (issue 22): on forward
 step 1 neither reaches a solution with any QP solver or Hessian option CasADi 3.8 offers (docs/solvers.md,
 "Removed").
@@ -30,6 +33,7 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.options import OptionError, unknown_option
 from gaitbench.problem.nlp import NLP
+from gaitbench.problem.stagewise import StagewiseForm, stagewise
 from gaitbench.solve.evaluation import Deadline
 from gaitbench.solve.silence import quiet_stdout
 from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
@@ -110,11 +114,10 @@ class CasadiMethod(ABC):
             solver = self._built(nlp)
             deadline = Deadline(self.time_limit_s)  # the limit covers the solve, as IPOPT's max_wall_time does
             with quiet_stdout(self.print_level == 0):
-                solution = solver(x0=x0, p=p, lbx=nlp.lbx, ubx=nlp.ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+                solution = solver(**self._arguments(nlp, p, x0))
+            x, multipliers = self._solution(nlp, solution)
         except Exception as error:  # the Solver protocol reports failures, it never raises them
             return self._result(SolverStatus.ERROR, _casadi_message(error), nlp, p, x0, deadline)
-        x = np.asarray(solution["x"], dtype=float).ravel()
-        multipliers = np.asarray(solution["lam_g"], dtype=float).ravel()
         try:
             stats = solver.stats()
         except RuntimeError:  # CasADi leaves the return status unset when a method aborts mid-iteration
@@ -129,8 +132,19 @@ class CasadiMethod(ABC):
                         f"({self.plugin} cannot be stopped during a solve)")
         return self._result(status, message, nlp, p, x, deadline, stats, multipliers)
 
+    def _arguments(self, nlp: NLP, p: np.ndarray, x0: np.ndarray) -> dict[str, np.ndarray]:
+        """The built ``nlpsol``'s inputs for a solve of ``nlp`` from ``x0``."""
+        return {"x0": x0, "p": p, "lbx": nlp.lbx, "ubx": nlp.ubx, "lbg": nlp.lbg, "ubg": nlp.ubg}
+
+    def _solution(self, nlp: NLP, solution: dict) -> tuple[np.ndarray, np.ndarray]:
+        """``nlp``'s x and constraint multipliers from the built ``nlpsol``'s outputs."""
+        return (np.asarray(solution["x"], dtype=float).ravel(), np.asarray(solution["lam_g"], dtype=float).ravel())
+
+    def _key(self) -> tuple:
+        return options_key(self.name, self.options)
+
     def _built(self, nlp: NLP) -> ca.Function:
-        key = options_key(self.name, self.options)
+        key = self._key()
         if key not in nlp.solver_cache:
             with quiet_stdout(self.print_level == 0):
                 nlp.solver_cache[key] = self._nlpsol(nlp, self.options)
@@ -227,19 +241,24 @@ class Fatrop(CasadiMethod):
 
     FATROP exploits the stage structure of an OCP: variables ordered stage-wise [x₀, u₀, x₁, u₁, …], each
     stage's dynamics an explicit x_{k+1} = f(x_k, u_k) (identity in x_{k+1}), every other constraint depending on
-    one stage only. The gait NLPs are none of these: their variables come in blocks (all positions, then all
-    torques, ...), DMOC's dynamics are implicit in q_{k+1} and Hermite–Simpson's in the next state, and the
-    heel-strike and push-off constraints couple the first and last nodes. So ``structure_detection`` defaults to
-    ``"none"``: the NLP is one stage with all variables as controls, which FATROP solves with a dense
-    factorization (correct, without its speed-up). ``structure_detection="auto"`` (CasADi's detection, given
-    which constraints are equalities) is for NLPs built stage-wise, each stage's dynamics written as
-    x_{k+1} − f(x_k, u_k) = 0 and followed by that stage's other constraints; on an NLP that is not, every solve
-    returns ERROR saying so.
+    one stage only. The gait NLPs are none of these as built: their variables come in blocks (all positions, then
+    all torques, ...), DMOC's dynamics are implicit in q_{k+1} and Hermite–Simpson's in the next state, and the
+    push-off impulse and slacks enter the last node's rows. Two forms:
 
-    ``max_iterations`` is FATROP's ``max_iter`` less one (FATROP takes one iteration past its ``max_iter``),
-    ``tolerance`` is ``tol``; ``print_level`` is FATROP's own but at least 5 when not 0, the first level at which
-    FATROP prints its iterations. FATROP stops at an acceptable point (its
-    ``acceptable_tol``/``acceptable_iter``, like IPOPT's) when it cannot reach ``tol``, which it often cannot
+    - ``stagewise=True``: the NLP is rewritten in stage-wise form (:mod:`gaitbench.problem.stagewise`: each stage's
+      own variables as controls, copies of earlier ones and of the global variables as states, gap-closing rows
+      that carry the copies) and FATROP is given its structure (``N``, ``nx``, ``nu``, ``ng``); the solution is
+      mapped back, so the result is the NLP's own. ``structure_detection="auto"`` instead leaves the structure to
+      CasADi's detection, which misreads this form (docs/solvers.md): kept for comparison, not for use.
+    - ``stagewise=False`` (default): with ``structure_detection="none"`` (default) the NLP is one stage with all
+      variables as controls, which FATROP solves with a dense factorization (correct, without its speed-up).
+      ``structure_detection="auto"`` (CasADi's detection, given which constraints are equalities) is for NLPs
+      built stage-wise; on one that is not, every solve returns ERROR saying so.
+
+    docs/solvers.md compares the two forms with IPOPT. ``max_iterations`` is FATROP's ``max_iter`` less one (FATROP
+    takes one iteration past its ``max_iter``), ``tolerance`` is ``tol``; ``print_level`` is FATROP's own but at
+    least 5 when not 0, the first level at which FATROP prints its iterations. FATROP stops at an acceptable point
+    (its ``acceptable_tol``/``acceptable_iter``, like IPOPT's) when it cannot reach ``tol``, which it often cannot
     on the gait steps (it has no NLP scaling): that is CONVERGED, as IPOPT's Solved_To_Acceptable_Level is.
     It cannot be stopped during a solve (no iteration callback and no time option). Other keywords are FATROP
     options (e.g. ``mu_init``, ``bound_push``, ``acceptable_iter``), except the interface's own: ``N``, ``nx``,
@@ -252,10 +271,19 @@ class Fatrop(CasadiMethod):
                 "MaxIterExceeded": SolverStatus.ITERATION_LIMIT, "LocalInfeasibility": SolverStatus.INFEASIBLE}
     _INTERFACE_OPTIONS = ("N", "nx", "nu", "ng", "convexify_strategy", "convexify_margin", "debug")
     """Options of CasADi's FATROP interface (a manual structure, convexification); the rest are FATROP's."""
+    _FORM = ("fatrop", "stage-wise form")
+    """The key of an NLP's stage-wise form in its ``solver_cache``: built once, for every solver built on it."""
 
     def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, structure_detection: str = "none", **fatrop_options) -> None:
+                 print_level: int = 0, structure_detection: str = "none", stagewise: bool = False,
+                 **fatrop_options) -> None:
+        if not isinstance(stagewise, bool):
+            raise TypeError(f"stagewise = {stagewise!r}: expected true or false")
         self.structure_detection = structure_detection
+        self.stagewise = stagewise
+        if stagewise and (structure_detection not in ("none", "auto") or set(fatrop_options) & {"N", "nx", "nu", "ng"}):
+            raise ValueError("stagewise = true gives FATROP the structure itself: leave out N, nx, nu, ng and "
+                             "structure_detection (or set it to 'auto')")
         super().__init__(max_iterations, time_limit_s, tolerance, print_level, **fatrop_options)
 
     def _method_options(self, max_iterations: int, tolerance: float, print_level: int, extra: dict) -> dict:
@@ -265,15 +293,40 @@ class Fatrop(CasadiMethod):
                   "print_level": max(print_level, 5) if print_level > 0 else 0, **fatrop}
         return {"structure_detection": self.structure_detection, "fatrop": fatrop, **interface}
 
+    def _key(self) -> tuple:
+        return options_key(self.name, {**self.options, "stagewise": self.stagewise})
+
+    def _form(self, nlp: NLP) -> StagewiseForm:
+        if self._FORM not in nlp.solver_cache:
+            nlp.solver_cache[self._FORM] = stagewise(nlp)
+        return nlp.solver_cache[self._FORM]
+
     def _nlpsol(self, nlp: NLP, options: dict) -> ca.Function:
+        if self.stagewise:
+            form = self._form(nlp)
+            structure = form.structure() if self.structure_detection == "none" else {"equality": form.equality()}
+            return ca.nlpsol(self.name, self.plugin, form.nlp.casadi_problem(), {**options, **structure})
         if self.structure_detection != "auto":
             return super()._nlpsol(nlp, options)
         try:  # CasADi's detection needs to know which constraints are equalities
             return super()._nlpsol(nlp, {**options, "equality": [bool(equal) for equal in nlp.lbg == nlp.ubg]})
         except RuntimeError as error:
             raise RuntimeError("structure detection failed: the NLP is not an OCP in stage-wise order (variables "
-                               "[x_k, u_k] per stage, dynamics x_k+1 = f(x_k, u_k)); use structure_detection='none'. "
+                               "[x_k, u_k] per stage, dynamics x_k+1 = f(x_k, u_k)); use stagewise=true. "
                                f"CasADi: {_casadi_message(error)}") from error
+
+    def _arguments(self, nlp: NLP, p: np.ndarray, x0: np.ndarray) -> dict[str, np.ndarray]:
+        if not self.stagewise:
+            return super()._arguments(nlp, p, x0)
+        form = self._form(nlp)
+        return super()._arguments(form.nlp, p, form.lift(x0))
+
+    def _solution(self, nlp: NLP, solution: dict) -> tuple[np.ndarray, np.ndarray]:
+        x, multipliers = super()._solution(nlp, solution)
+        if not self.stagewise:
+            return x, multipliers
+        form = self._form(nlp)
+        return form.restrict(x), form.constraint_multipliers(multipliers)
 
     def _return_status(self, stats: dict) -> str:
         return _FATROP_FLAGS[int(stats["fatrop"]["return_flag"])]
@@ -283,5 +336,6 @@ class Fatrop(CasadiMethod):
 def register_solvers():
     return [
         Registration("blocksqp", "blockSQP through CasADi: filter SQP, block-wise BFGS Hessians", BlockSqp),
-        Registration("fatrop", "FATROP through CasADi: interior point for OCPs (dense on general NLPs)", Fatrop),
+        Registration("fatrop", "FATROP through CasADi: interior point for OCPs (stagewise=true: the NLP in "
+                               "stage-wise form; else one dense stage)", Fatrop),
     ]

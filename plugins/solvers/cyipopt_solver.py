@@ -20,7 +20,7 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
-from gaitbench.solve.ipopt import IPOPT_STATUSES, check_ipopt_options
+from gaitbench.solve.ipopt import IPOPT_STATUSES, SMALL_MU_INIT, check_ipopt_options
 from gaitbench.solve.silence import quiet_stdout
 from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
 
@@ -156,6 +156,12 @@ return ERROR.
         if self.options.get("mu_strategy") == "adaptive":
             return []
         return [("adaptive-mu", type(self)(**{**self._arguments, "mu_strategy": "adaptive"}))]
+
+    def last_resorts(self) -> list:
+        """A small initial barrier parameter after every other rung, as the ``ipopt`` plugin offers it."""
+        if "mu_init" in self.options:
+            return []
+        return [("small-mu-init", type(self)(**{**self._arguments, "mu_init": SMALL_MU_INIT}))]
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Solve from ``initial_guess``; exceptions (in cyipopt or in a callback) become an ERROR status."""

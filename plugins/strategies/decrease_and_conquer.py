@@ -13,6 +13,12 @@ Per step:
    among the synthesized and completed trajectories;
 6. the next step from the heel-strike map of the chosen trajectory.
 
+A patchwork's end state is not where the robot would be, and it can leave the next step no solution (upward slope,
+HS, N = 60: from step 3's chosen trajectory step 4's First Phase reaches IPOPT's iteration limit with both μ
+strategies; from the polished trajectory it converges in 489 iterations). With ``back_up`` (the default) such a
+dead end makes the walk go on from the polished trajectory of the step before instead, as a walk of the robot
+would; a walk that never meets one is the thesis's walk unchanged.
+
 The synthesized (and completed) trajectories are node-wise patchworks of different NLP solutions, so in general
 they are not motions of the robot. Every chosen trajectory is therefore verified like any other step — the
 transcription's dynamics residual at its nodes and its re-simulation under its own torques — and, with ``polish``,
@@ -24,8 +30,7 @@ from __future__ import annotations
 
 import multiprocessing
 from collections.abc import Callable
-from dataclasses import dataclass
-from functools import partial
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,12 +62,13 @@ class DecreaseAndConquer:
     ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
     to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
-    (processes for the sectional solves of a step; see :class:`SectionalSolves`)."""
+    (processes for the sectional solves of a step; see :class:`SectionalSolves`), ``back_up`` (True: a step that
+    cannot be solved from the chosen trajectory's end is solved from the polished one's; needs ``polish``)."""
 
     name = "decrease-and-conquer"
 
     def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
-                 workers: int = 1):
+                 workers: int = 1, back_up: bool = True):
         if sectional_guess not in ("first-phase", "complete"):
             raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
         if int(workers) < 1:
@@ -73,10 +79,21 @@ class DecreaseAndConquer:
         self.sectional_guess = sectional_guess
         self.max_checks = int(max_checks)
         self.workers = int(workers)
+        self.back_up = bool(back_up) and self.polish
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
+        solved: dict[int, StepOutcome] = {}
+
+        def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
+            solved[index] = self._solve_step(problem, index, state, sections)
+            return solved[index]
+
+        def back_up(problem: WalkProblem, index: int, state: np.ndarray, seed: object) -> StepOutcome:
+            return continue_from_polished(problem, solved[index])
+
         with SectionalSolves(problem, self.workers) as sections:
-            walk = walk_step_by_step(problem, self.name, partial(self._solve_step, sections=sections), on_step)
+            walk = walk_step_by_step(problem, self.name, solve_step, on_step,
+                                     back_up=back_up if self.back_up else None)
         walk.strategy_details = walk_summary(walk)
         return walk
 
@@ -153,6 +170,16 @@ class DecreaseAndConquer:
         return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
                            verification, next_state=next_step_state(model, trajectory), details=details,
                            polished=polished)
+
+
+def continue_from_polished(problem: WalkProblem, step: StepOutcome) -> StepOutcome:
+    """``step`` going on from its polished trajectory's heel strike instead of its chosen one's: a dead end's
+    back-up. Unsolved when the step has no polished trajectory that solved."""
+    if step.polished is None or not step.polished.solved:
+        status = step.polished.status if step.polished is not None else "not_polished"
+        return StepOutcome(step.index, step.stance, status, "no polished trajectory to go on from")
+    return replace(step, next_state=next_step_state(problem.model("second"), step.polished.trajectory),
+                   details={**step.details, "continued_from": "polished"})
 
 
 class SectionalSolves:

@@ -83,7 +83,9 @@ when the iteration cannot continue from such a point. Complementarity is IPOPT's
 
 QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as
 failed. PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to
-5e4 at DMOC, N = 50), which Clarabel solves, if only to its reduced accuracy.
+5e4 at DMOC, N = 50; most QPs of the later walk steps), which Clarabel solves, if only to its reduced accuracy.
+Its limit is 100 iterations, not its own 250: the QPs it solves take at most 95, and the ones it fails it fails
+whatever the limit (``backends._BACKEND_OPTIONS``).
 
 Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
 interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords).
