@@ -17,7 +17,9 @@ from plugins.solvers.fsqp.qp_subproblem import minimize_qp
 class FSQP:
     """Feasible SQP after the thesis's Appendix D, with damped BFGS or the convexified exact Hessian.
 
-    Shared options: ``max_iterations`` (500, the digest's k_max; phase-1 iterations count too), ``time_limit_s``
+    Shared options: ``max_iterations`` (3000, IPOPT's and ``sqp``'s, so the solvers compare on one budget; the
+    digest's k_max = 500 is its own choice, not the thesis's, and forward step 3 needs 702–818 iterations at
+    N = 20–50; phase-1 iterations count too), ``time_limit_s``
     (None; checked every iteration and at every arc-search trial), ``tolerance`` (1e-8: converged when ‖d0‖₂ and the
     largest equality residual are both ≤ tolerance, in scaled units — d0 = 0 exactly at a KKT point, thesis
     Lemma 2; the digest's 1e-6 left HS039's equalities violated by 1e-7, and 1e-8 costs about one more iteration
@@ -123,7 +125,7 @@ class FSQP:
 
     name = "fsqp"
 
-    def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
+    def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, hessian: str = "exact", alpha: float = 0.1, beta: float = 0.5,
                  nu: float = 2.5, delta: float = 2.2, tau: float = 2.5, theta: float = 0.8, xi: float = 1e-3,
                  epsilon0: float = 1.0, epsilon: float = 1.0, rho: float = 1.0, max_halvings: int = 50,
