@@ -50,14 +50,17 @@ class BFGS:
 def qp_hessian(form: NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
                 damping: float) -> tuple[sp.csc_matrix, float, sp.csc_matrix]:
     """∇²L(x, u⁺) + δI made positive definite as ``sqp`` does: δ = max(damping, 1e-14 max|H|), then the least
-    ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 100 with δ
+    ρ max|H| Σ â âᵀ (ρ = 1, 10, …, 10⁴; â the working rows, normalized) that factorizes, then ρ = 10⁴ with δ
     growing ×4 from there, so that it stays within 4× of the least shift that works. Returns H, the augmentation's
     factor (for the multiplier correction) and H without the augmentation (for the KKT test).
 
     Along the thesis cost's flat valleys ∇²L has no curvature, so δ sets the QP's step length there (d = −g/δ),
     and the merit falls by twice the model's decrease. A shift that jumped to 1e-8·max|H| (``sqp``'s), or that the
     pivot test held near 1e-10·max|H|, made forward step 2 (HS, N = 50) crawl by ~1e-6 of merit per iteration to
-    the iteration limit; the Levenberg–Marquardt damping still raises δ where the model reaches too far."""
+    the iteration limit; the Levenberg–Marquardt damping still raises δ where the model reaches too far. The last
+    rung keeps the largest ρ tried: with ρ = 100 there, forward step 2 (DMOC, N = 50) needed δ ≈ 1.7e-7·max|H| in
+    the second convexification (over the rows the QP held), and crawled by ~1.5e-7 of merit per iteration to the
+    iteration limit; with ρ = 10⁴ the shifts of that stretch were 2e-10–9e-9·max|H|."""
     multipliers = u.copy()
     multipliers[: form.n_inequalities] = np.maximum(multipliers[: form.n_inequalities], 0.0)
     lagrangian = form.hessian(x, multipliers)
@@ -74,7 +77,7 @@ def qp_hessian(form: NLPForm, x: np.ndarray, u: np.ndarray, rows: sp.csr_matrix,
         augmented = (shifted + rho * size * gram).tocsc()
         if positive_definite(augmented, _QP_PIVOT):
             return augmented, rho * size, shifted
-    augmentation = 100.0 * size
+    augmentation = 1e4 * size
     while shift <= SHIFT_RANGE[1] * size:
         shift *= 4
         base = (lagrangian + shift * sp.eye(form.n)).tocsc()

@@ -17,12 +17,15 @@ from plugins.solvers.fsqp.qp_subproblem import minimize_qp
 class FSQP:
     """Feasible SQP after the thesis's Appendix D, with damped BFGS or the convexified exact Hessian.
 
-    Shared options: ``max_iterations`` (500, the digest's k_max; phase-1 iterations count too), ``time_limit_s``
+    Shared options: ``max_iterations`` (3000, IPOPT's and ``sqp``'s, so the solvers compare on one budget; the
+    digest's k_max = 500 is its own choice, not the thesis's, and forward step 3 needs 702–818 iterations at
+    N = 20–50; phase-1 iterations count too), ``time_limit_s``
     (None; checked every iteration and at every arc-search trial), ``tolerance`` (1e-8: converged when ‖d0‖₂ and the
     largest equality residual are both ≤ tolerance, in scaled units — d0 = 0 exactly at a KKT point, thesis
     Lemma 2; the digest's 1e-6 left HS039's equalities violated by 1e-7, and 1e-8 costs about one more iteration
     where the rate is superlinear), ``print_level`` (0 silent, ≥ 1 one line per iteration: F_c, ‖d0‖, step t,
-    penalty c_k, |J_k|, the NLP's largest violation, the direction taken).
+    penalty c_k, |J_k|, the NLP's largest violation, the direction taken; ≥ 2 also the parts of the ``qp``
+    subproblem's KKT error and the shift of its H).
 
     Method parameters, with the digest's [S] defaults (the thesis gives no values):
 
@@ -81,14 +84,18 @@ class FSQP:
       one their inequality form with ∇F_c gives. H = ∇²L + δI made positive definite as ``sqp`` does it (sparse LDLᵀ
       tests; the least ρ·max|H|·Σ âᵢâᵢᵀ over a working set of equalities, rows with multipliers and bounds within
       1e-6, then a shift), convexified once more over the rows the QP held if it left some of that working set; δ is
-      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease.
+      a Levenberg–Marquardt damping set by the merit's actual against predicted decrease. A QP that both backends
+      fail on is solved again with δ 100× larger (up to 1e-2·max|H|): with ρ = 10⁴ and δ ~ 1e-8 its conditioning
+      reaches ~1e12 on the flat valleys.
     - The merit is f + Σ_E w_j|c_j| with Powell's per-row weights (``sqp``'s), raised together when d would not
       decrease it by ½dᵀHd: one penalty c ≥ max|π| + ρ dwarfed the gait objective (f ~ 1e-5) and every curvature
       error in the equalities cut the step.
     - d̃ = s − d, s the QP again with the rows linearised at x + d (second-order correction); the arc x + t d + t²d̃
       is searched with every inequality row ≤ ``tolerance`` (scaled units) and Armijo on the merit.
     - Converged when IPOPT's scaled KKT error, with the QP's multipliers, is below ``tolerance``, or below 1e-6 for
-      15 iterations (IPOPT's acceptable level).
+      15 iterations (IPOPT's acceptable level). The QP's multipliers belong to x + d, so the error is also taken
+      with them corrected by least squares over the rows the step holds (at x; signs and complementarity checked):
+      on the flat valleys ‖∇²L d‖ stays ~1e-5 while f no longer moves, which the first test never passes.
     - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; the
       Gauss–Newton step when that QP is inconsistent), until the inequalities hold and the equalities are within
       1e-6, so that the first QP is consistent.
@@ -118,7 +125,7 @@ class FSQP:
 
     name = "fsqp"
 
-    def __init__(self, max_iterations: int = 500, time_limit_s: float | None = None, tolerance: float = 1e-8,
+    def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, hessian: str = "exact", alpha: float = 0.1, beta: float = 0.5,
                  nu: float = 2.5, delta: float = 2.2, tau: float = 2.5, theta: float = 0.8, xi: float = 1e-3,
                  epsilon0: float = 1.0, epsilon: float = 1.0, rho: float = 1.0, max_halvings: int = 50,
