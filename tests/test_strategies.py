@@ -429,10 +429,12 @@ def test_a_chain_starts_each_step_where_the_event_map_of_the_previous_one_ends()
 
 def test_look_ahead_and_back_up_walk_past_the_greedy_dead_end():
     """Stairs, DMOC, N = 20: the greedy walk (H = 1, no back-up) stops at step 8, infeasible after every rung of the
-    retry ladder. Backing up (the default) solves step 7 again with step 8 and walks on; a fixed look-ahead of two
-    steps walks all 11 without a dead end."""
+    retry ladder but the last resort. Backing up (the default) solves step 7 again with step 8 and walks on; a fixed
+    look-ahead of two steps walks all 11 without a dead end. IPOPT's μ₀ is fixed at its default, which removes the
+    last resort (``small-mu-init`` solves step 8 of the greedy walk) so the dead end stays one."""
     stairs = REGISTRY.create("experiment", "stairs")
-    problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 20)
+    ipopt = REGISTRY.create("solver", "ipopt", mu_init=0.1)
+    problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), ipopt, 20)
     greedy = REGISTRY.create("strategy", "one-phase", back_up=False).solve(problem)
     assert not greedy.complete and greedy.steps[-1].index == 8 and greedy.steps[-1].status == "infeasible"
 
