@@ -10,6 +10,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -33,6 +34,7 @@ COMPARED = ("case_key", "method", "N", "status", "acot", "cot_steps", "iteration
 FAULTY_PLUGIN = '''
 import os, signal, time
 from gaitbench import Registration, hookimpl
+from gaitbench.solve.solver import SolverResult, SolverStatus
 
 
 class Crash:
@@ -57,9 +59,28 @@ class Hang:
         time.sleep(3600)
 
 
+class SpendsItsLimit:
+    """Runs until its own time limit, as IPOPT did when MUMPS's factorizations grew to seconds each; IPOPT is its
+    remedy."""
+    name = "spends-its-limit"
+
+    def __init__(self, time_limit_s=None, **options):
+        self.time_limit_s = time_limit_s
+
+    def solve(self, nlp, parameters, initial_guess):
+        time.sleep(self.time_limit_s)
+        return SolverResult(SolverStatus.TIME_LIMIT, "time limit (scripted)", initial_guess, float("nan"),
+                            float("nan"), 1, self.time_limit_s, 0.0)
+
+    def remedies(self):
+        from plugins.solvers.ipopt import Ipopt
+        return [("ipopt", Ipopt(time_limit_s=self.time_limit_s))]
+
+
 @hookimpl
 def register_solvers():
-    return [Registration("crash", "kills its process", Crash), Registration("hang", "never returns", Hang)]
+    return [Registration("crash", "kills its process", Crash), Registration("hang", "never returns", Hang),
+            Registration("spends-its-limit", "runs to its time limit", SpendsItsLimit)]
 '''
 
 
@@ -165,6 +186,19 @@ def test_crashed_and_hung_workers_fail_only_their_case(tmp_path, faulty_plugins,
     assert rows[cases[0].key]["status"] == "crashed" and "SIGKILL" in rows[cases[0].key]["message"]
     assert rows[cases[1].key]["status"] == "timeout" and "worker was stopped" in rows[cases[1].key]["message"]
     assert rows[cases[2].key]["status"] == "solved"
+
+
+def test_one_solve_gets_a_quarter_of_the_case_s_time_and_the_next_rung_the_rest(faulty_plugins) -> None:
+    """Downward slope, OP-DM, N = 180 spent its whole hour in one rung of step 1's retries; the next rung then solved
+    the step in 2.5 s, too late for the walk."""
+    case = replace(walk_case(10, "spends-its-limit", (str(faulty_plugins),)), time_limit_s=4.0)
+    assert (case.solve_time_limit_s, case.hard_limit_s) == (1.0, 35.0)
+    outcome = run_case(case)
+    assert outcome.status == "solved", outcome.message
+    step, = json.loads(outcome.files["walk.json"])["steps"]
+    assert step["details"]["first_attempt"]["status"] == "time_limit"
+    assert step["details"]["first_attempt"]["solve_time_s"] == 1.0
+    assert [retry["remedy"] for retry in step["details"]["retries"]] == ["ipopt"]
 
 
 def test_a_local_worker_runs_decrease_and_conquer_s_sectional_pool(tmp_path: Path) -> None:

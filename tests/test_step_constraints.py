@@ -144,6 +144,30 @@ def test_a_failed_solve_climbs_the_ladder_and_records_every_rung():
     assert outcome.details["first_attempt"]["status"] == "infeasible"
 
 
+class RunsOutOfTime(FailingFirst):
+    """A solve that ends at its own time limit (as IPOPT's did, seconds per iteration, while MUMPS reallocated)."""
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.calls += 1
+        return SolverResult(SolverStatus.TIME_LIMIT, "IPOPT: Maximum_WallTime_Exceeded (scripted)",
+                            np.asarray(initial_guess), np.nan, np.nan, 2776, 900.0, 0.0)
+
+
+def test_a_solve_that_runs_out_of_its_own_time_climbs_the_ladder_while_the_walk_has_time():
+    """Downward slope, OP-DM, N = 180, step 1: a solve that spends its time limit is retried like one that spends its
+    iterations; only the walk's deadline is final."""
+    import time
+
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = RunsOutOfTime()
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1, deadline=time.monotonic() + 3600)
+    built = problem.transcription.build(problem.structure("second"))
+    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    assert outcome.solved and solver.calls == 1
+    assert outcome.details["first_attempt"]["status"] == "time_limit"
+    assert [entry["remedy"] for entry in outcome.details["retries"]] == ["use-ipopt"]
+
+
 def test_a_step_that_fails_every_rung_names_them_and_the_walk_stops_there():
     experiment = REGISTRY.create("experiment", "forward")
     walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), FailingFirst(remedies=False), 10, steps=2))

@@ -31,6 +31,13 @@ class PluginChoice:
         return {"name": self.name, "options": dict(sorted(self.options.items()))}
 
 
+SOLVE_SHARE = 0.25
+"""The share of a case's time limit that one solve (one rung of the retry ladder) may take. A pathological solve
+then leaves the rest of the walk's time to the next rungs: downward slope, OP-DM, N = 180, step 1 spent the whole
+hour in the adaptive-μ rung (2,776 iterations, the last ones seconds each while MUMPS reallocated its workspace to
+80 times its estimate), and the next rung then solved it in 2.5 s. The longest converged solve stored in
+thesis-all took 669 s of its 3,600 (upward slope, OP-DM, N = 170, step 6)."""
+
 DEFAULT_OBJECTIVE = PluginChoice("net-power")
 """The thesis's cost, what a case without an objective is solved for."""
 
@@ -69,7 +76,19 @@ class Case:
     objective: PluginChoice = DEFAULT_OBJECTIVE
     """What every step minimises and every COT measures."""
     time_limit_s: float | None = None
+    """The walk's deadline: no solve starts after it (:class:`gaitbench.solve.walk.WalkProblem`)."""
     plugin_dirs: tuple[str, ...] = ()
+
+    @property
+    def solve_time_limit_s(self) -> float | None:
+        """The longest one solve of the walk may run: :data:`SOLVE_SHARE` of the case's time limit."""
+        return None if self.time_limit_s is None else SOLVE_SHARE * self.time_limit_s
+
+    @property
+    def hard_limit_s(self) -> float | None:
+        """When the case's process is stopped from outside: a solve started just before the deadline may run its
+        whole share past it, and 30 s more leave room for verification and writing the result."""
+        return None if self.time_limit_s is None else self.time_limit_s + self.solve_time_limit_s + 30.0
 
     def identity(self) -> dict[str, Any]:
         """What the result depends on, in canonical form: the key is a hash of exactly this. The default objective

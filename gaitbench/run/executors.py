@@ -3,10 +3,11 @@
 Every executor takes cases and yields their outcomes as they finish, so the runner records each at once. It asks
 for the next case only when it can start it (a worker is free), because taking a case is what claims it for this
 run in the store (:func:`gaitbench.run.runner.run_suite`): runs sharing a store then split the cases, largest first.
-The time limit per case is passed to the solver (so a slow solve ends with its own ``time_limit`` status) and,
-outside the in-process executor, also enforced from outside: a case still running at 1.25 × its limit + 30 s
-has its process stopped and is recorded as ``timeout``. A worker that dies takes only its case with it
-(``crashed``, with the exit signal); the run goes on.
+A quarter of the case's time limit is each solve's own limit (so a slow solve ends with its own ``time_limit``
+status and the next rung of the retry ladder gets the rest), and the whole limit is the walk's deadline, after which
+no solve starts. Outside the in-process executor the limit is also enforced from outside: a case still running at
+1.25 × its limit + 30 s has its process stopped and is recorded as ``timeout``. A worker that dies takes only its
+case with it (``crashed``, with the exit signal); the run goes on.
 """
 
 from __future__ import annotations
@@ -32,8 +33,8 @@ walks' many small allocations 5–30 % slower (docs/performance.md, "Executors")
 
 
 def hard_limit(case: Case) -> float | None:
-    """Seconds after which a case's process is stopped: past the solver's own limit, with room for verification."""
-    return None if case.time_limit_s is None else 1.25 * case.time_limit_s + 30.0
+    """Seconds after which a case's process is stopped (:attr:`Case.hard_limit_s`)."""
+    return case.hard_limit_s
 
 
 class InProcessExecutor:

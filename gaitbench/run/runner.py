@@ -86,7 +86,7 @@ def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     transcription = registry.create("transcription", case.transcription.name, **case.transcription.options)
     solver_options = dict(case.solver.options)
     if case.time_limit_s is not None:
-        solver_options.setdefault("time_limit_s", case.time_limit_s)
+        solver_options.setdefault("time_limit_s", case.solve_time_limit_s)
     solver = registry.create("solver", case.solver.name, **solver_options)
     strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
     objective = registry.create("objective", case.objective.name, **case.objective.options)

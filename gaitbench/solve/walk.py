@@ -254,8 +254,8 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
         else:
             outcome = StepOutcome(index, problem.experiment.stance_leg(index), "infeasible_geometry",
                                   "; ".join(check.problems))
-        dead_end = check.ok and outcome.status != SolverStatus.TIME_LIMIT.value  # a time limit is final
-        if (not outcome.solved and dead_end and back_up is not None and index > 1 and index - 1 not in backed_up
+        # the walk's deadline is final: a step it stopped is no dead end to back up from
+        if (not outcome.solved and check.ok and back_up is not None and index > 1 and index - 1 not in backed_up
                 and not problem.out_of_time):
             backed_up.add(index - 1)
             replaced = walk.steps[-1]
@@ -299,9 +299,12 @@ def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, d
                        next_state=next_step_state(model, trajectory))
 
 
-RETRIED_STATUSES = (SolverStatus.INFEASIBLE.value, SolverStatus.ITERATION_LIMIT.value, SolverStatus.ERROR.value)
-"""Failures worth another try: a local solver that calls a feasible step infeasible, runs out of iterations or
-fails in its restoration phase has often only started badly. A time limit is final."""
+RETRIED_STATUSES = (SolverStatus.INFEASIBLE.value, SolverStatus.ITERATION_LIMIT.value, SolverStatus.ERROR.value,
+                    SolverStatus.TIME_LIMIT.value)
+"""Failures worth another try: a local solver that calls a feasible step infeasible, runs out of iterations or of
+its own time (a suite gives each solve a quarter of the case's limit, :attr:`gaitbench.run.case.Case.
+solve_time_limit_s`), or fails in its restoration phase has often only started badly. The walk's deadline is final:
+no rung starts after it."""
 
 
 def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
