@@ -19,15 +19,12 @@ REGISTRY = load_registry()
 SOLVERS = REGISTRY.names("solver")
 GAIT_STEPS = [("dmoc", 20), ("hermite-simpson", 20)]
 
-_MA27 = "blockSQP stops on an infeasible QP; its restoration phase needs HSL MA27, which is not installed"
 _PHASE_ONE = ("FSQP's phase 1 (projections onto every linearised row, equalities too) stalls on this step's "
               "standard guess: iteration limit with inequality and equality rows still violated (ℓ1 violation ~0.5)")
 KNOWN_SHORTFALLS: dict[tuple[str, str], str] = {
     ("sqp", "gait-dmoc-20"): "converges (KKT residual ~1e-9) to another local minimum, |f - f*|/f* = 6.4e-3",
     ("sqp", "gait-hermite-simpson-20"): "converges to another local minimum, |f - f*|/f* = 4.8e-3",
     ("fsqp", "gait-hermite-simpson-20"): _PHASE_ONE,
-    ("blocksqp", "gait-dmoc-20"): _MA27,
-    ("blocksqp", "gait-hermite-simpson-20"): _MA27,
 }
 """(solver, check or problem name) → why it fails, as measured."""
 

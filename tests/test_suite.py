@@ -139,7 +139,7 @@ def test_shipped_suites_keep_the_file_text():
         (BASE.replace('solvers = ["ipopt"]', 'solvers = [{ name = "ipopt", option = {} }]'),
          ["[sweep].solvers[0]: unknown key 'option' (did you mean 'options'?); allowed: name, options, grid"]),
         (BASE.replace('solvers = ["ipopt"]', 'solvers = ["ipopt", "ipopz"]'),
-         ["[sweep].solvers[1]: unknown solver 'ipopz'; available: blocksqp, cyipopt", "ipopt", "sqp"]),
+         ["[sweep].solvers[1]: unknown solver 'ipopz'; available: cyipopt, fatrop", "ipopt", "sqp"]),
         (BASE.replace('["forward"]', '["forwards"]'),
          ["[sweep].experiments[0]: unknown experiment 'forwards'; available:", "downward-slope", "forward"]),
         (BASE.replace('"one-phase", "decrease', '{ name = "one-phase", options = { phase = "third" } }, "decrease'),
@@ -248,12 +248,11 @@ def _solver(entry: str) -> str:
          ["[sweep].solvers[0].options.bogus_option: solver 'cyipopt': unknown option 'bogus_option'", "IPOPT"]),
         (_solver('{ name = "cyipopt", options = { mu_strategy = "adaptiv" } }'),
          ["[sweep].solvers[0].options.mu_strategy: solver 'cyipopt': IPOPT rejects mu_strategy = 'adaptiv'"]),
-        (_solver('{ name = "blocksqp", options = { max_line_searc = 3 } }'),
-         ["[sweep].solvers[0].options.max_line_searc: solver 'blocksqp': unknown option 'max_line_searc' (did you "
-          "mean 'max_line_search'", "any blocksqp option"]),
-        (_solver('{ name = "blocksqp", options = { max_line_search = "x" } }'),
-         ["[sweep].solvers[0].options.max_line_search: solver 'blocksqp': blocksqp takes an integer, found a "
-          "string"]),
+        (_solver('{ name = "fatrop", options = { mu_inti = 0.1 } }'),
+         ["[sweep].solvers[0].options.mu_inti: solver 'fatrop': unknown option 'mu_inti'; allowed: max_iterations",
+          "stagewise, or any fatrop option"]),
+        (_solver('{ name = "fatrop", options = { convexify_margin = "x" } }'),
+         ["[sweep].solvers[0].options.convexify_margin: solver 'fatrop': fatrop takes a number, found a string"]),
         (_solver('{ name = "sqp", options = { qp_solvr = "piqp" } }'),
          ["[sweep].solvers[0].options.qp_solvr: solver 'sqp': unknown option 'qp_solvr' (did you mean "
           "'qp_solver'?); allowed: max_iterations"]),
@@ -292,7 +291,7 @@ def test_options_the_plugins_accept_load(tmp_path):
     text = _solver('{ name = "ipopt", options = { linear_solver = "mumps", mu_strategy = "adaptive", '
                    'acceptable_tol = 1e-6, max_iterations = 500, time_limit_s = 60, print_level = 0 } }, '
                    '{ name = "cyipopt", options = { tol = 1 } }, '
-                   '{ name = "blocksqp", options = { max_line_search = 3 } }')
+                   '{ name = "fatrop", options = { convexify_margin = 1e-3 } }')
     text += ("[tracking]\noptions = { controller = { kp = [900, 400] }, sample_rate = 1000, "
              "fall = { hip_fraction = 0.4 } }\n")
     assert len(_load(tmp_path, text).cases) == 2 * 3 * 2 * 2

@@ -1,6 +1,6 @@
 """Numeric access to an NLP for solvers written in Python: counted, timed callbacks and the shared result.
 
-CasADi-backed solvers (``ipopt``, ``blocksqp``, ``fatrop``) evaluate the NLP inside CasADi. Solvers that iterate in
+CasADi-backed solvers (``ipopt``, ``fatrop``) evaluate the NLP inside CasADi. Solvers that iterate in
 Python (``fsqp``, ``sqp``, ``cyipopt``) call the same exact derivatives through :class:`NLPEvaluator`, which fixes
 the parameters, returns NumPy arrays and SciPy sparse matrices, and counts calls and time per callback, so every
 solver reports evaluations and function time the same way.

@@ -1,30 +1,31 @@
 """CasADi's own NLP methods as solver plugins, so the benchmark can set them against IPOPT on the same NLPs.
 
 Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and options and kept in
-``nlp.solver_cache`` like the ``ipopt`` plugin:
+``nlp.solver_cache`` like the ``ipopt`` plugin. One is left:
 
-- ``blocksqp``: blockSQP, filter line-search SQP with block-wise quasi-Newton Hessians;
 - ``fatrop``: FATROP, an interior-point method for optimal control (IPOPT's algorithm on a stage-wise Riccati
   factorization), on the NLP rewritten in stage-wise form (``stagewise=true``) or as one dense stage (the
   default; see :class:`Fatrop`).
 
-Both solve forward step 1 of the gait problems with Hermite–Simpson and DMOC at N = 20, blockSQP and dense FATROP
-20–150× slower than IPOPT; on the harder upward-slope step 1, without the torque tie-break, both fail. Stage-wise
-FATROP solves forward step 1 at N = 20 and 50 (4–9× IPOPT's time, most of it CasADi's interpreted derivatives) and
-the upward-slope step 1 at N = 20, but not forward step 1 at N = 100 (docs/solvers.md has the measurements).
-CasADi's ``sqpmethod`` and ``feasiblesqpmethod`` were plugins here too and were removed (issue 22): on forward
-step 1 neither reaches a solution with any QP solver or Hessian option CasADi 3.8 offers (docs/solvers.md,
-"Removed").
+Dense FATROP solves forward step 1 of the gait problems at N = 20, 20–150× slower than IPOPT, and fails the
+harder steps without the torque tie-break. Stage-wise FATROP solves 8 of the solver benchmark's 18 gait steps
+(N = 25 and 50; none at N = 100), at 3–23× IPOPT's time (docs/solvers.md has the measurements).
+CasADi's ``sqpmethod``, ``feasiblesqpmethod`` and ``blocksqp`` were plugins here too and were removed (issue 22):
+the first two reach no solution on forward step 1 with any option CasADi 3.8 offers, and blockSQP, without the
+HSL solver its QP and restoration phase need, converges on 2 of the 18 steps and ignores its time limit
+(docs/solvers.md, "Removed").
 
-At ``print_level`` 0 standard output is discarded during build and solve (at the file-descriptor level, so for
-the whole process while it lasts): blockSQP's qpOASES prints its banner whatever its print options say.
+At ``print_level`` 0 standard output and error are discarded during build and solve (at the file-descriptor
+level, so for the whole process while it lasts): CasADi's FATROP interface writes a warning per row its structure
+detection refuses whatever the print options say, and the solve's message says why it failed anyway.
 """
 
 from __future__ import annotations
 
+import contextlib
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import casadi as ca
@@ -35,7 +36,7 @@ from gaitbench.options import OptionError, unknown_option
 from gaitbench.problem.nlp import NLP
 from gaitbench.problem.stagewise import StagewiseForm, stagewise
 from gaitbench.solve.evaluation import Deadline
-from gaitbench.solve.silence import quiet_stdout
+from gaitbench.solve.silence import quiet_stderr, quiet_stdout
 from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
 
 
@@ -44,8 +45,8 @@ class CasadiMethod(ABC):
 
     ``max_iterations``, ``time_limit_s`` (``None``: no limit), ``tolerance`` and ``print_level`` are the options
     every gaitbench solver shares; each subclass says which of the method's own options they become. Other
-    keywords are the method's own options, passed unchanged. Neither method calls CasADi's
-    ``iteration_callback`` nor has a time option, so neither can be stopped during a solve: a solve that ends after
+    keywords are the method's own options, passed unchanged. FATROP calls no ``iteration_callback`` and has no
+    time option, so it cannot be stopped during a solve: a solve that ends after
     the time limit is reported as TIME_LIMIT with its point. A claimed convergence at a point where the
     NLP is not finite is an ERROR (FATROP reports success from a start where the objective is NaN).
     ``multipliers`` are CasADi's ``lam_g``.
@@ -62,19 +63,23 @@ class CasadiMethod(ABC):
     @classmethod
     def check_options(cls, options: Mapping[str, Any]) -> None:
         """The method's own options, by CasADi's list of them: a one-variable ``nlpsol`` is built with the options
-        this solver would pass, and an unknown option or a value of the wrong type is refused (docs/plugins.md).
-        Values within a type (a string option's choices) are the method's to check when it runs."""
+        this solver would pass and solved once (FATROP checks its own options only then), and an unknown option or
+        a value of the wrong type is refused (docs/plugins.md). Values within a type (a string option's choices)
+        are the method's to check when it runs."""
         try:
             solver = cls(**options)
         except (TypeError, ValueError):
             return  # refused again, with its own message, when the suite builds it
         x = ca.SX.sym("x")
         try:
-            with quiet_stdout():
-                ca.nlpsol("option_check", cls.plugin, {"x": x, "f": x**2}, solver.options)
+            with _quiet():
+                ca.nlpsol("option_check", cls.plugin, {"x": x, "f": x**2}, solver.options)(x0=1.0)
         except RuntimeError as error:
             message = str(error)
             own = _signature_options(cls)
+            refused = re.search(r"option not supported: (\w+)", message)
+            if refused and refused.group(1) in options:
+                raise unknown_option(refused.group(1), own, more=f", or any {cls.plugin} option") from None
             unknown = re.search(r"Unknown option: (\w+)", message)
             if unknown and unknown.group(1) in options:
                 raise unknown_option(unknown.group(1), own, candidates=[*own, *ca.nlpsol_options(cls.plugin)],
@@ -113,7 +118,7 @@ class CasadiMethod(ABC):
         try:
             solver = self._built(nlp)
             deadline = Deadline(self.time_limit_s)  # the limit covers the solve, as IPOPT's max_wall_time does
-            with quiet_stdout(self.print_level == 0):
+            with _quiet(self.print_level == 0):
                 solution = solver(**self._arguments(nlp, p, x0))
             x, multipliers = self._solution(nlp, solution)
         except Exception as error:  # the Solver protocol reports failures, it never raises them
@@ -146,7 +151,7 @@ class CasadiMethod(ABC):
     def _built(self, nlp: NLP) -> ca.Function:
         key = self._key()
         if key not in nlp.solver_cache:
-            with quiet_stdout(self.print_level == 0):
+            with _quiet(self.print_level == 0):
                 nlp.solver_cache[key] = self._nlpsol(nlp, self.options)
         return nlp.solver_cache[key]
 
@@ -189,46 +194,18 @@ def _signature_options(cls: type) -> list[str]:
 _LOCATION = re.compile(r"^\S+\.(?:cpp|hpp):\d+:\s*")
 
 
+@contextlib.contextmanager
+def _quiet(active: bool = True) -> Iterator[None]:
+    """Standard output and error discarded while ``active`` (see the module docstring)."""
+    with quiet_stdout(active), quiet_stderr(active):
+        yield
+
+
 def _casadi_message(error: BaseException) -> str:
     """A CasADi exception without its call trace: the lines that say what failed, without source locations."""
     lines = [_LOCATION.sub("", line.strip()) for line in str(error).splitlines()]
     kept = " ".join(line for line in lines if line and not line.startswith("Error in Function::")) or str(error)
     return f"{type(error).__name__}: {kept}"
-
-
-class BlockSqp(CasadiMethod):
-    """blockSQP (Janka et al.) in CasADi: filter line-search SQP with block-wise damped BFGS Hessians.
-
-    blockSQP's defaults (SR1 updates, the Schur-complement qpOASES, the feasibility restoration phase) all need
-    the HSL linear solver MA27, which is not installed, so this runs qpOASES on the reduced Hessian
-    (``schur=False``), BFGS updates (``hess_update=2``) and no restoration phase (``restore_feas=False``):
-    when a QP is infeasible it tries blockSQP's heuristic and otherwise stops (an ERROR). Pass ``schur=True``,
-    ``hess_update=1``, ``restore_feas=True`` where HSL is available. ``max_iterations`` is ``max_iter``;
-    ``tolerance`` is ``opttol`` and ``nlinfeastol``; ``print_level`` ≥ 1 prints the header and iterations.
-
-    blockSQP reports neither an iteration count nor why it failed: iterations are counted as its derivative
-    evaluations less the one at the starting point (restoration heuristics add evaluations), and its status is
-    CasADi's unified return status; the log at ``print_level`` ≥ 1 says what failed. It cannot be stopped during
-    a solve (no iteration callback).
-    """
-
-    name = "blocksqp"
-    plugin = "blocksqp"
-    statuses = {"SOLVER_RET_SUCCESS": SolverStatus.CONVERGED, "SOLVER_RET_LIMITED": SolverStatus.ITERATION_LIMIT}
-    explanations = {"SOLVER_RET_UNKNOWN": " (blockSQP stopped without converging: an infeasible or failed QP, or "
-                                          "a failed line search)"}
-
-    def _method_options(self, max_iterations: int, tolerance: float, print_level: int, extra: dict) -> dict:
-        verbose = print_level > 0
-        return {"max_iter": max_iterations, "opttol": tolerance, "nlinfeastol": tolerance, "schur": False,
-                "hess_update": 2, "restore_feas": False, "print_header": verbose, "print_iteration": verbose,
-                "print_maxit_reached": verbose, **extra}
-
-    def _return_status(self, stats: dict) -> str:
-        return stats["unified_return_status"]
-
-    def _iterations(self, stats: dict) -> int:
-        return max(int(stats.get("n_call_nlp_gf_jg", 0)) - 1, 0)
 
 
 _FATROP_FLAGS = ("Success", "MaxIterExceeded", "StopAtAcceptablePoint", "LocalInfeasibility", "LineSearchFailed",
@@ -335,7 +312,6 @@ class Fatrop(CasadiMethod):
 @hookimpl
 def register_solvers():
     return [
-        Registration("blocksqp", "blockSQP through CasADi: filter SQP, block-wise BFGS Hessians", BlockSqp),
         Registration("fatrop", "FATROP through CasADi: interior point for OCPs (stagewise=true: the NLP in "
                                "stage-wise form; else one dense stage)", Fatrop),
     ]
