@@ -106,7 +106,7 @@ def test_built_once_per_nlp_and_options(method: type[CasadiMethod], monkeypatch:
     method(max_iterations=50).solve(problem.nlp, [1.0], problem.x0)
     method(max_iterations=50).solve(problem.nlp, [1.0], problem.x0)
     assert builds == [method.plugin] * 2
-    assert len(problem.nlp.solver_cache) == 2
+    assert len([built for built in problem.nlp.solver_cache.values() if isinstance(built, ca.Function)]) == 2
 
 
 def test_shared_options_map_to_each_methods_own():
@@ -142,7 +142,7 @@ def test_fatrop_detects_the_stages_of_an_ocp_built_stage_wise():
         result = Fatrop(structure_detection=structure_detection).solve(nlp, p, x0)
         assert result.status is SolverStatus.CONVERGED, result.message
         assert result.objective == pytest.approx(reference.objective, rel=1e-8)
-    stages = [solver.stats()["N"] for solver in nlp.solver_cache.values()]
+    stages = [solver.stats()["N"] for solver in nlp.solver_cache.values() if isinstance(solver, ca.Function)]
     assert stages == [10, 0]  # ten stages found, against one dense stage
 
 
@@ -177,8 +177,20 @@ def test_fatrop_stagewise_solves_the_forward_gait_step_to_ipopts_optimum(transcr
 def test_fatrop_stagewise_refuses_a_structure_of_its_own():
     with pytest.raises(ValueError, match="stagewise = true gives FATROP the structure itself"):
         Fatrop(stagewise=True, structure_detection="manual")
-    with pytest.raises(TypeError, match="expected true or false"):
+    with pytest.raises(TypeError, match="expected true, false or 'auto'"):
         Fatrop(stagewise="yes")
+
+
+def test_fatrop_by_default_solves_a_gait_step_stage_wise_and_a_textbook_nlp_dense():
+    """``stagewise="auto"``: the stage-wise form where the NLP has one, one dense stage where it has none or where
+    the user gives a structure."""
+    step, textbook = gait_step("dmoc", 10, "forward"), hs071()
+    fatrop = Fatrop()
+    assert fatrop.solve(step.nlp, step.parameters, step.x0).converged
+    assert fatrop.solve(textbook.nlp, textbook.parameters, textbook.x0).converged
+    assert step.nlp.solver_cache[fatrop._key()].stats()["N"] == 9  # a stage per node
+    assert textbook.nlp.solver_cache[fatrop._key()].stats()["N"] == 0  # one dense stage
+    assert Fatrop(structure_detection="auto").stagewise is False
 
 
 def test_print_level_zero_is_silent_on_standard_output():

@@ -220,17 +220,21 @@ class Fatrop(CasadiMethod):
     stage's dynamics an explicit x_{k+1} = f(x_k, u_k) (identity in x_{k+1}), every other constraint depending on
     one stage only. The gait NLPs are none of these as built: their variables come in blocks (all positions, then
     all torques, ...), DMOC's dynamics are implicit in q_{k+1} and Hermite–Simpson's in the next state, and the
-    push-off impulse and slacks enter the last node's rows. Two forms:
+    push-off impulse and slacks enter the last node's rows. Three choices:
 
     - ``stagewise=True``: the NLP is rewritten in stage-wise form (:mod:`gaitbench.problem.stagewise`: each stage's
       own variables as controls, copies of earlier ones and of the global variables as states, gap-closing rows
       that carry the copies) and FATROP is given its structure (``N``, ``nx``, ``nu``, ``ng``); the solution is
       mapped back, so the result is the NLP's own. ``structure_detection="auto"`` instead leaves the structure to
       CasADi's detection, which misreads this form (docs/solvers.md): kept for comparison, not for use.
-    - ``stagewise=False`` (default): with ``structure_detection="none"`` (default) the NLP is one stage with all
+    - ``stagewise=False``: with ``structure_detection="none"`` (default) the NLP is one stage with all
       variables as controls, which FATROP solves with a dense factorization (correct, without its speed-up).
       ``structure_detection="auto"`` (CasADi's detection, given which constraints are equalities) is for NLPs
       built stage-wise; on one that is not, every solve returns ERROR saying so.
+    - ``stagewise="auto"`` (default): the stage-wise form where the NLP has one (the gait steps: variable blocks
+      over a grid, rows and objective that join nearby stages only), the dense stage otherwise (textbook NLPs) or
+      where a structure is given (``structure_detection``, ``N``, ...). Measured on the solver benchmark's 18 gait
+      steps: stage-wise 8 converged, dense 2 (docs/solvers.md).
 
     docs/solvers.md compares the two forms with IPOPT. ``max_iterations`` is FATROP's ``max_iter`` less one (FATROP
     takes one iteration past its ``max_iter``), ``tolerance`` is ``tol``; ``print_level`` is FATROP's own but at
@@ -252,15 +256,18 @@ class Fatrop(CasadiMethod):
     """The key of an NLP's stage-wise form in its ``solver_cache``: built once, for every solver built on it."""
 
     def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, structure_detection: str = "none", stagewise: bool = False,
+                 print_level: int = 0, structure_detection: str = "none", stagewise: bool | str = "auto",
                  **fatrop_options) -> None:
-        if not isinstance(stagewise, bool):
-            raise TypeError(f"stagewise = {stagewise!r}: expected true or false")
-        self.structure_detection = structure_detection
-        self.stagewise = stagewise
-        if stagewise and (structure_detection not in ("none", "auto") or set(fatrop_options) & {"N", "nx", "nu", "ng"}):
+        if not (isinstance(stagewise, bool) or stagewise == "auto"):
+            raise TypeError(f"stagewise = {stagewise!r}: expected true, false or 'auto'")
+        structure_given = structure_detection != "none" or bool(set(fatrop_options) & {"N", "nx", "nu", "ng"})
+        if stagewise is True and (structure_detection not in ("none", "auto") or
+                                  set(fatrop_options) & {"N", "nx", "nu", "ng"}):
             raise ValueError("stagewise = true gives FATROP the structure itself: leave out N, nx, nu, ng and "
                              "structure_detection (or set it to 'auto')")
+        self.structure_detection = structure_detection
+        self.stagewise: bool | str = False if stagewise == "auto" and structure_given else stagewise
+        """True, False, or "auto": the stage-wise form where the NLP has one (a structure given by hand: dense)."""
         super().__init__(max_iterations, time_limit_s, tolerance, print_level, **fatrop_options)
 
     def _method_options(self, max_iterations: int, tolerance: float, print_level: int, extra: dict) -> dict:
@@ -273,14 +280,22 @@ class Fatrop(CasadiMethod):
     def _key(self) -> tuple:
         return options_key(self.name, {**self.options, "stagewise": self.stagewise})
 
-    def _form(self, nlp: NLP) -> StagewiseForm:
+    def _form(self, nlp: NLP) -> StagewiseForm | None:
+        """``nlp``'s stage-wise form, or None where it is solved as one dense stage."""
+        if self.stagewise is False:
+            return None
         if self._FORM not in nlp.solver_cache:
-            nlp.solver_cache[self._FORM] = stagewise(nlp)
+            try:
+                nlp.solver_cache[self._FORM] = stagewise(nlp)
+            except ValueError:
+                if self.stagewise is True:
+                    raise
+                nlp.solver_cache[self._FORM] = None  # not an OCP on a grid (a textbook NLP): dense
         return nlp.solver_cache[self._FORM]
 
     def _nlpsol(self, nlp: NLP, options: dict) -> ca.Function:
-        if self.stagewise:
-            form = self._form(nlp)
+        form = self._form(nlp)
+        if form is not None:
             structure = form.structure() if self.structure_detection == "none" else {"equality": form.equality()}
             return ca.nlpsol(self.name, self.plugin, form.nlp.casadi_problem(), {**options, **structure})
         if self.structure_detection != "auto":
@@ -293,16 +308,16 @@ class Fatrop(CasadiMethod):
                                f"CasADi: {_casadi_message(error)}") from error
 
     def _arguments(self, nlp: NLP, p: np.ndarray, x0: np.ndarray) -> dict[str, np.ndarray]:
-        if not self.stagewise:
-            return super()._arguments(nlp, p, x0)
         form = self._form(nlp)
+        if form is None:
+            return super()._arguments(nlp, p, x0)
         return super()._arguments(form.nlp, p, form.lift(x0))
 
     def _solution(self, nlp: NLP, solution: dict) -> tuple[np.ndarray, np.ndarray]:
         x, multipliers = super()._solution(nlp, solution)
-        if not self.stagewise:
-            return x, multipliers
         form = self._form(nlp)
+        if form is None:
+            return x, multipliers
         return form.restrict(x), form.constraint_multipliers(multipliers)
 
     def _return_status(self, stats: dict) -> str:
