@@ -327,6 +327,6 @@ class Fatrop(CasadiMethod):
 @hookimpl
 def register_solvers():
     return [
-        Registration("fatrop", "FATROP through CasADi: interior point for OCPs (stagewise=true: the NLP in "
-                               "stage-wise form; else one dense stage)", Fatrop),
+        Registration("fatrop", "FATROP through CasADi: interior point for OCPs, on the NLP in stage-wise form "
+                               "where it has one (else one dense stage)", Fatrop),
     ]
