@@ -4,8 +4,8 @@ Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and o
 ``nlp.solver_cache`` like the ``ipopt`` plugin. One is left:
 
 - ``fatrop``: FATROP, an interior-point method for optimal control (IPOPT's algorithm on a stage-wise Riccati
-  factorization), on the NLP rewritten in stage-wise form (``stagewise=true``) or as one dense stage (the
-  default; see :class:`Fatrop`).
+  factorization), on the NLP rewritten in stage-wise form where it has one (the default, ``stagewise="auto"``)
+  or as one dense stage (see :class:`Fatrop`).
 
 Dense FATROP solves forward step 1 of the gait problems at N = 20, 20–150× slower than IPOPT, and fails the
 harder steps without the torque tie-break. Stage-wise FATROP solves 8 of the solver benchmark's 18 gait steps
@@ -260,12 +260,12 @@ class Fatrop(CasadiMethod):
                  **fatrop_options) -> None:
         if not (isinstance(stagewise, bool) or stagewise == "auto"):
             raise TypeError(f"stagewise = {stagewise!r}: expected true, false or 'auto'")
-        structure_given = structure_detection != "none" or bool(set(fatrop_options) & {"N", "nx", "nu", "ng"})
-        if stagewise is True and (structure_detection not in ("none", "auto") or
-                                  set(fatrop_options) & {"N", "nx", "nu", "ng"}):
+        manual = bool(set(fatrop_options) & {"N", "nx", "nu", "ng"})
+        if stagewise is True and (structure_detection not in ("none", "auto") or manual):
             raise ValueError("stagewise = true gives FATROP the structure itself: leave out N, nx, nu, ng and "
                              "structure_detection (or set it to 'auto')")
         self.structure_detection = structure_detection
+        structure_given = structure_detection != "none" or manual
         self.stagewise: bool | str = False if stagewise == "auto" and structure_given else stagewise
         """True, False, or "auto": the stage-wise form where the NLP has one (a structure given by hand: dense)."""
         super().__init__(max_iterations, time_limit_s, tolerance, print_level, **fatrop_options)
