@@ -492,8 +492,8 @@ def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
             return outcome(index, state, solved=state[1] > 0.5)  # only from the backed-up step 2
         return outcome(index, state, solved=index != 5)
 
-    def back_up(problem, index, state, seed):
-        seeds.append(seed)
+    def back_up(problem, index, state, replaced):
+        seeds.append(replaced.verified.trajectory.seed())
         result = outcome(index, state, solved=index == 2)
         if result.solved:
             result.next_state = state + np.array([1.0, 1.0, 0, 0])

@@ -1,8 +1,8 @@
 """One case of a suite: everything that determines a walk's result, and the canonical key that names it.
 
 A case is plain data (strings, numbers, dicts), so it pickles to any worker process or Dask worker and rebuilds
-its plugins there by name. The key hashes only what changes the result; labels, time limits and plugin
-directories are how a case is run or shown, not what it is, so they stay out of it.
+its plugins there by name. The key hashes only what changes the result; labels, time limits, plugin
+directories and checkpoints are how a case is run or shown, not what it is, so they stay out of it.
 """
 
 from __future__ import annotations
@@ -78,6 +78,9 @@ class Case:
     time_limit_s: float | None = None
     """The walk's deadline: no solve starts after it (:class:`gaitbench.solve.walk.WalkProblem`)."""
     plugin_dirs: tuple[str, ...] = ()
+    checkpoint: str | None = None
+    """Where the walk saves its solved steps as it goes, so that a run of the case after this one was stopped goes on
+    from them (:mod:`gaitbench.solve.checkpoint`); the runner sets it, in its store, where the worker can write."""
 
     @property
     def solve_time_limit_s(self) -> float | None:

@@ -44,6 +44,8 @@ class InProcessExecutor:
 
     name = "inprocess"
     jobs = 1
+    local_files = True
+    """Its workers write where the runner does: the walks keep step checkpoints in the store."""
 
     def run(self, cases: Iterable[Case]) -> Iterator[CaseOutcome]:
         builds = BuildCache()  # this process's, for the run
@@ -57,6 +59,7 @@ class LocalPoolExecutor:
     :class:`~gaitbench.problem.build_cache.BuildCache`)."""
 
     name = "local"
+    local_files = True
 
     def __init__(self, jobs: int = 1) -> None:
         if jobs < 1:
@@ -112,6 +115,12 @@ class DaskExecutor:
     def __init__(self, scheduler: str | None = None, jobs: int = 1) -> None:
         self.scheduler = scheduler
         self.jobs = jobs
+
+    @property
+    def local_files(self) -> bool:
+        """Only a local cluster's workers surely see the store's directory; a remote cluster's walks keep no step
+        checkpoints."""
+        return self.scheduler is None
 
     def run(self, cases: Iterable[Case]) -> Iterator[CaseOutcome]:
         import dask

@@ -3,7 +3,9 @@
 :func:`run_case` is what a worker does with one case; it never raises, so a failing method, a broken plugin or
 bad options become a recorded status. :func:`run_suite` hands the cases that are not yet in the store to an
 executor (:mod:`gaitbench.run.executors`), claiming each as the executor takes it so that runs sharing a store never
-solve a case twice, and records each outcome as it arrives.
+solve a case twice, and records each outcome as it arrives. A case's walk saves its steps in the store's checkpoints
+as it goes; a case stopped from outside (the run killed, its worker crashed or timed out) is resumed from them by
+the next run that solves it.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import provenance
-from gaitbench.run.store import ResultStore, case_file
+from gaitbench.run.store import ResultStore, case_file, checkpoint_file
 
 if TYPE_CHECKING:
     from gaitbench.plugins import PluginRegistry
@@ -57,6 +59,7 @@ def run_case(case: Case, builds: BuildCache | None = None) -> CaseOutcome:
     started = time.perf_counter()
     metrics: dict[str, Any] = {}
     files: dict[str, bytes] = {}
+    walk = None
     try:
         walk = _solve_walk(case, builds or BuildCache())
         metrics |= walk_metrics(walk)
@@ -69,7 +72,8 @@ def run_case(case: Case, builds: BuildCache | None = None) -> CaseOutcome:
             files |= _saved_files(tracking.save, TRACK_FILE)
     except Exception as error:  # a failing plugin is this case's result, not the run's end
         status, message = "error", _describe(error)
-    return CaseOutcome(case, status, message, time.perf_counter() - started, metrics, files, provenance())
+    earlier = walk.resumed.get("elapsed_s", 0.0) if walk is not None else 0.0  # before a stop, from its checkpoint
+    return CaseOutcome(case, status, message, earlier + time.perf_counter() - started, metrics, files, provenance())
 
 
 def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0.0) -> CaseOutcome:
@@ -79,6 +83,7 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
 
 def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.checkpoint import WalkCheckpoint, code_fingerprint
     from gaitbench.solve.walk import WalkProblem
 
     registry = _registry(case)
@@ -91,11 +96,16 @@ def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
     objective = registry.create("objective", case.objective.name, **case.objective.options)
     options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
-    deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s
+    checkpoint = None if case.checkpoint is None else \
+        WalkCheckpoint.open(case.checkpoint, {"case": case.key, "code": code_fingerprint()})
+    earlier = checkpoint.elapsed_s if checkpoint is not None else 0.0  # the time limit is the whole walk's
+    deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s - earlier
     problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
-                          objective=objective, builds=builds, deadline=deadline)
+                          objective=objective, builds=builds, deadline=deadline, checkpoint=checkpoint)
     walk = strategy.solve(problem)
     walk.experiment_options, walk.strategy_options = dict(case.experiment.options), dict(case.strategy.options)
+    if checkpoint is not None and checkpoint.discarded:
+        walk.resumed = {**walk.resumed, "discarded": checkpoint.discarded}
     return walk
 
 
@@ -275,6 +285,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                 "pass --resume to run only the missing ones, or --store to write somewhere else"
             )
         pending = largest_first([case for case in suite.cases if case.key not in finished])
+        if getattr(executor, "local_files", False):  # its workers can write in the store's directory
+            pending = [replace(case, checkpoint=str(store.directory / checkpoint_file(case.key))) for case in pending]
         run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,
                                   "suite_path": str(suite.path), "suite_text": suite.text,
                                   "executor": executor.name, "jobs": executor.jobs,
@@ -296,6 +308,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
             with store.heartbeat(run_id):
                 for outcome in executor.run(_claimed(store, run_id, pending, stored, left)):
                     store.record_case(case_row(outcome, suite.name, run_id), outcome.files)
+                    if outcome.case.checkpoint and outcome.status not in RUN_FAILURE_CAUSES:
+                        Path(outcome.case.checkpoint).unlink(missing_ok=True)  # its walk is recorded whole
                     solved += not outcome.failed
                     failed += outcome.failed
                     if on_outcome:

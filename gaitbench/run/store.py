@@ -4,10 +4,12 @@ Layout of a store directory::
 
     results.sqlite          runs (one row per `gaitbench run` session) and cases (one row per case key)
     cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked
+    checkpoints/<case_key>  the solved steps of a walk in flight (gaitbench.solve.checkpoint), until its row is in
 
 Only the processes that run suites write: workers return their results and the runner records each one as soon
 as it arrives. A case's files are written to a temporary directory and renamed into place before its row is
-committed, so a crash or kill loses at most the cases in flight, and a row always has its files.
+committed, so a row always has its files. A worker saves each step its walk solves in the case's checkpoint, so a
+crash or kill loses at most the steps in flight: the next run of the case goes on after the saved ones.
 
 Several runs may share a store: each claims a case (table ``claims``, under SQLite's write lock) right before it
 starts it, so no case is solved twice, and a claim dies with its run (same host: the process is gone; any host:
@@ -50,6 +52,7 @@ from gaitbench.run.store_schema import (
 
 DATABASE = "results.sqlite"
 CASES_DIR = "cases"
+CHECKPOINTS_DIR = "checkpoints"
 
 HEARTBEAT_S = 20.0
 """How often a running suite refreshes its run's ``heartbeat_at``."""
@@ -325,6 +328,11 @@ class ResultStore:
         known = ", ".join(ids) or "none"
         problem = "matches several runs" if matches else "is not a run"
         raise StoreError(f"{self.directory}: {run!r} {problem} of this store; runs: {known}")
+
+
+def checkpoint_file(case_key: str) -> str:
+    """Where a case's walk keeps its solved steps while it runs, relative to the store directory."""
+    return f"{CHECKPOINTS_DIR}/{case_key}"
 
 
 def case_file(case_key: str, name: str = "") -> str:

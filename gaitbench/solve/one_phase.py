@@ -56,6 +56,10 @@ class OnePhase:
             chosen.details = {**chosen.details, "retries": rungs}
             return chosen
 
+        def back_up(problem: WalkProblem, index: int, state: np.ndarray, replaced: StepOutcome) -> StepOutcome:
+            return backing.solve_step(problem, index, state, replaced.verified.trajectory.seed())
+
+        # a window starts from the previous window's later steps, which a checkpoint does not keep
         return walk_step_by_step(problem, self.name, solve_step, on_step, phase=self.phase,
-                                 back_up=backing.solve_step if self.back_up else None)
+                                 back_up=back_up if self.back_up else None, resumable=self.look_ahead == 1)
 

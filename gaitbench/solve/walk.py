@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +27,9 @@ from gaitbench.problem.trajectory import Seed, StepTrajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.verify import StepVerification, verify_step
+
+if TYPE_CHECKING:
+    from gaitbench.solve.checkpoint import WalkCheckpoint
 
 
 @dataclass
@@ -112,6 +116,9 @@ class WalkResult:
     whoever built the plugins (``gaitbench solve``, the suite runner)."""
     strategy_options: dict = field(default_factory=dict)
     """The options the strategy was built with (set like :attr:`experiment_options`)."""
+    resumed: dict = field(default_factory=dict)
+    """For a walk resumed from a checkpoint (:mod:`gaitbench.solve.checkpoint`): how many of its steps were
+    restored (``steps``) and the time it had run before it was stopped (``elapsed_s``); empty otherwise."""
 
     @property
     def failure(self) -> str | None:
@@ -143,6 +150,7 @@ class WalkResult:
             "acot": self.acot,
             "failure": self.failure,
             "wall_time_s": self.wall_time_s,
+            **({"resumed": self.resumed} if self.resumed else {}),
             "strategy_details": self.strategy_details,
             "problem_options": self.problem_options,
             "steps": [step.as_dict() for step in self.steps],
@@ -168,6 +176,9 @@ class WalkProblem:
     """``time.monotonic()`` at which the walk's time runs out (a suite case's time limit): a step that would start
     later is not started, and the walk stops there with ``time_limit``, keeping the steps it solved, instead of
     running on until its process is stopped and losing them all."""
+    checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
+    """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
+    the walk resumes after them (:func:`walk_step_by_step`)."""
 
     @property
     def out_of_time(self) -> bool:
@@ -221,14 +232,13 @@ class WalkProblem:
 StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
 """Solves step ``index`` from a (q1, q2, q̇1, q̇2) state; a solved outcome carries the next step's state."""
 
-BackUp = Callable[[WalkProblem, int, np.ndarray, Seed], "StepOutcome"]
-"""Solves step ``index`` again from its state, looking further ahead, started from ``seed``: the trajectory it is
-to replace."""
+BackUp = Callable[[WalkProblem, int, np.ndarray, "StepOutcome"], "StepOutcome"]
+"""Solves step ``index`` again from its state, looking further ahead, given the outcome it is to replace."""
 
 
 def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
                       on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
-                      back_up: BackUp | None = None) -> WalkResult:
+                      back_up: BackUp | None = None, resumable: bool = True) -> WalkResult:
     """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
 
     A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
@@ -237,13 +247,23 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
     own initial state, started from its own trajectory (feasible for it, and nearer one that leaves the next step
     a way on than a blended guess is), and the walk goes on from the new one. Each step is backed up at most once;
     the step that was replaced is recorded in the new one's ``details["backed_up_from"]``.
+
+    With the problem's ``checkpoint``, each solved step is saved as the walk goes, and a walk that an earlier run
+    left unfinished goes on after the steps it saved. A strategy whose steps depend on more than the state the step
+    before left (a look-ahead window's seeds) passes ``resumable=False``: its walk starts from step 1.
     """
     walk = problem.result(strategy, phase)
     started = time.perf_counter()
     checks = problem.feasibility()
     states = [problem.start_state()]  # states[i - 1]: where step i starts
     backed_up: set[int] = set()
-    index = 1
+    checkpoint = problem.checkpoint if resumable else None
+    earlier = 0.0
+    if checkpoint is not None and checkpoint.steps:
+        walk.steps, backed_up, earlier = list(checkpoint.steps), set(checkpoint.backed_up), checkpoint.elapsed_s
+        states += [step.next_state for step in walk.steps]
+        walk.resumed = {"steps": len(walk.steps), "elapsed_s": earlier}
+    index = len(walk.steps) + 1
     while index <= problem.n_steps:
         check = checks[index - 1]
         if problem.out_of_time:
@@ -259,7 +279,7 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
                 and not problem.out_of_time):
             backed_up.add(index - 1)
             replaced = walk.steps[-1]
-            previous = back_up(problem, index - 1, states[index - 2], replaced.verified.trajectory.seed())
+            previous = back_up(problem, index - 1, states[index - 2], replaced)
             if previous.solved:
                 previous.details = {**previous.details, "backed_up_from": {
                     **replaced.summary(), "dead_end": {"step": index, "message": outcome.message}}}
@@ -276,9 +296,11 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
             on_step(outcome)
         if not outcome.solved:
             break
+        if checkpoint is not None:
+            checkpoint.save(walk.steps, backed_up, earlier + time.perf_counter() - started)
         states.append(outcome.next_state)
         index += 1
-    walk.wall_time_s = time.perf_counter() - started
+    walk.wall_time_s = earlier + time.perf_counter() - started
     return walk
 
 

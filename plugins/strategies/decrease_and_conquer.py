@@ -82,14 +82,11 @@ class DecreaseAndConquer:
         self.back_up = bool(back_up) and self.polish
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
-        solved: dict[int, StepOutcome] = {}
-
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
-            solved[index] = self._solve_step(problem, index, state, sections)
-            return solved[index]
+            return self._solve_step(problem, index, state, sections)
 
-        def back_up(problem: WalkProblem, index: int, state: np.ndarray, seed: object) -> StepOutcome:
-            return continue_from_polished(problem, solved[index])
+        def back_up(problem: WalkProblem, index: int, state: np.ndarray, replaced: StepOutcome) -> StepOutcome:
+            return continue_from_polished(problem, replaced)
 
         with SectionalSolves(problem, self.workers) as sections:
             walk = walk_step_by_step(problem, self.name, solve_step, on_step,
