@@ -20,12 +20,9 @@ import subprocess
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import cloudpickle
-
-if TYPE_CHECKING:
-    from gaitbench.solve.walk import StepOutcome
 
 
 @dataclass
@@ -35,7 +32,9 @@ class WalkCheckpoint:
 
     path: Path
     fingerprint: dict[str, Any]
-    steps: list[StepOutcome] = field(default_factory=list)
+    steps: list[Any] = field(default_factory=list)
+    """The walk's solved steps (:class:`gaitbench.solve.walk.StepOutcome`), kept whole; this module does not look
+    inside them, so that it stands below the walk that uses it."""
     backed_up: set[int] = field(default_factory=set)
     """Steps solved again after a dead end (each is backed up at most once, resumed or not)."""
     elapsed_s: float = 0.0
@@ -65,7 +64,7 @@ class WalkCheckpoint:
         checkpoint.path.unlink(missing_ok=True)
         return checkpoint
 
-    def save(self, steps: list[StepOutcome], backed_up: set[int], elapsed_s: float) -> None:
+    def save(self, steps: list[Any], backed_up: set[int], elapsed_s: float) -> None:
         """Keep ``steps`` (every one solved) for a resumed walk; written whole and then renamed, so that a kill
         during the write leaves the previous checkpoint."""
         self.steps, self.backed_up, self.elapsed_s = list(steps), set(backed_up), elapsed_s
