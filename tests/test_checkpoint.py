@@ -12,9 +12,10 @@ import pytest
 from gaitbench.plugins import load_registry
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.executors import InProcessExecutor
+from gaitbench.run.provenance import code_fingerprint
 from gaitbench.run.runner import run_suite
 from gaitbench.run.store import checkpoint_file, load_results
-from gaitbench.solve.checkpoint import WalkCheckpoint, code_fingerprint
+from gaitbench.solve.checkpoint import WalkCheckpoint
 from gaitbench.solve.walk import StepOutcome, WalkProblem, walk_step_by_step
 
 REGISTRY = load_registry()

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
-from gaitbench.run.provenance import provenance
+from gaitbench.run.provenance import code_fingerprint, provenance
 from gaitbench.run.store import ResultStore, case_file, checkpoint_file
 
 if TYPE_CHECKING:
@@ -83,7 +83,7 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
 
 def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
-    from gaitbench.solve.checkpoint import WalkCheckpoint, code_fingerprint
+    from gaitbench.solve.checkpoint import WalkCheckpoint
     from gaitbench.solve.walk import WalkProblem
 
     registry = _registry(case)

@@ -8,17 +8,14 @@ was not stopped.
 
 The steps are kept as they are in memory (their solver results, verifications and trajectories with their
 interpolants), pickled with cloudpickle because the interpolants are closures. A checkpoint is resumed only by the
-same case under the same code (:func:`code_fingerprint`); any other is discarded, so a walk never mixes steps
-solved by different code.
+same case under the same code (the runner's :func:`gaitbench.run.provenance.code_fingerprint`); any other is
+discarded, so a walk never mixes steps solved by different code.
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
-import subprocess
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -77,22 +74,3 @@ class WalkCheckpoint:
     def discard(self) -> None:
         """Remove the saved steps: the walk's outcome is recorded, or it is to be solved from step 1."""
         self.path.unlink(missing_ok=True)
-
-
-@lru_cache(maxsize=1)
-def code_fingerprint() -> str:
-    """What solved the steps: gaitbench's version, its commit, and a hash of any uncommitted change to tracked
-    files. Outside a git checkout, the version alone."""
-    from gaitbench._version import __version__
-
-    source = Path(__file__).resolve().parents[2]  # the checkout: gaitbench/solve/checkpoint.py is three levels down
-    if not (source / ".git").exists():
-        return __version__
-    try:
-        commit = subprocess.run(["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                check=True, timeout=10).stdout.strip()
-        diff = subprocess.run(["git", "-C", str(source), "diff", "HEAD"], capture_output=True, check=True,
-                              timeout=30).stdout
-    except (OSError, subprocess.SubprocessError):
-        return __version__
-    return f"{__version__} {commit}" + (f"+{hashlib.sha256(diff).hexdigest()[:16]}" if diff else "")
