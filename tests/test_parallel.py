@@ -70,3 +70,36 @@ def test_busy_forked_workers_die_with_their_parent() -> None:
     for worker in alive:
         worker.kill()
     assert not alive
+
+
+
+def _report_and_hang(item: int, state: object) -> None:
+    os.write(1, f"{os.getpid()}\n".encode())  # one write: two workers' lines must not interleave
+    time.sleep(3600)
+
+
+SPAWNING_PARENT = """
+import time
+from test_parallel import _report_and_hang
+from gaitbench.solve.parallel import WorkerPool
+
+pool = WorkerPool(2, state=list, start="spawn", die_with_parent=True)  # as the local executor starts its cases
+futures = [pool.schedule(_report_and_hang, item) for item in range(2)]
+time.sleep(3600)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal: Linux only")
+def test_busy_spawned_case_workers_die_with_a_killed_run() -> None:
+    """A run killed from outside must not leave its case workers solving on: nothing would record their walks."""
+    parent = subprocess.Popen([sys.executable, "-c", SPAWNING_PARENT], stdout=subprocess.PIPE, text=True,
+                              env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)})
+    try:
+        workers = [psutil.Process(int(parent.stdout.readline())) for _ in range(2)]
+    finally:
+        parent.kill()
+        parent.wait()
+    _, alive = psutil.wait_procs(workers, timeout=10)
+    for worker in alive:
+        worker.kill()
+    assert not alive

@@ -70,7 +70,7 @@ class LocalPoolExecutor:
         from concurrent.futures import FIRST_COMPLETED, wait
 
         # spawn, not fork: the parent has threads (progress display, SQLite), which fork would copy mid-state
-        with WorkerPool(self.jobs, state=BuildCache, start="spawn") as pool:
+        with WorkerPool(self.jobs, state=BuildCache, start="spawn", die_with_parent=True) as pool:
             upcoming = iter(cases)
             running = {}
 

@@ -36,18 +36,23 @@ class WorkerPool(Generic[State]):
     """``workers`` long-lived processes, started by ``start`` ("spawn" or "fork"), each holding ``state()``.
 
     ``state`` is called once in each worker as it starts (spawned workers receive it pickled, so a class or a
-    module-level function; forked ones inherit it, so any callable). Forked workers die with their parent (on
-    Linux), so a process stopped at its time limit leaves no orphans still solving its sections.
+    module-level function; forked ones inherit it, so any callable). With ``die_with_parent`` (the default for
+    forked workers) the workers die with the process that started them (on Linux): a case stopped at its time limit
+    leaves no sectional workers solving on, and a run killed from outside leaves no case workers solving on, which
+    nothing would record (and whose walks would write the same step checkpoints as the run that resumes them).
     """
 
-    def __init__(self, workers: int, state: Callable[[], State], start: str = "spawn") -> None:
+    def __init__(self, workers: int, state: Callable[[], State], start: str = "spawn",
+                 die_with_parent: bool | None = None) -> None:
         if workers < 1:
             raise ValueError(f"workers = {workers}: need at least one")
         if start not in multiprocessing.get_all_start_methods():
             raise ValueError(f"the {start!r} start method is not available on this platform")
         self.workers = workers
         self._pool = ProcessPool(max_workers=workers, context=multiprocessing.get_context(start),
-                                 initializer=_worker_started, initargs=(state, start == "fork"))
+                                 initializer=_worker_started,
+                                 initargs=(state, start == "fork" if die_with_parent is None else die_with_parent,
+                                           os.getpid()))
 
     def schedule(self, task: Callable[[Item, State], Result], item: Item,
                  timeout: float | None = None) -> Future[Result]:
@@ -80,8 +85,8 @@ def _call(task: Callable[[Item, object], Result], item: Item) -> Result:
     return task(item, _STATE)
 
 
-def _worker_started(state: Callable[[], object], forked: bool) -> None:
-    """Pool worker initializer: die with a forking parent, ignore a SIGTERM while exiting, then build the state.
+def _worker_started(state: Callable[[], object], die_with_parent: bool, parent: int) -> None:
+    """Pool worker initializer: die with the parent (if asked), ignore a SIGTERM while exiting, build the state.
 
     Pebble stops a pool by closing its channels (idle workers then exit on their own) and sending each worker
     SIGTERM, whose handler ends the process at once (``os._exit``). Landing in the middle of a worker's own exit,
@@ -91,10 +96,12 @@ def _worker_started(state: Callable[[], object], forked: bool) -> None:
     other SIGTERM (a case past its time limit) still ends it at once.
     """
     global _STATE
-    if forked and sys.platform.startswith("linux"):
+    if die_with_parent and sys.platform.startswith("linux"):
         # An idle worker exits when its parent's end of the channel closes, a busy one only after its task: without
         # this, a case stopped at its time limit would leave its sectional workers solving on.
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:  # the parent died before the signal was asked for
+            os._exit(1)
     from multiprocessing import util
 
     stop_now = signal.getsignal(signal.SIGTERM)
