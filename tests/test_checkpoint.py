@@ -15,7 +15,7 @@ from gaitbench.run.executors import InProcessExecutor
 from gaitbench.run.provenance import code_fingerprint
 from gaitbench.run.runner import run_suite
 from gaitbench.run.store import checkpoint_file, load_results
-from gaitbench.solve.checkpoint import WalkCheckpoint
+from gaitbench.solve.checkpoint import WalkCheckpoint, progress_file
 from gaitbench.solve.walk import StepOutcome, WalkProblem, walk_step_by_step
 
 REGISTRY = load_registry()
@@ -153,7 +153,7 @@ def test_the_runner_resumes_a_case_from_its_checkpoint_and_then_removes_it(tmp_p
     row = load_results(tmp_path / "store").iloc[0]
     assert row["status"] == "solved" and row["acot"] == whole.acot
     assert _walk_file(tmp_path / "store", case)["resumed"]["steps"] == 2
-    assert not path.exists()  # the walk is recorded whole
+    assert not path.exists() and not progress_file(path).exists()  # the walk is recorded whole
 
 
 def test_the_runner_discards_another_code_s_checkpoint(tmp_path: Path) -> None:
@@ -177,3 +177,19 @@ def test_a_resumed_case_s_time_limit_counts_the_time_before_its_stop(tmp_path: P
     assert (row["status"], row["stop_cause"], row["stop_step"], row["steps_solved"]) == \
         ("incomplete", "time_limit", 3, 2)
     assert row["wall_time_s"] >= 10.0
+
+
+def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) -> None:
+    from gaitbench.cli.run_commands import steps_in_flight
+    from gaitbench.solve.checkpoint import remove_checkpoint, saved_progress
+
+    step = StepOutcome(1, 1, "converged", "", next_state=np.zeros(4))
+    WalkCheckpoint(tmp_path / "a1", FINGERPRINT).save([step, step], set(), 5.0, of=11)
+    WalkCheckpoint(tmp_path / "b2", FINGERPRINT).save([step], set(), 1.0, of=11)  # another suite's walk
+    progress = saved_progress(tmp_path)
+    assert progress["a1"] == {"saved": 2, "of": 11, "elapsed_s": 5.0}
+    labels = {"a1": "forward N=140 D&C-DM"}
+    assert steps_in_flight(progress, labels) == "in flight: 2 of 11 steps (forward N=140 D&C-DM)"
+    remove_checkpoint(tmp_path / "a1")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["b2", "b2.json"]
+    assert steps_in_flight(saved_progress(tmp_path), labels) == ""

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
 import os
+import time
 from pathlib import Path
 
 import click
 from rich import box
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 from rich.text import Text
 
@@ -79,7 +81,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         if problem is not None:
             raise click.BadParameter(problem, param_hint="--jobs")
     store_dir = store_dir or suite.output
-    with _CaseProgress(console) as progress:
+    with _CaseProgress(console, _StepsInFlight(Path(store_dir), suite.cases)) as progress:
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
@@ -143,16 +145,48 @@ def _executor(name: str, jobs: int, scheduler: str | None):
     return LocalPoolExecutor(jobs)
 
 
-class _CaseProgress:
-    """Cases done, failed and left, with an estimate of the time left; each failure printed as it happens."""
+class _StepsInFlight(ProgressColumn):
+    """The suite's walks in flight and the steps each has saved (their checkpoints' progress files), read at most
+    every 2 s: a case of hours shows how far it is."""
 
-    def __init__(self, console: Console) -> None:
+    def __init__(self, store_dir: Path, cases) -> None:
+        from gaitbench.run.store import CHECKPOINTS_DIR
+
+        super().__init__()
+        self.directory = store_dir / CHECKPOINTS_DIR
+        self.labels = {case.key: case.label.split(":")[0] for case in cases}
+        self.text, self.read_at = Text(""), -math.inf
+
+    def render(self, task) -> Text:
+        from gaitbench.solve.checkpoint import saved_progress
+
+        if time.monotonic() - self.read_at >= 2.0:
+            self.read_at = time.monotonic()
+            self.text = Text(steps_in_flight(saved_progress(self.directory), self.labels))
+        return self.text
+
+
+def steps_in_flight(progress: dict[str, dict], labels: dict[str, str]) -> str:
+    """``in flight: 3 of 11 steps (forward N=140 D&C-DM), ...`` for the walks of ``labels`` (case key → label)
+    that have saved steps; empty when none has."""
+    walks = [f"{saved['saved']} of {saved.get('of') or '?'} steps ({labels[key]})"
+             for key, saved in sorted(progress.items()) if key in labels and "saved" in saved]
+    return "in flight: " + ", ".join(walks) if walks else ""
+
+
+class _CaseProgress:
+    """Cases done, failed and left, with an estimate of the time left, and the steps the walks in flight have
+    saved; each failure printed as it happens."""
+
+    def __init__(self, console: Console, in_flight: _StepsInFlight) -> None:
         self.console = console
+        self.in_flight = in_flight
         self.done = self.failed = self.taken = 0
         self.progress = Progress(
             TextColumn("{task.description}"), BarColumn(),
             TextColumn("{task.fields[done]} done · {task.fields[failed]} failed · {task.fields[left]} left"),
-            TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), console=console, transient=False)
+            TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(), in_flight, console=console,
+            transient=False)
         self.task = None
 
     def __enter__(self) -> _CaseProgress:
@@ -177,6 +211,7 @@ class _CaseProgress:
 
     def advance(self, outcome) -> None:
         self.done += 1
+        self.in_flight.read_at = -math.inf  # the finished walk's steps are no longer in flight
         if outcome.failed:
             self.failed += 1
             self.console.print(Text(f"{outcome.status}: {outcome.case.label}: {outcome.message}", style="yellow"),

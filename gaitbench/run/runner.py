@@ -23,6 +23,7 @@ from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import code_fingerprint, provenance
 from gaitbench.run.store import ResultStore, case_file, checkpoint_file
+from gaitbench.solve.checkpoint import WalkCheckpoint, remove_checkpoint
 
 if TYPE_CHECKING:
     from gaitbench.plugins import PluginRegistry
@@ -83,7 +84,6 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
 
 def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
-    from gaitbench.solve.checkpoint import WalkCheckpoint
     from gaitbench.solve.walk import WalkProblem
 
     registry = _registry(case)
@@ -309,7 +309,7 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                 for outcome in executor.run(_claimed(store, run_id, pending, stored, left)):
                     store.record_case(case_row(outcome, suite.name, run_id), outcome.files)
                     if outcome.case.checkpoint and outcome.status not in RUN_FAILURE_CAUSES:
-                        Path(outcome.case.checkpoint).unlink(missing_ok=True)  # its walk is recorded whole
+                        remove_checkpoint(outcome.case.checkpoint)  # its walk is recorded whole
                     solved += not outcome.failed
                     failed += outcome.failed
                     if on_outcome:

@@ -10,10 +10,14 @@ The steps are kept as they are in memory (their solver results, verifications an
 interpolants), pickled with cloudpickle because the interpolants are closures. A checkpoint is resumed only by the
 same case under the same code (the runner's :func:`gaitbench.run.provenance.code_fingerprint`); any other is
 discarded, so a walk never mixes steps solved by different code.
+
+Beside each checkpoint, a small JSON file (:func:`progress_file`) says how many of the walk's steps are saved, for a
+progress display that should not unpickle whole walks to show it.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,19 +62,46 @@ class WalkCheckpoint:
                 checkpoint.steps, checkpoint.backed_up = saved["steps"], set(saved["backed_up"])
                 checkpoint.elapsed_s = float(saved["elapsed_s"])
                 return checkpoint
-        checkpoint.path.unlink(missing_ok=True)
+        remove_checkpoint(checkpoint.path)
         return checkpoint
 
-    def save(self, steps: list[Any], backed_up: set[int], elapsed_s: float) -> None:
-        """Keep ``steps`` (every one solved) for a resumed walk; written whole and then renamed, so that a kill
-        during the write leaves the previous checkpoint."""
+    def save(self, steps: list[Any], backed_up: set[int], elapsed_s: float, of: int | None = None) -> None:
+        """Keep ``steps`` (every one solved, of ``of`` the walk has) for a resumed walk."""
         self.steps, self.backed_up, self.elapsed_s = list(steps), set(backed_up), elapsed_s
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        staging = self.path.with_name(f".{self.path.name}.{os.getpid()}")
-        staging.write_bytes(cloudpickle.dumps({"fingerprint": self.fingerprint, "steps": self.steps,
-                                               "backed_up": sorted(self.backed_up), "elapsed_s": elapsed_s}))
-        os.replace(staging, self.path)
+        _write_whole(self.path, cloudpickle.dumps({"fingerprint": self.fingerprint, "steps": self.steps,
+                                                   "backed_up": sorted(self.backed_up), "elapsed_s": elapsed_s}))
+        _write_whole(progress_file(self.path), json.dumps({"saved": len(steps), "of": of,
+                                                           "elapsed_s": elapsed_s}).encode())
 
-    def discard(self) -> None:
-        """Remove the saved steps: the walk's outcome is recorded, or it is to be solved from step 1."""
-        self.path.unlink(missing_ok=True)
+
+def remove_checkpoint(path: str | Path) -> None:
+    """Remove the checkpoint at ``path`` and its progress file: the walk's outcome is recorded, or it is to be
+    solved from step 1."""
+    Path(path).unlink(missing_ok=True)
+    progress_file(Path(path)).unlink(missing_ok=True)
+
+
+def progress_file(path: Path) -> Path:
+    """The JSON file beside the checkpoint at ``path``: ``{"saved": steps saved, "of": the walk's steps,
+    "elapsed_s": its time}``."""
+    return path.with_name(f"{path.name}.json")
+
+
+def saved_progress(directory: str | Path) -> dict[str, dict[str, Any]]:
+    """The progress files of the checkpoints in ``directory``, by checkpoint name (a store's: the case key); a
+    file being replaced or cut short is left out."""
+    found = {}
+    for path in Path(directory).glob("*.json") if Path(directory).is_dir() else ():
+        try:
+            found[path.name.removesuffix(".json")] = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+    return found
+
+
+def _write_whole(path: Path, content: bytes) -> None:
+    """Write and then rename, so that a kill during the write leaves the previous file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = path.with_name(f".{path.name}.{os.getpid()}")
+    staging.write_bytes(content)
+    os.replace(staging, path)

@@ -297,7 +297,7 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
         if not outcome.solved:
             break
         if checkpoint is not None:
-            checkpoint.save(walk.steps, backed_up, earlier + time.perf_counter() - started)
+            checkpoint.save(walk.steps, backed_up, earlier + time.perf_counter() - started, of=problem.n_steps)
         states.append(outcome.next_state)
         index += 1
     walk.wall_time_s = earlier + time.perf_counter() - started
