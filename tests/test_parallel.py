@@ -1,5 +1,5 @@
 """The one worker pool: each task runs with its worker's state, a task past its time limit costs only its worker,
-and forked workers die with their parent."""
+and busy workers die with their parent."""
 
 from __future__ import annotations
 
@@ -41,59 +41,31 @@ def test_a_task_past_its_time_limit_loses_its_worker_and_the_pool_goes_on() -> N
         assert pool.schedule(_sleep, 0.0).result() == 0.0
 
 
-FORKING_PARENT = """
-import os, time
-from gaitbench.solve.parallel import WorkerPool
-
-def hang(item, state):
-    os.write(1, f"{os.getpid()}\\n".encode())  # one write: two workers' lines must not interleave
-    time.sleep(3600)
-
-pool = WorkerPool(2, state=lambda: None, start="fork")
-futures = [pool.schedule(hang, item) for item in range(2)]
-time.sleep(3600)
-"""
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal: Linux only")
-def test_busy_forked_workers_die_with_their_parent() -> None:
-    """A case stopped at its time limit must not leave its sectional workers behind, still solving (an idle worker
-    would see its channel close and exit anyway)."""
-    parent = subprocess.Popen([sys.executable, "-c", FORKING_PARENT], stdout=subprocess.PIPE, text=True,
-                              env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)})
-    try:
-        workers = [psutil.Process(int(parent.stdout.readline())) for _ in range(2)]
-    finally:
-        parent.kill()
-        parent.wait()
-    _, alive = psutil.wait_procs(workers, timeout=10)
-    for worker in alive:
-        worker.kill()
-    assert not alive
-
-
-
 def _report_and_hang(item: int, state: object) -> None:
     os.write(1, f"{os.getpid()}\n".encode())  # one write: two workers' lines must not interleave
     time.sleep(3600)
 
 
-SPAWNING_PARENT = """
+PARENT = """
 import time
 from test_parallel import _report_and_hang
 from gaitbench.solve.parallel import WorkerPool
 
-pool = WorkerPool(2, state=list, start="spawn", die_with_parent=True)  # as the local executor starts its cases
+pool = WorkerPool(2, state=list, {options})
 futures = [pool.schedule(_report_and_hang, item) for item in range(2)]
 time.sleep(3600)
 """
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal: Linux only")
-def test_busy_spawned_case_workers_die_with_a_killed_run() -> None:
-    """A run killed from outside must not leave its case workers solving on: nothing would record their walks."""
-    parent = subprocess.Popen([sys.executable, "-c", SPAWNING_PARENT], stdout=subprocess.PIPE, text=True,
-                              env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)})
+@pytest.mark.parametrize("options", ['start="fork"', 'start="spawn", die_with_parent=True'],
+                         ids=["forked sections", "spawned case workers"])
+def test_busy_workers_die_with_their_parent(options: str) -> None:
+    """Forked (D&C's sections): a case stopped at its time limit must not leave its sectional workers behind, still
+    solving (an idle worker would see its channel close and exit anyway). Spawned with ``die_with_parent`` (the
+    local executor's case workers): a run killed from outside must not leave its cases solving on, unrecorded."""
+    parent = subprocess.Popen([sys.executable, "-c", PARENT.format(options=options)], stdout=subprocess.PIPE,
+                              text=True, env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)})
     try:
         workers = [psutil.Process(int(parent.stdout.readline())) for _ in range(2)]
     finally:
