@@ -66,10 +66,10 @@ class WalkCheckpoint:
         return checkpoint
 
     def save(self, steps: list[Any], backed_up: set[int], elapsed_s: float, of: int | None = None) -> None:
-        """Keep ``steps`` (every one solved, of ``of`` the walk has) for a resumed walk."""
-        self.steps, self.backed_up, self.elapsed_s = list(steps), set(backed_up), elapsed_s
-        _write_whole(self.path, cloudpickle.dumps({"fingerprint": self.fingerprint, "steps": self.steps,
-                                                   "backed_up": sorted(self.backed_up), "elapsed_s": elapsed_s}))
+        """Keep ``steps`` (every one solved, of ``of`` the walk has) on disk for a resumed walk; the attributes stay
+        what was opened."""
+        _write_whole(self.path, cloudpickle.dumps({"fingerprint": self.fingerprint, "steps": list(steps),
+                                                   "backed_up": sorted(backed_up), "elapsed_s": elapsed_s}))
         _write_whole(progress_file(self.path), json.dumps({"saved": len(steps), "of": of,
                                                            "elapsed_s": elapsed_s}).encode())
 
