@@ -8,13 +8,17 @@ walk's steps are each verified; a Decrease & Conquer walk's figure is its polish
 leaves its walk complete but unverified), the N of those that stopped with the cause, step and status recorded by
 the store, the solve retries the walks needed (docs/solvers.md, "Retries") and the steps solved
 again after a dead end (back-ups, docs/deviations.md "Dead ends"). Then each method's lowest ACOT over N beside
-the thesis's published minimum (the report's ``published_acot`` table, over the complete walks only). Every figure
-is read from the store; the table names the commits the cases ran at.
+the thesis's published minimum (the report's ``published_acot`` table, over the complete walks only). Then the
+costly steps: every verified step COT above :data:`COSTLY_STEP_COT` by experiment, method and step, and, for
+Decrease & Conquer, how often its complete Second Phase solution (candidate k0 = 0, verified) lies below the polished
+step it reported. Every figure is read from the store (the walk files for the last two); the table names the commits
+the cases ran at.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -68,6 +72,51 @@ def minima_table(frame: pd.DataFrame) -> pd.DataFrame:
     })
 
 
+COSTLY_STEP_COT = 3.0
+"""A step COT above this is costly: several times a typical step's (0.03–0.9 on these terrains)."""
+
+
+def step_cots(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
+    """One row per solved step of every complete walk: its verified COT (a D&C step's polished one) and, for D&C,
+    the verified COT of its complete Second Phase solution."""
+    rows = []
+    for case in prepare(frame).itertuples():
+        if not isinstance(case.walk_path, str) or case.stop_cause != "complete":
+            continue
+        walk = json.loads((store / case.walk_path).read_text())
+        for step in walk["steps"]:
+            details = step.get("details") or {}
+            decrease_and_conquer = "polished" in details
+            cot = (details["polished"].get("cot") if decrease_and_conquer else step.get("cot"))
+            complete = (details.get("complete") or {}).get("cot") if decrease_and_conquer else None
+            rows.append({"experiment": case.experiment, "method": case.method, "N": case.N, "step": step["index"],
+                         "cot": cot, "complete_cot": complete})
+    return pd.DataFrame(rows)
+
+
+def costly_steps_table(steps: pd.DataFrame) -> pd.DataFrame:
+    """Per experiment, method and step: the walks whose step COT is above :data:`COSTLY_STEP_COT`, with their N."""
+    costly = steps[steps["cot"] > COSTLY_STEP_COT]
+    rows = [{"experiment": experiment, "method": method, "step": int(step), "walks": len(group),
+             "N": ", ".join(str(n) for n in sorted(group["N"])),
+             "COT": f"{group['cot'].min():.2f}–{group['cot'].max():.2f}"}
+            for (experiment, method, step), group in costly.groupby(["experiment", "method", "step"], sort=True)]
+    return pd.DataFrame(rows, columns=["experiment", "method", "step", "walks", "N", "COT"])
+
+
+def complete_candidate_summary(steps: pd.DataFrame) -> str:
+    """How often D&C's complete Second Phase solution verifies below the polished step it reports."""
+    dc = steps.dropna(subset=["complete_cot", "cot"])
+    if dc.empty:
+        return ""
+    below = dc[dc["complete_cot"] < dc["cot"]]
+    costly = dc[dc["cot"] > COSTLY_STEP_COT]
+    costly_below = int((costly["complete_cot"] < costly["cot"]).sum())
+    return (f"D&C's complete Second Phase solution (candidate k0 = 0, verified) lies below the polished step it "
+            f"reports in {len(below)} of its {len(dc)} steps, and in {costly_below} of the {len(costly)} polished "
+            f"steps above {COSTLY_STEP_COT:g}.")
+
+
 def markdown_table(table: pd.DataFrame) -> str:
     lines = ["| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
     lines += ["| " + " | ".join(str(value) for value in row) + " |" for row in table.itertuples(index=False)]
@@ -100,6 +149,11 @@ def render(store: Path) -> str:
         markdown_table(minima_table(frame)),
         "",
     ]
+    steps = step_cots(frame, store)
+    if not steps.empty:
+        lines += [f"Costly steps: verified step COTs above {COSTLY_STEP_COT:g} in complete walks (a D&C step's is its "
+                  "polished one).", "", markdown_table(costly_steps_table(steps)), "",
+                  complete_candidate_summary(steps), ""]
     return "\n".join(lines)
 
 

@@ -154,3 +154,30 @@ def test_the_scaling_model_schedules_as_the_runner_hands_out_cases():
     two, eight = model.scaling(cases, (2, 8))
     assert (two.makespan_s, two.bound_s) == (10.0, 9.0)
     assert (eight.makespan_s, eight.bound_s, eight.efficiency) == (5.0, 5.0, 1.0)  # the longest case bounds it
+
+
+def _completion_module():
+    spec = importlib.util.spec_from_file_location("completion", BENCHMARKS / "completion.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_costly_steps_and_the_complete_candidate_are_counted_from_the_step_cots():
+    import pandas as pd
+
+    completion = _completion_module()
+    steps = pd.DataFrame([
+        {"experiment": "stairs", "method": "OP-DC", "N": 190, "step": 8, "cot": 5.7, "complete_cot": None},
+        {"experiment": "stairs", "method": "OP-DC", "N": 150, "step": 8, "cot": 3.2, "complete_cot": None},
+        {"experiment": "stairs", "method": "OP-DC", "N": 150, "step": 7, "cot": 0.03, "complete_cot": None},
+        {"experiment": "upward-slope", "method": "D&C-DM", "N": 140, "step": 2, "cot": 10.5, "complete_cot": 0.67},
+        {"experiment": "upward-slope", "method": "D&C-DM", "N": 140, "step": 3, "cot": 0.5, "complete_cot": 0.7},
+        {"experiment": "upward-slope", "method": "D&C-DM", "N": 140, "step": 4, "cot": 0.5, "complete_cot": 0.4},
+    ])
+    table = completion.costly_steps_table(steps)
+    assert table.to_dict("records") == [
+        {"experiment": "stairs", "method": "OP-DC", "step": 8, "walks": 2, "N": "150, 190", "COT": "3.20–5.70"},
+        {"experiment": "upward-slope", "method": "D&C-DM", "step": 2, "walks": 1, "N": "140", "COT": "10.50–10.50"}]
+    assert "below the polished step it reports in 2 of its 3 steps, and in 1 of the 1 polished steps above 3" in \
+        completion.complete_candidate_summary(steps)
