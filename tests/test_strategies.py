@@ -435,7 +435,7 @@ def test_look_ahead_and_back_up_walk_past_the_greedy_dead_end():
     stairs = REGISTRY.create("experiment", "stairs")
     ipopt = REGISTRY.create("solver", "ipopt", mu_init=0.1)
     problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), ipopt, 20)
-    greedy = REGISTRY.create("strategy", "one-phase", back_up=False).solve(problem)
+    greedy = REGISTRY.create("strategy", "one-phase", back_up=False, rescue=False).solve(problem)
     assert not greedy.complete and greedy.steps[-1].index == 8 and greedy.steps[-1].status == "infeasible"
 
     walk = REGISTRY.create("strategy", "one-phase").solve(problem)
@@ -505,6 +505,61 @@ def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
     assert not walk.steps[-1].solved and walk.steps[-1].details["back_up"]["step"] == 4
     assert seeds == ["seed of step 2", "seed of step 4"]
     assert walk_step_by_step(problem, "test", greedy).steps[-1].index == 3  # without back-up: the first dead end
+
+
+def test_a_step_that_no_rung_and_no_back_up_solves_is_rescued_from_the_same_state():
+    """walk_step_by_step's rescue on made-up steps: it gets the failed step after its back-up has failed, from the
+    state the step started at, and a rescued step walks on; a time limit is never rescued."""
+    from gaitbench.solve.walk import StepOutcome, walk_step_by_step
+
+    experiment = _short_slope(4)
+    problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)
+    calls = []
+
+    def outcome(index, state, solved, status="infeasible"):
+        return StepOutcome(index, experiment.stance_leg(index), "converged" if solved else status, "no",
+                           trajectory=SimpleNamespace(seed=lambda: None) if solved else None,
+                           verification=SimpleNamespace(cot=0.1, resim_error=0.0) if solved else None,
+                           next_state=state + np.array([1.0, 0, 0, 0]) if solved else None)
+
+    def greedy(problem, index, state):
+        return outcome(index, state, solved=index != 3)
+
+    def back_up(problem, index, state, replaced):
+        calls.append(("back-up", index))
+        return outcome(index, state, solved=False)
+
+    def rescue(problem, index, state, failed):
+        calls.append(("rescue", index, float(state[0]), failed.details["back_up"]["step"]))
+        return outcome(index, state, solved=True)
+
+    walk = walk_step_by_step(problem, "test", greedy, back_up=back_up, rescue=rescue)
+    assert walk.complete and [step.index for step in walk.steps] == [1, 2, 3, 4]
+    started = problem.start_state()[0] + 2.0  # step 3 starts where steps 1 and 2 left it
+    assert calls == [("back-up", 2), ("rescue", 3, pytest.approx(started), 2)]
+    assert walk_step_by_step(problem, "test", greedy, back_up=back_up).steps[-1].index == 3  # without: it stops
+
+    def out_of_time(problem, index, state):
+        return outcome(index, state, solved=index != 3, status="time_limit")
+
+    calls.clear()
+    assert not walk_step_by_step(problem, "test", out_of_time, rescue=rescue).complete and calls == []
+
+
+def test_the_coarse_grid_rescue_walks_past_the_greedy_dead_end():
+    """Stairs, DMOC, N = 20, the greedy walk of the test above without a back-up: step 8, which no rung solves, is
+    solved on a coarser grid from the same state (15 nodes), and the 20-node step started from that solution
+    converges; the walk goes on to step 11. The steps before are the greedy walk's."""
+    stairs = REGISTRY.create("experiment", "stairs")
+    ipopt = REGISTRY.create("solver", "ipopt", mu_init=0.1)
+    problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), ipopt, 20)
+    walk = REGISTRY.create("strategy", "one-phase", back_up=False).solve(problem)
+    assert walk.complete, walk.failure
+    rescued = [step for step in walk.steps if "rescued_from" in step.details]
+    assert [step.index for step in rescued] == [8]
+    assert rescued[0].details["rescued_from"]["status"] == "infeasible"
+    assert rescued[0].details["retries"][-1]["remedy"].startswith("coarse-seed-")
+    assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
 
 
 def test_look_ahead_must_be_a_positive_whole_number_of_second_phase_steps():

@@ -235,10 +235,15 @@ StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
 BackUp = Callable[[WalkProblem, int, np.ndarray, "StepOutcome"], "StepOutcome"]
 """Solves step ``index`` again from its state, looking further ahead, given the outcome it is to replace."""
 
+Rescue = Callable[[WalkProblem, int, np.ndarray, "StepOutcome"], "StepOutcome"]
+"""Tries once more a step ``index`` that neither the retry ladder nor the back-up solved, from the same state, given
+its failed outcome; returns the step solved, or that failure with the rescue's attempts added to its details."""
+
 
 def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolver,
                       on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
-                      back_up: BackUp | None = None, resumable: bool = True) -> WalkResult:
+                      back_up: BackUp | None = None, resumable: bool = True,
+                      rescue: Rescue | None = None) -> WalkResult:
     """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
 
     A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
@@ -246,7 +251,9 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
     the previous step walked into: that step is solved again by ``back_up`` (which looks further ahead) from its
     own initial state, started from its own trajectory (feasible for it, and nearer one that leaves the next step
     a way on than a blended guess is), and the walk goes on from the new one. Each step is backed up at most once;
-    the step that was replaced is recorded in the new one's ``details["backed_up_from"]``.
+    the step that was replaced is recorded in the new one's ``details["backed_up_from"]``. With ``rescue``, a step
+    that still fails (after the back-up, or where there is none) is handed to ``rescue`` before the walk stops there.
+    A walk that completes without ``back_up`` and ``rescue`` is the same walk with them.
 
     With the problem's ``checkpoint``, each solved step is saved as the walk goes, and a walk that an earlier run
     left unfinished goes on after the steps it saved. A strategy whose steps depend on more than the state the step
@@ -291,6 +298,9 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
                 continue
             outcome.details = {**outcome.details, "back_up": {"step": index - 1, "message": previous.message,
                                                               **previous.summary()}}
+        if (not outcome.solved and check.ok and rescue is not None and not problem.out_of_time
+                and outcome.status != SolverStatus.TIME_LIMIT.value):
+            outcome = rescue(problem, index, states[index - 1], outcome)
         walk.steps.append(outcome)
         if on_step:
             on_step(outcome)
