@@ -173,11 +173,14 @@ def test_a_step_that_fails_every_rung_names_them_and_the_walk_stops_there():
     walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), FailingFirst(remedies=False), 10, steps=2))
     assert len(walk.steps) == 1 and not walk.complete
     step = walk.steps[0]
-    # The First Phase fails with the same solver, so the first-phase seed cannot be tried further.
-    assert [entry["remedy"] for entry in step.details["retries"]] == ["first-phase-seed"]
-    assert step.details["retries"][0]["failed_in"] == "first phase"
+    # The First Phase fails with the same solver, so the first-phase seed cannot be tried further; then the
+    # coarse-grid rescue solves the step at 8 and 5 nodes, and fails there too.
+    assert [entry["remedy"] for entry in step.details["retries"]] == ["first-phase-seed", "coarse-seed-8",
+                                                                      "coarse-seed-5"]
+    assert [entry["failed_in"] for entry in step.details["retries"]] == ["first phase", "8-node step", "5-node step"]
     assert step.message == ("infeasible: infeasible (scripted) "
-                            "(retried: first-phase-seed (its first phase: infeasible))")
+                            "(retried: first-phase-seed (its first phase: infeasible)) "
+                            "(coarse grids: coarse-seed-8 infeasible, coarse-seed-5 infeasible)")
 
 
 def test_a_first_phase_that_fails_ends_the_ladder_instead_of_being_recorded_once_per_remedy():
