@@ -547,9 +547,9 @@ def test_a_step_that_no_rung_and_no_back_up_solves_is_rescued_from_the_same_stat
 
 
 def test_the_coarse_grid_rescue_walks_past_the_greedy_dead_end():
-    """Stairs, DMOC, N = 20, the greedy walk of the test above without a back-up: step 8, which no rung solves, is
-    solved on a coarser grid from the same state (15 nodes), and the 20-node step started from that solution
-    converges; the walk goes on to step 11. The steps before are the greedy walk's."""
+    """Stairs, DMOC, N = 20, the greedy walk of ``test_look_ahead_and_back_up_walk_past_the_greedy_dead_end``
+    without a back-up: step 8, which no rung solves, is solved on a coarser grid from the same state, and the 20-node
+    step started from that solution converges; the walk goes on to step 11."""
     stairs = REGISTRY.create("experiment", "stairs")
     ipopt = REGISTRY.create("solver", "ipopt", mu_init=0.1)
     problem = WalkProblem(stairs, REGISTRY.create("transcription", "dmoc"), ipopt, 20)

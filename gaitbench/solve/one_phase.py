@@ -30,7 +30,7 @@ COARSE_GRIDS = (3 / 4, 1 / 2)
 the one `thesis-all` One Phase walk whose step no rung and no back-up solved (stairs, OP-DM, N = 200, step 8; IPOPT
 ends in restoration from the blended and the First-Phase seeds): from the same state the step solves at 150, 100
 and 67 nodes, and seeded from the 150- or the 100-node solution the 200-node step converges (from 50 nodes it does
-not; docs/deviations.md, "Dead ends")."""
+not; docs/solvers.md, "Retries")."""
 
 MIN_COARSE_NODES = 5
 """No coarser grid than this: a step of fewer nodes says too little about the trajectory to seed it."""
@@ -93,7 +93,7 @@ def coarse_grid_rescue(problem: WalkProblem, index: int, state: np.ndarray, fail
     records the failure it replaces in ``details["rescued_from"]``. When no grid solves it, ``failed`` is returned
     with those attempts added.
     """
-    attempts = []
+    attempts, grids = [], []  # every rung tried; each grid's own result, for the message
     for fraction in COARSE_GRIDS:
         n_nodes = round(fraction * problem.n_nodes)
         if not MIN_COARSE_NODES <= n_nodes < problem.n_nodes or problem.out_of_time:
@@ -105,10 +105,12 @@ def coarse_grid_rescue(problem: WalkProblem, index: int, state: np.ndarray, fail
         remedy = f"coarse-seed-{n_nodes}"
         if not coarse.solved:
             attempts.append({"remedy": remedy, **coarse.summary(), "failed_in": f"{n_nodes}-node step"})
+            grids.append(f"{remedy} {coarse.status}")
             continue
         outcome = solve_with_retries(problem, index, built, problem.step_data(index, state),
                                      seed=coarse.trajectory.seed(), phase=phase, reseed=False)
         attempts.append({"remedy": remedy, **outcome.summary()})
+        grids.append(f"{remedy} {outcome.status}")
         attempts += [{**rung, "remedy": f"{remedy}+{rung['remedy']}"} for rung in outcome.details.get("retries", [])]
         if outcome.solved:
             outcome.details = {**outcome.details, "retries": failed.details.get("retries", []) + attempts,
@@ -118,7 +120,6 @@ def coarse_grid_rescue(problem: WalkProblem, index: int, state: np.ndarray, fail
             return outcome
     if attempts:
         failed.details = {**failed.details, "retries": failed.details.get("retries", []) + attempts}
-        failed.message += " (coarse grids: " + ", ".join(
-            f"{attempt['remedy']} {attempt['status']}" for attempt in attempts if "+" not in attempt["remedy"]) + ")"
+        failed.message += f" (coarse grids: {', '.join(grids)})"
     return failed
 
