@@ -172,6 +172,46 @@ def test_a_polish_called_infeasible_climbs_the_solver_s_remedies_from_its_own_se
     assert walk.strategy_details["verified_acot"] == pytest.approx(details["polished"]["cot"])
 
 
+class FirstNlpCalledInfeasible:
+    """IPOPT, except that the first NLP it is given (decrease-and-conquer's N-node First Phase) is called infeasible
+    on its first two solves (the first attempt and the remedy), as IPOPT called stairs HS N = 130 step 5's."""
+
+    name = "first-nlp-called-infeasible"
+
+    def __init__(self) -> None:
+        self.ipopt = REGISTRY.create("solver", "ipopt")
+        self.first_nlp = None
+        self.refused = 0
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.first_nlp = self.first_nlp or nlp
+        if nlp is self.first_nlp and self.refused < 2:
+            self.refused += 1
+            return SolverResult(SolverStatus.INFEASIBLE, "infeasible (scripted)", np.asarray(initial_guess), np.nan,
+                                np.nan, 3, 0.0, 0.0)
+        return self.ipopt.solve(nlp, parameters, initial_guess)
+
+    def remedies(self):
+        return [("use-ipopt", self)]
+
+
+@pytest.mark.parametrize("rescue", [True, False])
+def test_a_first_phase_that_every_rung_leaves_unsolved_is_rescued_from_a_coarser_grid(forward, rescue):
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"), FirstNlpCalledInfeasible(), 8,
+                          steps=1)
+    step = DecreaseAndConquer(rescue=rescue).solve(problem).steps[0]
+    if not rescue:
+        assert not step.solved and step.details["failed_in"] == "first phase"
+        assert step.message.startswith("First Phase: infeasible")
+        return
+    assert step.solved and step.polished.solved, step.message
+    assert step.details["rescued_from"]["failed_in"] == "first phase"
+    assert step.details["rescued_from"]["status"] == "infeasible"
+    # the N-node First Phase's remedy, then the 6-node grid that seeded it (6 = ¾ · 8; ½ · 8 = 4 is below the least)
+    assert [retry["remedy"] for retry in step.details["retries"]] == ["use-ipopt", "coarse-seed-6"]
+    assert step.details["first_phase"]["status"] == "converged"
+
+
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
 def test_decrease_and_conquer_walks_and_records_everything(forward, transcription, tmp_path):
     n = 8

@@ -7,8 +7,8 @@ decrease-and-conquer is compared against: the full 4-DOF problem with push-off, 
 default, is the thesis's greedy walk. With ``back_up`` (the default), a step the solver cannot solve is first taken
 for a dead end that the step before walked into: that step is solved again looking one step further ahead (H + 1)
 and the walk goes on from there. With ``rescue`` (the default), a step that still fails is solved on coarser grids
-from the same state (:func:`coarse_grid_rescue`) before the walk stops. A walk that completes without them is the
-same walk with them.
+from the same state (:func:`~gaitbench.solve.rescue.coarse_grid_rescue`) before the walk stops. A walk that completes
+without them is the same walk with them.
 
 It lives in the core, registered by ``plugins/strategies/one_phase.py``, because other strategies build on it
 (whole-walk's ``guess="one-phase"``) and plugins use each other only through the core.
@@ -17,23 +17,12 @@ It lives in the core, registered by ``plugins/strategies/one_phase.py``, because
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 
 import numpy as np
 
-from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.solve.rescue import coarse_grid_rescue
 from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, solve_with_retries, walk_step_by_step
 from gaitbench.solve.walk_chain import LookAhead
-
-COARSE_GRIDS = (3 / 4, 1 / 2)
-"""The grids, as fractions of N, that :func:`coarse_grid_rescue` solves a stopped step on, finest first. Measured on
-the one `thesis-all` One Phase walk whose step no rung and no back-up solved (stairs, OP-DM, N = 200, step 8; IPOPT
-ends in restoration from the blended and the First-Phase seeds): from the same state the step solves at 150, 100
-and 67 nodes, and seeded from the 150- or the 100-node solution the 200-node step converges (from 50 nodes it does
-not; docs/solvers.md, "Retries")."""
-
-MIN_COARSE_NODES = 5
-"""No coarser grid than this: a step of fewer nodes says too little about the trajectory to seed it."""
 
 
 class OnePhase:
@@ -75,51 +64,9 @@ class OnePhase:
             return backing.solve_step(problem, index, state, replaced.verified.trajectory.seed())
 
         def rescue(problem: WalkProblem, index: int, state: np.ndarray, failed: StepOutcome) -> StepOutcome:
-            return coarse_grid_rescue(problem, index, state, failed, built, self.phase)
+            return coarse_grid_rescue(problem, index, state, failed, built)
 
         # a window starts from the previous window's later steps, which a checkpoint does not keep
         return walk_step_by_step(problem, self.name, solve_step, on_step, phase=self.phase,
                                  back_up=back_up if self.back_up else None, resumable=self.look_ahead == 1,
                                  rescue=rescue if self.rescue and self.look_ahead == 1 else None)
-
-
-def coarse_grid_rescue(problem: WalkProblem, index: int, state: np.ndarray, failed: StepOutcome,
-                       built: TranscribedStep, phase: str = "second") -> StepOutcome:
-    """Step ``index`` from ``state`` solved on each of the :data:`COARSE_GRIDS` (with the retry ladder) and the
-    N-node step started from that solution, until one solves: a rung after every other, because the coarse step's
-    optimum, not the walk's own seeds, then picks the N-node step's.
-
-    Each grid tried is appended to the step's ``details["retries"]`` as ``coarse-seed-<nodes>``; a rescued step
-    records the failure it replaces in ``details["rescued_from"]``. When no grid solves it, ``failed`` is returned
-    with those attempts added.
-    """
-    attempts, grids = [], []  # every rung tried; each grid's own result, for the message
-    for fraction in COARSE_GRIDS:
-        n_nodes = round(fraction * problem.n_nodes)
-        if not MIN_COARSE_NODES <= n_nodes < problem.n_nodes or problem.out_of_time:
-            continue
-        coarse_problem = replace(problem, n_nodes=n_nodes, checkpoint=None)
-        coarse_built = problem.transcription.build(coarse_problem.structure(phase, walked=True))
-        coarse = solve_with_retries(coarse_problem, index, coarse_built, coarse_problem.step_data(index, state),
-                                    phase=phase)
-        remedy = f"coarse-seed-{n_nodes}"
-        if not coarse.solved:
-            attempts.append({"remedy": remedy, **coarse.summary(), "failed_in": f"{n_nodes}-node step"})
-            grids.append(f"{remedy} {coarse.status}")
-            continue
-        outcome = solve_with_retries(problem, index, built, problem.step_data(index, state),
-                                     seed=coarse.trajectory.seed(), phase=phase, reseed=False)
-        attempts.append({"remedy": remedy, **outcome.summary()})
-        grids.append(f"{remedy} {outcome.status}")
-        attempts += [{**rung, "remedy": f"{remedy}+{rung['remedy']}"} for rung in outcome.details.get("retries", [])]
-        if outcome.solved:
-            outcome.details = {**outcome.details, "retries": failed.details.get("retries", []) + attempts,
-                               "rescued_from": {"message": failed.message, **failed.summary(),
-                                                **({"back_up": failed.details["back_up"]}
-                                                   if "back_up" in failed.details else {})}}
-            return outcome
-    if attempts:
-        failed.details = {**failed.details, "retries": failed.details.get("retries", []) + attempts}
-        failed.message += f" (coarse grids: {', '.join(grids)})"
-    return failed
-

@@ -17,7 +17,10 @@ A patchwork's end state is not where the robot would be, and it can leave the ne
 HS, N = 60: from step 3's chosen trajectory step 4's First Phase reaches IPOPT's iteration limit with both μ
 strategies; from the polished trajectory it converges in 489 iterations). With ``back_up`` (the default) such a
 dead end makes the walk go on from the polished trajectory of the step before instead, as a walk of the robot
-would; a walk that never meets one is the thesis's walk unchanged.
+would; a walk that never meets one is the thesis's walk unchanged. With ``rescue`` (the default), a First Phase that
+still fails is solved on coarser grids from the same state, and the N-node First Phase started from that solution
+(:func:`~gaitbench.solve.rescue.coarse_grid_rescue`; stairs, HS, N = 130, step 5: infeasible after every rung, from
+98 nodes it converges); again a walk that completes without it is the same walk with it.
 
 The synthesized (and completed) trajectories are node-wise patchworks of different NLP solutions, so in general
 they are not motions of the robot. Every chosen trajectory is therefore verified like any other step — the
@@ -41,6 +44,7 @@ from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.parallel import WorkerPool
+from gaitbench.solve.rescue import coarse_grid_rescue
 from gaitbench.solve.solver import SolverResult, prepare
 from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import verify_step
@@ -53,6 +57,9 @@ from gaitbench.solve.walk import (
     walk_step_by_step,
 )
 
+FIRST_PHASE = "first phase"
+"""``details["failed_in"]`` of a step whose First Phase failed: what the rescue acts on."""
+
 DYNAMICS_TOLERANCE = 1e-6
 """A chosen trajectory whose dynamics residual exceeds this is reported as failing verification."""
 
@@ -63,12 +70,13 @@ class DecreaseAndConquer:
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
     to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
     (processes for the sectional solves of a step; see :class:`SectionalSolves`), ``back_up`` (True: a step that
-    cannot be solved from the chosen trajectory's end is solved from the polished one's; needs ``polish``)."""
+    cannot be solved from the chosen trajectory's end is solved from the polished one's; needs ``polish``),
+    ``rescue`` (True: a First Phase that every rung and the back-up leave unsolved is seeded from coarser grids)."""
 
     name = "decrease-and-conquer"
 
     def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
-                 workers: int = 1, back_up: bool = True):
+                 workers: int = 1, back_up: bool = True, rescue: bool = True):
         if sectional_guess not in ("first-phase", "complete"):
             raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
         if int(workers) < 1:
@@ -80,6 +88,7 @@ class DecreaseAndConquer:
         self.max_checks = int(max_checks)
         self.workers = int(workers)
         self.back_up = bool(back_up) and self.polish
+        self.rescue = bool(rescue)
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
@@ -88,25 +97,38 @@ class DecreaseAndConquer:
         def back_up(problem: WalkProblem, index: int, state: np.ndarray, replaced: StepOutcome) -> StepOutcome:
             return continue_from_polished(problem, replaced)
 
+        def rescue(problem: WalkProblem, index: int, state: np.ndarray, failed: StepOutcome) -> StepOutcome:
+            if failed.details.get("failed_in") != FIRST_PHASE:
+                return failed
+            built = problem.transcription.build(problem.structure("first"))
+            first = coarse_grid_rescue(problem, index, state, failed, built)
+            return self._solve_step(problem, index, state, sections, first) if first.solved else first
+
         with SectionalSolves(problem, self.workers) as sections:
             walk = walk_step_by_step(problem, self.name, solve_step, on_step,
-                                     back_up=back_up if self.back_up else None)
+                                     back_up=back_up if self.back_up else None,
+                                     rescue=rescue if self.rescue else None)
         walk.strategy_details = walk_summary(walk)
         return walk
 
-    def _solve_step(self, problem: WalkProblem, index: int, state: np.ndarray,
-                    sections: SectionalSolves) -> StepOutcome:
+    def _solve_step(self, problem: WalkProblem, index: int, state: np.ndarray, sections: SectionalSolves,
+                    first: StepOutcome | None = None) -> StepOutcome:
+        """Step ``index`` from ``state``; ``first``: its First Phase, already solved (by the rescue)."""
         transcription, n = problem.transcription, problem.n_nodes
         data = problem.step_data(index, state)
-        first = solve_with_retries(problem, index, transcription.build(problem.structure("first")), data,
-                                   phase="first")
+        if first is None:
+            first = solve_with_retries(problem, index, transcription.build(problem.structure("first")), data,
+                                       phase="first")
         if not first.solved:
             first.message = f"First Phase: {first.message}"
+            first.details = {**first.details, "failed_in": FIRST_PHASE}
             return first
         complete_built = transcription.build(problem.structure("second"))
         complete = solve_with_retries(problem, index, complete_built, data, seed=first.trajectory.seed())
         details = {"first_phase": first.summary(), "complete": complete.summary(),
                    "retries": first.details.get("retries", []) + complete.details.get("retries", [])}
+        if "rescued_from" in first.details:
+            details["rescued_from"] = {**first.details["rescued_from"], "failed_in": FIRST_PHASE}
         if not complete.solved:
             complete.message = f"complete Second Phase: {complete.message}"
             complete.details = details
