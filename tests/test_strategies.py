@@ -212,6 +212,34 @@ def test_a_first_phase_that_every_rung_leaves_unsolved_is_rescued_from_a_coarser
     assert step.details["first_phase"]["status"] == "converged"
 
 
+class PolishNeverSolves(PolishCalledInfeasibleOnce):
+    """IPOPT, except that every solve of an NLP after its first (a one-step walk's polish and its remedy) is called
+    infeasible, as stairs HS N = 120 step 5's polish ended at IPOPT's iteration limit with every remedy."""
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.solves[id(nlp)] = self.solves.get(id(nlp), 0) + 1
+        if self.solves[id(nlp)] > 1:
+            return SolverResult(SolverStatus.INFEASIBLE, "infeasible (scripted)", np.asarray(initial_guess), np.nan,
+                                np.nan, 3, 0.0, 0.0)
+        return self.ipopt.solve(nlp, parameters, initial_guess)
+
+    def remedies(self):
+        return [("retry", self)]
+
+
+def test_a_polish_that_fails_leaves_the_complete_second_phase_as_the_verified_step(forward):
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"), PolishNeverSolves(), 8,
+                          steps=1)
+    walk = DecreaseAndConquer().solve(problem)
+    step = walk.steps[0]
+    details = step.details
+    assert details["polished"]["stand_in"] == "complete"
+    assert details["polished"]["polish"]["status"] == "infeasible"
+    assert step.verified is step.polished and step.polished.solved
+    assert details["polished"]["cot"] == details["complete"]["cot"] == step.polished.verification.cot
+    assert walk.strategy_details["verified_acot"] == pytest.approx(details["complete"]["cot"])
+
+
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
 def test_decrease_and_conquer_walks_and_records_everything(forward, transcription, tmp_path):
     n = 8

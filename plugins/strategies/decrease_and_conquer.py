@@ -26,7 +26,9 @@ The synthesized (and completed) trajectories are node-wise patchworks of differe
 they are not motions of the robot. Every chosen trajectory is therefore verified like any other step — the
 transcription's dynamics residual at its nodes and its re-simulation under its own torques — and, with ``polish``,
 the complete 4-DOF problem is re-solved from it: the polished COT is the figure of a trajectory that satisfies the
-dynamics, reported beside the claimed one.
+dynamics, reported beside the claimed one. Where the polish fails after its remedies (stairs, HS, N = 120, step 5:
+IPOPT's iteration limit), the complete Second Phase solution stands in for it (``details["polished"]["stand_in"]``):
+the same problem from the same state, solved from the First-Phase seed.
 """
 
 from __future__ import annotations
@@ -180,9 +182,15 @@ class DecreaseAndConquer:
             polished = solve_with_retries(problem, index, complete_built, data, seed=trajectory.seed(), reseed=False)
             polish_retries = [{**retry, "remedy": f"polish:{retry['remedy']}"}
                               for retry in polished.details.get("retries", [])]
+            stand_in = {}
+            if not polished.solved:
+                # the step's verified motion is then the complete problem's other solution, from the First-Phase
+                # seed: a step whose polish fails would otherwise leave its whole walk without a verified ACOT
+                stand_in = {"stand_in": "complete", "polish": {"message": polished.message, **polished.summary()}}
+                polished = complete
             details["polished"] = polished.summary() | (
                 {key: value for key, value in polished.verification.as_dict().items() if key != "cot"}
-                if polished.verification else {})
+                if polished.verification else {}) | stand_in
             details["retries"] = details["retries"] + polish_retries  # counted with the walk's other retries
         message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
                                           f"fails verification: dynamics residual {verification.max_defect:.2e}")
