@@ -134,6 +134,17 @@ def test_a_stopped_walk_is_run_again_only_when_asked(tmp_path: Path) -> None:
         assert store.finished_keys(retry_incomplete=True) == set()
 
 
+def test_a_complete_walk_without_a_verified_acot_is_run_again_only_when_asked(tmp_path: Path) -> None:
+    unverified, verified = walk_case(8), walk_case(10)
+    with ResultStore.create(tmp_path) as store:
+        store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
+        for case, acot in ((unverified, None), (verified, 0.3)):
+            store.record_case(case_row(CaseOutcome(case, "solved", "", 1.0, {"acot": acot}), "s", "r1"),
+                              {"walk.json": b"{}"})
+        assert store.finished_keys(retry_incomplete=True) == {unverified.key, verified.key}
+        assert store.finished_keys(retry_unverified=True) == {verified.key}
+
+
 def test_store_round_trip_and_messages(tmp_path: Path) -> None:
     case = walk_case(8)
     outcome = CaseOutcome(case, "timeout", "stopped", 12.5, provenance={"hostname": "here"})

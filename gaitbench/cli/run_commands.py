@@ -38,12 +38,15 @@ from gaitbench.run.executors import EXECUTORS
 @click.option("--retry-incomplete", is_flag=True,
               help="With --resume, run again the cases whose walks stopped before their last step: after a "
                    "change to gaitbench that may take them further (the new row replaces the old).")
+@click.option("--retry-unverified", is_flag=True,
+              help="With --resume, run again the complete walks that have no verified ACOT (a decrease-and-conquer "
+                   "step whose polish failed): after a change to gaitbench that may verify them.")
 @click.option("--report/--no-report", "write_report", default=True, show_default=True,
               help="Write the HTML and CSV report (`gaitbench report`) to reports/<store name> at the end.")
 @click.pass_obj
 def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
         methods: tuple[str, ...], resume: bool, retry_failed: bool, retry_incomplete: bool,
-        write_report: bool) -> None:
+        retry_unverified: bool, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
     Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle.
@@ -85,6 +88,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
+                                retry_unverified=retry_unverified,
                                 on_start=progress.start, on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
         except (RunRefused, StoreError, ExecutorError) as error:
             raise click.ClickException(str(error)) from None

@@ -261,7 +261,8 @@ class RunSummary:
 
 
 def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
-              retry_incomplete: bool = False, on_start: Callable[[int, int], None] | None = None,
+              retry_incomplete: bool = False, retry_unverified: bool = False,
+              on_start: Callable[[int, int], None] | None = None,
               on_outcome: Callable[[CaseOutcome], None] | None = None,
               on_elsewhere: Callable[[Case], None] | None = None) -> RunSummary:
     """Run every case of ``suite`` that the store does not hold yet, recording each as it finishes.
@@ -270,14 +271,15 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
     another run is working on it now: then this run shares that work. Each case is claimed right before the
     executor starts it, so runs sharing a store split the cases between them; a case another live run has claimed
     or finished meanwhile is left to it (``on_elsewhere``). With ``resume``, finished cases are skipped (failed
-    ones re-run with ``retry_failed``, stopped walks with ``retry_incomplete``), and a dead run's claims are taken
-    over. ``on_start(to_run, skipped)`` and
+    ones re-run with ``retry_failed``, stopped walks with ``retry_incomplete``, complete walks without a verified
+    ACOT with ``retry_unverified``), and a dead run's claims are taken over. ``on_start(to_run, skipped)`` and
     ``on_outcome(outcome)`` feed a progress display.
     """
     started = time.perf_counter()
     with ResultStore.create(store_dir) as store:
         stored = store.case_runs()
-        finished = store.finished_keys(retry_failed=retry_failed, retry_incomplete=retry_incomplete)
+        finished = store.finished_keys(retry_failed=retry_failed, retry_incomplete=retry_incomplete,
+                                       retry_unverified=retry_unverified)
         present = [case for case in suite.cases if case.key in finished]
         if present and not resume and not store.live_runs():
             raise RunRefused(

@@ -269,13 +269,15 @@ class ResultStore:
 
     # --- cases ----------------------------------------------------------------------------------------------
 
-    def finished_keys(self, retry_failed: bool = False, retry_incomplete: bool = False) -> set[str]:
-        """Keys of cases that need no new run: all stored ones, less the run's failures with ``retry_failed`` and
-        the walks that stopped with ``retry_incomplete``."""
+    def finished_keys(self, retry_failed: bool = False, retry_incomplete: bool = False,
+                      retry_unverified: bool = False) -> set[str]:
+        """Keys of cases that need no new run: all stored ones, less the run's failures with ``retry_failed``, the
+        walks that stopped with ``retry_incomplete``, and the complete walks without a verified ACOT (a
+        decrease-and-conquer polish that failed) with ``retry_unverified``."""
         again = (RETRYABLE_STATUSES if retry_failed else ()) + (("incomplete",) if retry_incomplete else ())
-        query = "SELECT case_key FROM cases"
-        if again:
-            query += f" WHERE status NOT IN ({', '.join('?' * len(again))})"
+        query = f"SELECT case_key FROM cases WHERE status NOT IN ({', '.join('?' * len(again))})"
+        if retry_unverified:
+            query += " AND NOT (status = 'solved' AND acot IS NULL)"
         return {key for (key,) in self._db.execute(query, again)}
 
     def case_runs(self) -> dict[str, str]:
