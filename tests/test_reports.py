@@ -234,6 +234,20 @@ def test_a_dc_walk_stored_without_its_polished_trajectory_shows_the_patchwork(st
     assert any("does not hold for every step" in note for note in section.gait.notes)
 
 
+def test_a_dc_step_whose_polish_failed_says_which_trajectory_stands_in(store, tmp_path):
+    copy = tmp_path / "stand-in"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        key, walk_path = db.execute("SELECT case_key, walk_path FROM cases WHERE method = 'D&C-DC'").fetchone()
+    walk = json.loads((copy / walk_path).read_text())
+    walk["steps"][0]["details"]["polished"]["stand_in"] = "complete"
+    (copy / walk_path).write_text(json.dumps(walk))
+    (section,) = build_report(copy, gait=key).gaits
+    assert any(note.startswith("Step 1: the polish failed") for note in section.gait.notes)
+    (section,) = build_report(store, gait=key).gaits
+    assert not any("stands in" in note for note in section.gait.notes)
+
+
 def test_tracking_section_from_track_files(store, tmp_path):
     """A synthetic track.json/npz in the format of gaitbench.control.results.TrackingResult.save."""
     copy = tmp_path / "tracked"

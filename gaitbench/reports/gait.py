@@ -119,6 +119,12 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
                      + ". Each polished step starts where the walk's previous step ended, after the patchwork's "
                      "push-off and heel strike (the walk chains the chosen trajectories), so polished steps need not "
                      "join exactly at a heel strike (docs/deviations.md).")
+        stand_ins = [step["index"] for step in walk.steps
+                     if ((step.get("details") or {}).get(POLISHED) or {}).get("stand_in")]
+        if stand_ins:
+            notes.append(f"Step{'s' if len(stand_ins) > 1 else ''} {', '.join(map(str, stand_ins))}: the polish "
+                         "failed, so the step's complete Second Phase solution (the same problem from the same "
+                         "state, solved from the First-Phase seed) stands in as its verified trajectory.")
     elif case["is_dc"]:
         notes.append("Decrease & Conquer: the stored trajectory is the chosen synthesized (node-wise patchwork) "
                      "trajectory whose COT is the claim; it need not satisfy the dynamics (see its max defect). "
