@@ -77,8 +77,9 @@ COSTLY_STEP_COT = 3.0
 
 
 def step_cots(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
-    """One row per solved step of every complete walk: its verified COT (a D&C step's polished one) and, for D&C,
-    the verified COT of its complete Second Phase solution."""
+    """One row per solved step of every complete walk: its verified COT (a D&C step's polished one), for D&C the
+    verified COT of its complete Second Phase solution, and which of the walk's last tries the step took (a back-up
+    onto it, a coarse-grid rescue, a complete solution standing in for a failed polish)."""
     rows = []
     for case in prepare(frame).itertuples():
         if not isinstance(case.walk_path, str) or case.stop_cause != "complete":
@@ -90,7 +91,9 @@ def step_cots(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
             cot = (details["polished"].get("cot") if decrease_and_conquer else step.get("cot"))
             complete = (details.get("complete") or {}).get("cot") if decrease_and_conquer else None
             rows.append({"experiment": case.experiment, "method": case.method, "N": case.N, "step": step["index"],
-                         "cot": cot, "complete_cot": complete})
+                         "cot": cot, "complete_cot": complete, "backed_up": "backed_up_from" in details,
+                         "rescued": "rescued_from" in details,
+                         "stand_in": bool(decrease_and_conquer and details["polished"].get("stand_in"))})
     return pd.DataFrame(rows)
 
 
@@ -115,6 +118,19 @@ def complete_candidate_summary(steps: pd.DataFrame) -> str:
     return (f"D&C's complete Second Phase solution (candidate k0 = 0, verified) lies below the polished step it "
             f"reports in {len(below)} of its {len(dc)} steps, and in {costly_below} of the {len(costly)} polished "
             f"steps above {COSTLY_STEP_COT:g}.")
+
+
+def last_tries_summary(steps: pd.DataFrame) -> str:
+    """How many steps of the complete walks needed each of the walk's last tries, and in how many walks."""
+    parts = []
+    for column, what in (("backed_up", "backed up (solved again after a dead end)"),
+                         ("rescued", "rescued from a coarser grid"),
+                         ("stand_in", "verified by the complete solution standing in for a failed polish")):
+        took = steps[steps[column].astype(bool)]
+        walks = len(took.groupby(["experiment", "method", "N"])) if len(took) else 0
+        parts.append(f"{len(took)} step{'s' if len(took) != 1 else ''} {what} in {walks} "
+                     f"walk{'s' if walks != 1 else ''}")
+    return "Last tries in the complete walks: " + "; ".join(parts) + "."
 
 
 def markdown_table(table: pd.DataFrame) -> str:
@@ -153,7 +169,7 @@ def render(store: Path) -> str:
     if not steps.empty:
         lines += [f"Costly steps: verified step COTs above {COSTLY_STEP_COT:g} in complete walks (a D&C step's is its "
                   "polished one).", "", markdown_table(costly_steps_table(steps)), "",
-                  complete_candidate_summary(steps), ""]
+                  complete_candidate_summary(steps), "", last_tries_summary(steps), ""]
     return "\n".join(lines)
 
 

@@ -181,3 +181,10 @@ def test_costly_steps_and_the_complete_candidate_are_counted_from_the_step_cots(
         {"experiment": "upward-slope", "method": "D&C-DM", "step": 2, "walks": 1, "N": "140", "COT": "10.50–10.50"}]
     assert "below the polished step it reports in 2 of its 3 steps, and in 1 of the 1 polished steps above 3" in \
         completion.complete_candidate_summary(steps)
+    steps["backed_up"] = [True, False, False, False, False, False]
+    steps["rescued"] = [True, True, False, False, False, False]
+    steps["stand_in"] = [False, False, False, False, True, True]
+    assert completion.last_tries_summary(steps) == (
+        "Last tries in the complete walks: 1 step backed up (solved again after a dead end) in 1 walk; 2 steps "
+        "rescued from a coarser grid in 2 walks; 2 steps verified by the complete solution standing in for a failed "
+        "polish in 1 walk.")
