@@ -126,8 +126,8 @@ def last_tries_summary(steps: pd.DataFrame) -> str:
     for column, what in (("backed_up", "backed up (solved again after a dead end)"),
                          ("rescued", "rescued from a coarser grid"),
                          ("stand_in", "verified by the complete solution standing in for a failed polish")):
-        took = steps[steps[column].astype(bool)]
-        walks = len(took.groupby(["experiment", "method", "N"])) if len(took) else 0
+        took = steps[steps[column]]
+        walks = len(took.groupby(["experiment", "method", "N"]))
         parts.append(f"{len(took)} step{'s' if len(took) != 1 else ''} {what} in {walks} "
                      f"walk{'s' if walks != 1 else ''}")
     return "Last tries in the complete walks: " + "; ".join(parts) + "."
