@@ -188,3 +188,41 @@ def test_costly_steps_and_the_complete_candidate_are_counted_from_the_step_cots(
         "Last tries in the complete walks: 1 step backed up (solved again after a dead end) in 1 walk; 2 steps "
         "rescued from a coarser grid in 2 walks; 2 steps verified by the complete solution standing in for a failed "
         "polish in 1 walk.")
+
+
+def test_a_store_snapshot_keeps_finished_cases_and_the_walks_in_flight(tmp_path):
+    from gaitbench.run.case import Case, PluginChoice
+    from gaitbench.run.runner import CaseOutcome, case_row
+    from gaitbench.run.store import ResultStore
+
+    spec = importlib.util.spec_from_file_location("snapshot_store", BENCHMARKS / "snapshot_store.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def case(n_nodes):
+        return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
+                    PluginChoice("decrease-and-conquer"), steps=11, method="D&C-DC")
+
+    finished, in_flight = case(150), case(200)
+    live = tmp_path / "live"
+    with ResultStore.create(live) as store:  # left open: the run is still writing when the snapshot is taken
+        store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
+        store.record_case(case_row(CaseOutcome(finished, "solved", "", 1.0, {"acot": 0.3}), "s", "r1"),
+                          {"walk.json": b"{}"})
+        assert store.claim(in_flight.key, "r1", None) == "claimed"
+        (live / "checkpoints").mkdir()
+        for key in (finished.key, in_flight.key):  # the finished case's is a leftover the runner would remove
+            (live / "checkpoints" / key).write_bytes(b"steps")
+            (live / "checkpoints" / f"{key}.json").write_text("{}")
+        (live / "cases" / "0123456789abcdef").mkdir()  # a case directory no row names
+        committed = tmp_path / "committed"
+        committed.mkdir()
+        (committed / "stale").write_text("an older snapshot")
+        assert module.snapshot(live, committed) == {"cases": 1, "case_dirs": 1, "checkpoints": 1}
+    assert sorted(path.name for path in committed.iterdir()) == ["cases", "checkpoints", "results.sqlite"]
+    assert [path.name for path in (committed / "cases").iterdir()] == [finished.key]
+    checkpoints = sorted(path.name for path in (committed / "checkpoints").iterdir())
+    assert checkpoints == [in_flight.key, f"{in_flight.key}.json"]
+    with ResultStore.create(committed) as copy:  # a resumed run opens it for writing
+        assert copy.finished_keys() == {finished.key}
+        assert copy.claim(in_flight.key, "r2", None) == "claimed"  # the claim stayed with the live store
