@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -173,14 +174,23 @@ def render(store: Path) -> str:
     return "\n".join(lines)
 
 
+def keep_notes(existing: str, rendered: str) -> str:
+    """``rendered`` under the hand-written notes of ``existing``: its title and whatever precedes its rendered
+    count line ("N of M walks complete"), so that a record kept by hand between snapshots survives a re-render."""
+    count = re.compile(r"^\d+ of \d+ walks complete", re.MULTILINE)
+    old, new = count.search(existing), count.search(rendered)
+    return rendered if old is None or new is None else existing[:old.start()] + rendered[new.start():]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("store", type=Path)
-    parser.add_argument("--out", type=Path, help="write the table here (default: print it)")
+    parser.add_argument("--out", type=Path,
+                        help="write the table here, keeping the notes above an existing file's table (default: print)")
     args = parser.parse_args()
     text = render(args.store)
     if args.out:
-        args.out.write_text(text)
+        args.out.write_text(keep_notes(args.out.read_text(), text) if args.out.exists() else text)
     else:
         print(text)
 

@@ -226,3 +226,12 @@ def test_a_store_snapshot_keeps_finished_cases_and_the_walks_in_flight(tmp_path)
     with ResultStore.create(committed) as copy:  # a resumed run opens it for writing
         assert copy.finished_keys() == {finished.key}
         assert copy.claim(in_flight.key, "r2", None) == "claimed"  # the claim stayed with the live store
+
+
+def test_a_re_rendered_completion_record_keeps_its_notes():
+    completion = _completion_module()
+    existing = "# Completion: s (in progress)\n\nChanges:\n- a note\n\n3 of 4 walks complete (75 %).\n\nold table\n"
+    rendered = "# Completion: s\n\n4 of 4 walks complete (100 %).\n\nnew table\n"
+    assert completion.keep_notes(existing, rendered) == \
+        "# Completion: s (in progress)\n\nChanges:\n- a note\n\n4 of 4 walks complete (100 %).\n\nnew table\n"
+    assert completion.keep_notes("no table yet\n", rendered) == rendered
