@@ -75,3 +75,24 @@ def test_busy_workers_die_with_their_parent(options: str) -> None:
     for worker in alive:
         worker.kill()
     assert not alive
+
+
+def _timed(seconds: float, state: object) -> tuple[float, float]:
+    started = time.monotonic()
+    time.sleep(seconds)
+    return started, time.monotonic()
+
+
+@pytest.mark.parametrize("allowed", [1, 2])
+def test_a_map_runs_no_more_tasks_at_once_than_its_width_allows(allowed: int) -> None:
+    asked = []
+
+    def width(unfinished: int) -> int:
+        asked.append(unfinished)
+        return allowed
+
+    with WorkerPool(2, state=list) as pool:
+        spans = pool.map(_timed, [0.3] * 4, width)
+    running_at_each_start = [sum(start <= moment < stop for start, stop in spans) for moment, _ in spans]
+    assert max(running_at_each_start) == allowed
+    assert asked[0] == 4 and asked == sorted(asked, reverse=True)  # asked again as tasks end, fewer left each time

@@ -212,19 +212,27 @@ def test_one_solve_gets_a_quarter_of_the_case_s_time_and_the_next_rung_the_rest(
     assert [retry["remedy"] for retry in step["details"]["retries"]] == ["ipopt"]
 
 
-def test_a_local_worker_runs_decrease_and_conquer_s_sectional_pool(tmp_path: Path) -> None:
-    """``--jobs`` and the strategy's ``workers`` together: a case worker starts its own pool of sectional workers,
-    and the walk is the one solved sequentially in this process."""
-    def case(workers: int) -> Case:
+def test_a_local_worker_runs_decrease_and_conquer_s_sectional_pool(tmp_path: Path, monkeypatch) -> None:
+    """``--jobs`` and the strategy's ``workers`` together: a case worker starts its own pool of sectional workers
+    (two, or as many as the idle cores with "auto"), and the walk is the one solved sequentially in this process."""
+    from gaitbench.solve.cores import CORES_DIR_ENV
+
+    monkeypatch.setenv(CORES_DIR_ENV, str(tmp_path / "cores"))  # the case worker's ledger: no other walk in it
+
+    def case(workers: int | str) -> Case:
         return Case(PluginChoice("forward"), 8, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
                     PluginChoice("decrease-and-conquer", {"polish": False, "workers": workers}), steps=1,
                     method=f"DC workers={workers}", time_limit_s=60)
 
     run_suite(suite_of([case(2)]), tmp_path / "pool", LocalPoolExecutor(1))
+    run_suite(suite_of([case("auto")]), tmp_path / "auto", LocalPoolExecutor(1))
     run_suite(suite_of([case(1)]), tmp_path / "here", InProcessExecutor())
-    (pooled,), (here,) = rows_by_key(tmp_path / "pool").values(), rows_by_key(tmp_path / "here").values()
-    assert pooled["status"] == "solved", pooled["message"]
-    assert pooled["claimed_acot"] == here["claimed_acot"] and pooled["strategy_details"] == here["strategy_details"]
+    here, = rows_by_key(tmp_path / "here").values()
+    for store in ("pool", "auto"):
+        pooled, = rows_by_key(tmp_path / store).values()
+        assert pooled["status"] == "solved", pooled["message"]
+        assert pooled["claimed_acot"] == here["claimed_acot"]
+        assert pooled["strategy_details"] == here["strategy_details"]
 
 
 def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:

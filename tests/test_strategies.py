@@ -323,11 +323,50 @@ def test_parallel_sectional_solves_give_the_sequential_walk(forward):
 
     sequential, parallel = walk(1), walk(2)
     assert parallel.complete
+    _assert_same_step(parallel, sequential)
+    for workers in (0, "all"):
+        with pytest.raises(ValueError, match=f"workers = {workers!r}"):
+            DecreaseAndConquer(workers=workers)
+
+
+def _assert_same_step(walk, reference):
     for key in ("candidates", "failed_sections", "selection", "candidate_cots", "chosen", "claimed_cot"):
-        assert parallel.steps[0].details[key] == sequential.steps[0].details[key], key
-    np.testing.assert_array_equal(parallel.steps[0].trajectory.q, sequential.steps[0].trajectory.q)
-    with pytest.raises(ValueError, match="workers = 0"):
-        DecreaseAndConquer(workers=0)
+        assert walk.steps[0].details[key] == reference.steps[0].details[key], key
+    np.testing.assert_array_equal(walk.steps[0].trajectory.q, reference.steps[0].trajectory.q)
+
+
+def test_auto_workers_borrow_only_the_idle_cores_and_give_the_sequential_walk(forward, tmp_path, monkeypatch):
+    """workers = "auto" spreads a step's sections over the cores no other walk holds, and solves them here when
+    none is free; either way the walk is the one solved serially."""
+    from gaitbench.solve.cores import IdleCores
+    from gaitbench.solve.parallel import WorkerPool
+
+    widths = []
+    pool_map = WorkerPool.map
+
+    def counted_map(self, task, items, width=None):
+        widths.append(width(len(items)))
+        return pool_map(self, task, items, width)
+
+    monkeypatch.setattr(WorkerPool, "map", counted_map)
+    cores = IdleCores(tmp_path / "cores", 2)
+
+    def walk(workers, cores=None):
+        problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                              REGISTRY.create("solver", "ipopt"), 8, steps=1, cores=cores)
+        return DecreaseAndConquer(polish=False, workers=workers).solve(problem)
+
+    sequential = walk(1)
+    with cores.occupy():
+        borrowing = walk("auto", cores)
+        assert widths == [2]  # its own core and the idle one
+        with cores.lease() as other_walk:
+            assert other_walk.hold(1) == 1
+            busy = walk("auto", cores)
+    assert widths == [2]  # no core to borrow: solved here
+    assert walk("auto").complete and widths == [2]  # without a ledger, serial
+    for walked in (borrowing, busy):
+        _assert_same_step(walked, sequential)
 
 
 def test_walks_sharing_a_build_cache_build_only_the_sections_not_built_yet(forward, monkeypatch):

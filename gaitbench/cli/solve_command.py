@@ -190,6 +190,7 @@ def solve(
     from dataclasses import replace
 
     from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.cores import IdleCores
     from gaitbench.solve.walk import WalkProblem
     from gaitbench.solve.walk_file import write_walk
 
@@ -209,9 +210,10 @@ def solve(
     options = replace(ProblemOptions(limits=experiment.limits), **overrides)
     console = Console()
     total = steps or experiment.n_steps
-    with console.status(f"solving step 1 of {total}") as status:
+    cores = IdleCores.machine()
+    with console.status(f"solving step 1 of {total}") as status, cores.occupy():
         problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options,
-                              objective=objective)
+                              objective=objective, cores=cores)
         walk = strategy.solve(problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
     walk.experiment_options, walk.strategy_options = built_with["experiment"], built_with["strategy"]
     _print_walk(console, walk)

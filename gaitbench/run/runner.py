@@ -24,6 +24,7 @@ from gaitbench.run.case import Case
 from gaitbench.run.provenance import code_fingerprint, provenance
 from gaitbench.run.store import ResultStore, case_file, checkpoint_file
 from gaitbench.solve.checkpoint import WalkCheckpoint, remove_checkpoint
+from gaitbench.solve.cores import IdleCores
 
 if TYPE_CHECKING:
     from gaitbench.plugins import PluginRegistry
@@ -100,9 +101,11 @@ def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
         WalkCheckpoint.open(case.checkpoint, {"case": case.key, "code": code_fingerprint()})
     earlier = checkpoint.elapsed_s if checkpoint is not None else 0.0  # the time limit is the whole walk's
     deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s - earlier
+    cores = IdleCores.machine()
     problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
-                          objective=objective, builds=builds, deadline=deadline, checkpoint=checkpoint)
-    walk = strategy.solve(problem)
+                          objective=objective, builds=builds, deadline=deadline, checkpoint=checkpoint, cores=cores)
+    with cores.occupy():  # this case's core; the walk may borrow the idle others
+        walk = strategy.solve(problem)
     walk.experiment_options, walk.strategy_options = dict(case.experiment.options), dict(case.strategy.options)
     if checkpoint is not None and checkpoint.discarded:
         walk.resumed = {**walk.resumed, "discarded": checkpoint.discarded}

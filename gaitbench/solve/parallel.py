@@ -17,7 +17,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Iterable
-from concurrent.futures import Future
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from typing import Generic, TypeVar
 
 from pebble import ProcessExpired, ProcessPool
@@ -60,10 +60,29 @@ class WorkerPool(Generic[State]):
         and the future raises ``TimeoutError``; a worker that dies makes it raise :class:`ProcessExpired`."""
         return self._pool.schedule(_call, (task, item), timeout=timeout)
 
-    def map(self, task: Callable[[Item, State], Result], items: Iterable[Item]) -> list[Result]:
-        """``task(item, state)`` for every item, spread over the workers; the results in the items' order."""
-        futures = [self.schedule(task, item) for item in items]
-        return [future.result() for future in futures]
+    def map(self, task: Callable[[Item, State], Result], items: Iterable[Item],
+            width: Callable[[int], int] | None = None) -> list[Result]:
+        """``task(item, state)`` for every item, spread over the workers; the results in the items' order.
+
+        ``width(unfinished)``, asked again each time a task ends, says how many tasks may run at once (at least one)
+        while ``unfinished`` items are not done yet; without it, all the workers run.
+        """
+        if width is None:
+            futures = [self.schedule(task, item) for item in items]
+            return [future.result() for future in futures]
+        items = list(items)
+        results: list[Result] = [None] * len(items)  # type: ignore[list-item]
+        running: dict[Future[Result], int] = {}
+        started = 0
+        while started < len(items) or running:
+            allowed = max(1, width(len(items) - started + len(running)))
+            while started < len(items) and len(running) < allowed:
+                running[self.schedule(task, items[started])] = started
+                started += 1
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                results[running.pop(future)] = future.result()
+        return results
 
     def close(self) -> None:
         """Stop every worker, busy or not."""

@@ -25,6 +25,7 @@ from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructu
 from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory
 from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.solve.cores import IdleCores
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.verify import StepVerification, verify_step
 
@@ -176,6 +177,9 @@ class WalkProblem:
     """``time.monotonic()`` at which the walk's time runs out (a suite case's time limit): a step that would start
     later is not started, and the walk stops there with ``time_limit``, keeping the steps it solved, instead of
     running on until its process is stopped and losing them all."""
+    cores: IdleCores | None = field(default=None, compare=False, repr=False)
+    """The machine's ledger of the cores walks are using, when the walk may borrow idle ones (a suite's case, a
+    `gaitbench solve`): a strategy whose solves are independent may spread them over the cores it can hold."""
     checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
     """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
     the walk resumes after them (:func:`walk_step_by_step`)."""

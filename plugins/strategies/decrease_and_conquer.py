@@ -71,24 +71,25 @@ class DecreaseAndConquer:
     ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
     to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
-    (processes for the sectional solves of a step; see :class:`SectionalSolves`), ``back_up`` (True: a step that
+    (processes for the sectional solves of a step, or "auto": the cores no other walk is using, checked at each
+    step; see :class:`SectionalSolves`), ``back_up`` (True: a step that
     cannot be solved from the chosen trajectory's end is solved from the polished one's; needs ``polish``),
     ``rescue`` (True: a First Phase that every rung and the back-up leave unsolved is seeded from coarser grids)."""
 
     name = "decrease-and-conquer"
 
     def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
-                 workers: int = 1, back_up: bool = True, rescue: bool = True):
+                 workers: int | str = "auto", back_up: bool = True, rescue: bool = True):
         if sectional_guess not in ("first-phase", "complete"):
             raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
-        if int(workers) < 1:
-            raise ValueError(f"workers = {workers}: expected at least 1")
-        if int(workers) > 1 and "fork" not in multiprocessing.get_all_start_methods():
+        if workers != "auto" and (isinstance(workers, str) or int(workers) < 1):
+            raise ValueError(f"workers = {workers!r}: expected 'auto' or a number of processes, at least 1")
+        if workers != "auto" and int(workers) > 1 and "fork" not in multiprocessing.get_all_start_methods():
             raise ValueError("workers > 1 needs the 'fork' start method (Linux, macOS); use workers = 1 here")
         self.polish = bool(polish)
         self.sectional_guess = sectional_guess
         self.max_checks = int(max_checks)
-        self.workers = int(workers)
+        self.workers = workers if workers == "auto" else int(workers)
         self.back_up = bool(back_up) and self.polish
         self.rescue = bool(rescue)
 
@@ -217,28 +218,44 @@ class SectionalSolves:
     (:class:`~gaitbench.solve.parallel.WorkerPool`), each holding this object. Forking, rather than sending the
     problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures that do
     not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once rather than
-    once per worker. In a suite run each case worker starts its own pool, so ``--jobs`` × ``workers`` processes
-    share the machine's cores.
+    once per worker. With ``workers = "auto"`` the walk borrows the cores that no other walk holds in its
+    problem's ledger (:mod:`gaitbench.solve.cores`): none, and the step's sections are solved here, serially; some,
+    and they run in the pool, as wide as the cores held, which are asked for again as each section ends and given
+    back when the step's last sections no longer need them. Without a ledger (a strategy called directly), "auto"
+    is serial. Which process solves a section does not change its result.
     """
 
-    def __init__(self, problem: WalkProblem, workers: int = 1) -> None:
+    def __init__(self, problem: WalkProblem, workers: int | str = 1) -> None:
         structure = problem.structure("second")
         self.starts = list(range(2, problem.n_nodes - 1))
         builder = problem.builds.builder(problem.transcription, structure)
         self.built: dict[int, TranscribedStep] = {
             k0: builder.build(sectional_structure(structure, k0)) for k0 in self.starts}
         self.solver = problem.solver
+        forking = "fork" in multiprocessing.get_all_start_methods()
+        self._cores = problem.cores if workers == "auto" and forking else None
+        size = (self._cores.cores if self._cores is not None else 1) if workers == "auto" else int(workers)
         self._pool: WorkerPool[SectionalSolves] | None = None
-        if workers > 1 and len(self.starts) > 1:
+        if size > 1 and len(self.starts) > 1:
             for built in self.built.values():  # built once here and inherited, not once per worker
                 prepare(self.solver, built.nlp)
-            self._pool = WorkerPool(workers, state=lambda: self, start="fork")  # forks on the first solve
+            self._pool = WorkerPool(size, state=lambda: self, start="fork")  # forks on the first solve
 
     def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]]) -> list[SolverResult]:
         """Solve (k0, parameters, initial guess) tasks; results in the tasks' order."""
         if self._pool is None:
             return [self.solve_one(task) for task in tasks]
-        return self._pool.map(_solve_section, tasks)
+        if self._cores is None:
+            return self._pool.map(_solve_section, tasks)
+        most = self._pool.workers
+
+        with self._cores.lease() as borrowed:
+            def width(unfinished: int) -> int:  # this walk's own core, and the borrowed ones the rest can use
+                return 1 + borrowed.hold(min(most, unfinished) - 1)
+
+            if width(len(tasks)) == 1:
+                return [self.solve_one(task) for task in tasks]
+            return self._pool.map(_solve_section, tasks, width)
 
     def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
         k0, parameters, guess = task
