@@ -15,6 +15,8 @@ from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.solve.cores import IdleCores
+from gaitbench.solve.parallel import WorkerPool
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
@@ -24,6 +26,7 @@ from plugins.strategies.decrease_and_conquer import (
     DecreaseAndConquer,
     NodeValues,
     PointCosts,
+    SectionalSolves,
 )
 
 NAN = np.nan
@@ -338,14 +341,12 @@ def _assert_same_step(walk, reference):
 def test_auto_workers_borrow_only_the_idle_cores_and_give_the_sequential_walk(forward, tmp_path, monkeypatch):
     """workers = "auto" spreads a step's sections over the cores no other walk holds, and solves them here when
     none is free; either way the walk is the one solved serially."""
-    from gaitbench.solve.cores import IdleCores
-    from gaitbench.solve.parallel import WorkerPool
-
     widths = []
     pool_map = WorkerPool.map
 
     def counted_map(self, task, items, width=None):
-        widths.append(width(len(items)))
+        if items:
+            widths.append(width(len(items)))
         return pool_map(self, task, items, width)
 
     monkeypatch.setattr(WorkerPool, "map", counted_map)
@@ -359,13 +360,26 @@ def test_auto_workers_borrow_only_the_idle_cores_and_give_the_sequential_walk(fo
     sequential = walk(1)
     with cores.occupy():
         borrowing = walk("auto", cores)
-        assert widths == [2]  # its own core and the idle one
-        with cores.lease() as other_walk:
-            assert other_walk.hold(1) == 1
-            busy = walk("auto", cores)
-    assert widths == [2]  # no core to borrow: solved here
-    assert walk("auto").complete and widths == [2]  # without a ledger, serial
-    for walked in (borrowing, busy):
+        assert widths == [2]  # its own core and the idle one, from the first section on
+        other_walk = cores.lease()
+        assert other_walk.hold(1) == 1
+        busy = walk("auto", cores)
+        assert widths == [2]  # no core to borrow: solved here
+        assert walk("auto").complete and widths == [2]  # without a ledger, serial
+
+        solve_one, solved_here = SectionalSolves.solve_one, []
+
+        def freed_after_two(self, task):  # the other walk ends while this step's third section is due
+            solved_here.append(task[0])
+            if len(solved_here) == 2:
+                other_walk.release()
+            return solve_one(self, task)
+
+        monkeypatch.setattr(SectionalSolves, "solve_one", freed_after_two)
+        assert other_walk.hold(1) == 1
+        freed = walk("auto", cores)
+    assert solved_here[:2] == [2, 3] and widths == [2, 2]  # the rest of the step spread over both cores
+    for walked in (borrowing, busy, freed):
         _assert_same_step(walked, sequential)
 
 

@@ -219,10 +219,10 @@ class SectionalSolves:
     problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures that do
     not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once rather than
     once per worker. With ``workers = "auto"`` the walk borrows the cores that no other walk holds in its
-    problem's ledger (:mod:`gaitbench.solve.cores`): none, and the step's sections are solved here, serially; some,
-    and they run in the pool, as wide as the cores held, which are asked for again as each section ends and given
-    back when the step's last sections no longer need them. Without a ledger (a strategy called directly), "auto"
-    is serial. Which process solves a section does not change its result.
+    problem's ledger (:mod:`gaitbench.solve.cores`), asked for again as each section ends: while none is free, the
+    sections are solved here, one by one; then the rest run in the pool, as wide as the cores held, which go back
+    to the ledger when the step's last sections no longer need them and at the step's end. Without a ledger (a
+    strategy called directly), "auto" is serial. Which process solves a section does not change its result.
     """
 
     def __init__(self, problem: WalkProblem, workers: int | str = 1) -> None:
@@ -253,9 +253,10 @@ class SectionalSolves:
             def width(unfinished: int) -> int:  # this walk's own core, and the borrowed ones the rest can use
                 return 1 + borrowed.hold(min(most, unfinished) - 1)
 
-            if width(len(tasks)) == 1:
-                return [self.solve_one(task) for task in tasks]
-            return self._pool.map(_solve_section, tasks, width)
+            results = []  # solved here until a core is free, then spread with the rest
+            while len(results) < len(tasks) and width(len(tasks) - len(results)) == 1:
+                results.append(self.solve_one(tasks[len(results)]))
+            return results + self._pool.map(_solve_section, tasks[len(results):], width)
 
     def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
         k0, parameters, guess = task
