@@ -261,8 +261,8 @@ def _solver(entry: str) -> str:
           "string 'yes'"]),
         (BASE.replace('"one-phase", "decrease', '{ name = "decrease-and-conquer", options = { workers = "two" } }, '
                                                '"decrease'),
-         ["[sweep].strategies[0].options.workers: strategy 'decrease-and-conquer': expected an integer, found a "
-          "string 'two'"]),
+         ["[sweep].strategies[0].options.workers: strategy 'decrease-and-conquer': expected an integer or one of "
+          "'auto', found a string 'two'"]),
         (BASE.replace('"one-phase", "decrease', '{ name = "decrease-and-conquer", options = { worker = 2 } }, '
                                                '"decrease'),
          ["[sweep].strategies[0].options.worker: strategy 'decrease-and-conquer': unknown option 'worker' (did you "

@@ -36,6 +36,7 @@ from __future__ import annotations
 import multiprocessing
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 
@@ -79,7 +80,7 @@ class DecreaseAndConquer:
     name = "decrease-and-conquer"
 
     def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
-                 workers: int | str = "auto", back_up: bool = True, rescue: bool = True):
+                 workers: int | Literal["auto"] = "auto", back_up: bool = True, rescue: bool = True):
         if sectional_guess not in ("first-phase", "complete"):
             raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
         if workers != "auto" and (isinstance(workers, str) or int(workers) < 1):
