@@ -193,3 +193,28 @@ def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) ->
     remove_checkpoint(tmp_path / "a1")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["b2", "b2.json"]
     assert steps_in_flight(saved_progress(tmp_path), labels) == ""
+
+
+def test_the_code_fingerprint_follows_the_source_that_solves_walks_not_the_commit(tmp_path, monkeypatch) -> None:
+    """A documentation commit keeps a walk in flight resumable; an edit to the core or a built-in plugin does not."""
+    import gaitbench
+    import plugins as builtin
+    from gaitbench.run import provenance
+
+    assert provenance._source_roots() == [Path(gaitbench.__file__).resolve().parent,
+                                          Path(builtin.__file__).resolve().parent]
+    core, plugins = tmp_path / "gaitbench", tmp_path / "plugins"
+    for package in (core, plugins):
+        (package / "sub").mkdir(parents=True)
+        (package / "sub" / "module.py").write_text("X = 1\n")
+    monkeypatch.setattr(provenance, "_source_roots", lambda: [core, plugins])
+    fingerprint = provenance.code_fingerprint.__wrapped__
+    before = fingerprint()
+    (core / "README.md").write_text("a note")
+    (tmp_path / "docs.md").write_text("a decision")
+    assert fingerprint() == before
+    (plugins / "sub" / "module.py").write_text("X = 2\n")
+    changed = fingerprint()
+    assert changed != before
+    (plugins / "sub" / "module.py").rename(plugins / "moved.py")  # the same text elsewhere is other code
+    assert fingerprint() not in (before, changed)

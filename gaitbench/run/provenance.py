@@ -7,6 +7,7 @@ may be other machines with other installs.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import platform
 import socket
@@ -59,13 +60,31 @@ def git_commit() -> str | None:
 @lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """What a walk's steps were solved by, for its checkpoint (:mod:`gaitbench.solve.checkpoint`): gaitbench's
-    version, its commit, and a hash of any uncommitted change to tracked files; outside a checkout, the version."""
+    version, a hash of the source that solves walks (the Python files of the core and of the built-in plugins, as
+    they are on disk, committed or not) and the versions of the packages that can change a result.
+
+    The source, not the commit: a commit that changes only documentation, tests, benchmarks or results keeps the
+    fingerprint, so a walk stopped in flight (a session's end, a crash) resumes across it, while any change to the
+    code that solves walks starts it again from step 1.
+    """
     from gaitbench._version import __version__
 
-    commit, diff = _git("rev-parse", "HEAD"), _git("diff", "HEAD")
-    if commit is None or diff is None:
-        return __version__
-    return f"{__version__} {commit.decode().strip()}" + (f"+{hashlib.sha256(diff).hexdigest()[:16]}" if diff else "")
+    digest = hashlib.sha256()
+    for root in _source_roots():
+        for path in sorted(root.rglob("*.py")):
+            digest.update(path.relative_to(root.parent).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    digest.update(repr(sorted(package_versions().items())).encode())
+    return f"{__version__} {digest.hexdigest()[:16]}"
+
+
+def _source_roots() -> list[Path]:
+    """The directories of the ``gaitbench`` package and of the built-in ``plugins`` package, found without importing
+    the plugins (the core imports none)."""
+    roots = [Path(__file__).resolve().parents[1]]  # gaitbench/: this file is gaitbench/run/provenance.py
+    spec = importlib.util.find_spec("plugins")
+    if spec is not None and spec.submodule_search_locations:
+        roots += [Path(location).resolve() for location in spec.submodule_search_locations]
+    return roots
 
 
 def _git(*args: str) -> bytes | None:
