@@ -40,6 +40,13 @@ def test_the_machine_ledger_counts_this_process_s_cores_in_a_shared_directory(mo
         IdleCores(tmp_path, 0)
 
 
+def test_a_ledger_that_cannot_be_written_lends_nothing(tmp_path: Path) -> None:
+    blocked = tmp_path / "a file"
+    blocked.write_text("not a directory")
+    with IdleCores(blocked / "cores", 2).occupy() as lease:
+        assert lease.count == 0
+
+
 def test_a_holder_that_dies_keeps_no_core(ledger: IdleCores) -> None:
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time; from gaitbench.solve.cores import IdleCores; "

@@ -10,7 +10,7 @@ The ledger is one lock file per core in a directory shared by every gaitbench pr
 takes what is free (:meth:`Lease.hold`). Locks are ``flock`` locks on separately opened files, so they are per
 holder (a thread, a process) and the kernel drops them when their holder dies: a killed worker leaves no core
 taken. Only gaitbench's walks are counted; a machine busy with other work looks idle to the ledger. Without
-``fcntl`` (Windows), no core is ever free, and walks solve serially.
+``fcntl`` (Windows), or where the directory cannot be written, no core is ever free, and walks solve serially.
 """
 
 from __future__ import annotations
@@ -74,7 +74,6 @@ class Lease:
         while self.count > wanted:
             self._give_back(max(self._held))
         if self.count < wanted and fcntl is not None:
-            self.ledger.directory.mkdir(parents=True, exist_ok=True)
             for core in range(self.ledger.cores):
                 if self.count == wanted:
                     break
@@ -88,7 +87,11 @@ class Lease:
             self._give_back(core)
 
     def _take(self, core: int) -> None:
-        descriptor = os.open(self.ledger.directory / f"core-{core}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            self.ledger.directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+            descriptor = os.open(self.ledger.directory / f"core-{core}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+        except OSError:  # a ledger that cannot be written lends no core: the walk solves serially
+            return
         try:
             fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:  # held by another walk
