@@ -72,10 +72,10 @@ class DecreaseAndConquer:
     ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
     to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
-    (processes for the sectional solves of a step, or "auto": the cores no other walk is using, checked at each
-    step; see :class:`SectionalSolves`), ``back_up`` (True: a step that
-    cannot be solved from the chosen trajectory's end is solved from the polished one's; needs ``polish``),
-    ``rescue`` (True: a First Phase that every rung and the back-up leave unsolved is seeded from coarser grids)."""
+    (processes for the sectional solves of a step, or "auto": the cores no other walk is using, asked for as each
+    section ends; see :class:`SectionalSolves`), ``back_up`` (True: a step that cannot be solved from the chosen
+    trajectory's end is solved from the polished one's; needs ``polish``), ``rescue`` (True: a First Phase that
+    every rung and the back-up leave unsolved is seeded from coarser grids)."""
 
     name = "decrease-and-conquer"
 
