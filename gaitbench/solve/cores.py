@@ -88,7 +88,8 @@ class Lease:
 
     def _take(self, core: int) -> None:
         try:
-            self.ledger.directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+            if not self.ledger.directory.is_dir():  # made once; a stat, not a mkdir, as each section ends
+                self.ledger.directory.mkdir(mode=0o700, parents=True, exist_ok=True)
             descriptor = os.open(self.ledger.directory / f"core-{core}.lock", os.O_RDWR | os.O_CREAT, 0o600)
         except OSError:  # a ledger that cannot be written lends no core: the walk solves serially
             return
