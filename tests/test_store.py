@@ -444,3 +444,99 @@ def test_a_local_pool_run_leaks_no_semaphore(tmp_path: Path) -> None:
     assert "2 solved" in result.stderr
     assert "leaked semaphore" not in result.stderr, result.stderr
 
+
+
+# --- 4. merging stores: a sweep run a part at a time --------------------------------------------------------------
+
+class Tagged:
+    """An executor like :class:`Instant` whose walks say which store they were run for, and take ``seconds``."""
+
+    name, jobs = "tagged", 1
+
+    def __init__(self, tag: str, seconds: float = 1.0) -> None:
+        self.tag, self.seconds = tag, seconds
+
+    def run(self, cases):
+        for case in cases:
+            yield CaseOutcome(case, "solved", "", self.seconds,
+                              files={"walk.json": f'{{"store": "{self.tag}", "N": {case.n_nodes}}}'.encode()})
+
+
+def stored(store: Path) -> dict[str, dict]:
+    return {row["case_key"]: row for row in ResultStore.open(store).cases()}
+
+
+def test_merging_stores_gathers_cases_with_their_files_and_runs(tmp_path: Path) -> None:
+    """Two stores holding parts of one sweep, merged: every case once, with its own files, row and run; the case
+    both hold is the destination's unless --replace; merging again changes nothing."""
+    cases = [fake_case(n) for n in (6, 7, 8)]
+    run_suite(suite_of(cases[:2]), tmp_path / "a", Tagged("a"))
+    run_suite(suite_of(cases[1:], name="b"), tmp_path / "b", Tagged("b", seconds=2.0))
+    before = stored(tmp_path / "a")
+    source = stored(tmp_path / "b")
+
+    result = run_cli("runs", "merge", str(tmp_path / "b"), "--into", str(tmp_path / "a"))
+    assert result.code == 0, result.output
+    assert "1 cases copied" in result.output and "1 cases differ" in result.output and cases[1].key in result.output
+    merged = stored(tmp_path / "a")
+    assert set(merged) == {case.key for case in cases}
+    assert merged[cases[1].key] == before[cases[1].key]  # kept: the destination's own
+    assert merged[cases[2].key] == source[cases[2].key]  # copied whole, run id and provenance included
+    walk = tmp_path / "a" / merged[cases[2].key]["walk_path"]
+    assert b'"store": "b"' in walk.read_bytes()
+    with ResultStore.open(tmp_path / "a") as store:
+        runs = {run["run_id"]: run for run in store.runs()}
+    assert source[cases[2].key]["run_id"] in runs and runs[source[cases[2].key]["run_id"]]["cases_done"] == 1
+
+    again = run_cli("runs", "merge", str(tmp_path / "b"), "--into", str(tmp_path / "a"))
+    assert again.code == 0 and "0 cases copied" in again.output and "1 already there" in again.output
+    assert stored(tmp_path / "a") == merged
+
+    replaced = run_cli("runs", "merge", str(tmp_path / "b"), "--into", str(tmp_path / "a"), "--replace")
+    assert replaced.code == 0 and "1 replaced" in replaced.output
+    assert stored(tmp_path / "a")[cases[1].key] == source[cases[1].key]
+    assert b'"store": "b"' in (tmp_path / "a" / source[cases[1].key]["walk_path"]).read_bytes()
+
+
+def test_a_run_id_taken_by_another_run_is_renamed_when_merged(tmp_path: Path) -> None:
+    from gaitbench.run.merge import merge_store
+
+    run_suite(suite_of([fake_case(6)]), tmp_path / "a", Tagged("a"))
+    run_suite(suite_of([fake_case(7)], name="b"), tmp_path / "b", Tagged("b"))
+    taken = next(iter(stored(tmp_path / "b").values()))["run_id"]
+    other_run(tmp_path / "a", taken, finished_at="2026-01-01T00:00:00+00:00")  # another run under the same id
+    with ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
+        summary = merge_store(into, source)
+    assert summary.runs == [f"{taken}-2"]
+    assert stored(tmp_path / "a")[fake_case(7).key]["run_id"] == f"{taken}-2"
+
+
+def test_a_case_being_solved_on_the_destination_is_left_to_its_run(tmp_path: Path) -> None:
+    from gaitbench.run.merge import merge_store
+
+    run_suite(suite_of([fake_case(6)]), tmp_path / "b", Tagged("b"))
+    other_run(tmp_path / "a", "live", claims=(fake_case(6).key,), pid=os.getpid())
+    from gaitbench.run import store as store_module
+
+    store_module._OPEN_RUNS.add("live")  # this process's run, so alive
+    try:
+        with ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
+            summary = merge_store(into, source)
+    finally:
+        store_module._OPEN_RUNS.discard("live")
+    assert summary.in_flight == [fake_case(6).key] and not summary.copied
+    assert stored(tmp_path / "a") == {}
+
+
+def test_a_source_missing_a_file_merges_nothing_and_says_which(tmp_path: Path) -> None:
+    run_suite(suite_of([fake_case(6), fake_case(7)]), tmp_path / "b", Tagged("b"))
+    lost = stored(tmp_path / "b")[fake_case(7).key]["walk_path"]
+    (tmp_path / "b" / lost).unlink()
+    result = run_cli("runs", "merge", str(tmp_path / "b"), "--into", str(tmp_path / "a"))
+    assert_one_line_error(result, lost, "nothing was merged")
+    assert stored(tmp_path / "a") == {}
+    missing = run_cli("runs", "merge", str(tmp_path / "nowhere"), "--into", str(tmp_path / "c"))
+    assert_one_line_error(missing, "nowhere", "no results store here")
+    assert not (tmp_path / "c").exists()  # the sources are opened before the destination is made
+    itself = run_cli("runs", "merge", str(tmp_path / "b"), "--into", str(tmp_path / "b"))
+    assert_one_line_error(itself, "cannot be merged into itself")

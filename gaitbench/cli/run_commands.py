@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import click
@@ -227,7 +228,7 @@ class _CaseProgress:
 
 @click.group("runs")
 def runs() -> None:
-    """Look at results stores: their runs, their cases, and exports for other tools."""
+    """Look at results stores: their runs, their cases, exports for other tools, and merging stores."""
 
 
 @runs.command("list")
@@ -340,6 +341,35 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
         raise click.ClickException(f"{out}: cannot write the export ({error.strerror or error}); "
                                    "choose another file with --out") from None
     Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
+
+
+@runs.command("merge")
+@click.argument("sources", metavar="SOURCE...", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--into", "destination", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="The store to merge into (created if it does not exist).")
+@click.option("--replace", is_flag=True, help="Where a case is in both stores with other results, take the "
+              "source's (default: keep the destination's and list the case).")
+def runs_merge(sources: tuple[Path, ...], destination: Path, replace: bool) -> None:
+    """Copy the cases of each SOURCE store into the store --into, with their files and the runs that computed them.
+
+    For a sweep run a part at a time on several machines or in several sessions (a suite's `--method` columns,
+    say): merged, one `gaitbench report` covers it all. A case is the same walk in every store (its key), so a case
+    the destination holds already is left alone; each copied case keeps its provenance (commit, machine, solver
+    versions). Cases a live run on the destination is solving are left to it, and checkpoints of walks in flight
+    are not copied: resume those on the store that holds them. The destination may be in use by `gaitbench run`.
+    """
+    from gaitbench.run.merge import describe, merge_store
+    from gaitbench.run.store import ResultStore
+    from gaitbench.run.store_schema import StoreError
+
+    try:
+        with ExitStack() as stack:
+            opened = [stack.enter_context(ResultStore.open(source)) for source in sources]  # all, before writing
+            into = stack.enter_context(ResultStore.create(destination))
+            for source, store in zip(sources, opened, strict=True):
+                click.echo(describe(merge_store(into, store, replace=replace), source, destination), err=True)
+    except StoreError as error:
+        raise click.ClickException(str(error)) from None
 
 
 def _unfinished(run: dict, alive) -> str:

@@ -168,16 +168,23 @@ class ResultStore:
         """Record a run starting in this process and return its id: ``run["run_id"]``, or with ``-2``, ``-3``, ...
         when that is taken (runs of one suite started within a second), chosen under the write lock so that
         concurrent runs never collide."""
+        run_id = self._add_run(run | {"host": socket.gethostname(), "pid": os.getpid(), "heartbeat_at": _now()})
+        _OPEN_RUNS.add(run_id)
+        return run_id
+
+    def add_run(self, run: Mapping[str, Any]) -> str:
+        """Record a run that another store holds (:mod:`gaitbench.run.merge`), as it is there: its id, or with a
+        suffix as in :meth:`start_run` when this store uses that id; the id given."""
+        return self._add_run({column: run.get(column) for column in RUN_COLUMNS})
+
+    def _add_run(self, run: Mapping[str, Any]) -> str:
         stem = run["run_id"]
         with self._write():
             taken = {row[0] for row in self._db.execute(
                 "SELECT run_id FROM runs WHERE run_id = ? OR run_id LIKE ?", (stem, f"{stem}-%"))}
             run_id = next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
                           if run_id not in taken)
-            values = run | {"run_id": run_id, "host": socket.gethostname(), "pid": os.getpid(),
-                            "heartbeat_at": _now()}
-            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(values, RUN_COLUMNS))
-        _OPEN_RUNS.add(run_id)
+            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(run | {"run_id": run_id}, RUN_COLUMNS))
         return run_id
 
     def finish_run(self, run_id: str, finished_at: str | None) -> None:
@@ -216,6 +223,12 @@ class ResultStore:
         """The runs working on this store now (unfinished, process alive, heartbeat fresh), but ``exclude``."""
         rows = self._db.execute("SELECT * FROM runs WHERE finished_at IS NULL").fetchall()
         return [dict(row) for row in rows if row["run_id"] != exclude and run_alive(row)]
+
+    def live_claims(self) -> set[str]:
+        """The keys of the cases that live runs are solving now."""
+        rows = self._db.execute(
+            "SELECT claims.case_key AS claimed, runs.* FROM claims JOIN runs ON runs.run_id = claims.run_id").fetchall()
+        return {row["claimed"] for row in rows if run_alive(row)}
 
     def claim(self, case_key: str, run_id: str, expected: str | None) -> str:
         """Claim a case for ``run_id`` before starting it: ``"claimed"``, ``"running"`` (a live run holds it) or
