@@ -540,3 +540,20 @@ def test_a_source_missing_a_file_merges_nothing_and_says_which(tmp_path: Path) -
     assert not (tmp_path / "c").exists()  # the sources are opened before the destination is made
     itself = run_cli("runs", "merge", str(tmp_path / "b"), "--into", str(tmp_path / "b"))
     assert_one_line_error(itself, "cannot be merged into itself")
+
+
+def test_runs_show_narrows_the_table_by_experiment_method_and_status(tmp_path: Path) -> None:
+    one_phase, other = fake_case(6), fake_case(7)
+    other = Case(other.experiment, 7, other.transcription, other.solver, PluginChoice("decrease-and-conquer"),
+                 steps=1, method="D&C-DC")
+    run_suite(suite_of([one_phase, other]), tmp_path / "store", Tagged("a"))
+
+    def shown(*options: str) -> list[str]:
+        result = run_cli("runs", "show", str(tmp_path / "store"), *options)
+        assert result.code == 0, result.output
+        return [line for line in result.lines if line.lstrip().startswith("forward")]
+
+    assert len(shown()) == 2
+    assert [line.split()[1:3] for line in shown("--method", "D&C-DC")] == [["7", "D&C-DC"]]
+    assert len(shown("--method", "D&C-DC", "--method", "OP-DC", "--experiment", "forward")) == 2
+    assert shown("--experiment", "stairs") == [] and shown("--status", "incomplete") == []

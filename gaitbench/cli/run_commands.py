@@ -282,8 +282,16 @@ def _show_cells(row: dict) -> dict[str, str]:
 @click.argument("run_id", metavar="[RUN]", required=False)
 @click.option("--wide", is_flag=True, help="Every column: case key, where and why each walk stopped, the claimed "
               "ACOT, per-step COT bounds, retries, time, iterations and the message (lines longer than 80 columns).")
-def runs_show(store_dir: Path, run_id: str | None, wide: bool) -> None:
-    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed.
+@click.option("--experiment", "experiments", multiple=True, metavar="NAME",
+              help="Only this experiment's cases (repeatable).")
+@click.option("--method", "methods", multiple=True, metavar="LABEL",
+              help="Only this method's cases: its suite label, or its strategy where it has none (repeatable).")
+@click.option("--status", "statuses", multiple=True, metavar="STATUS",
+              help="Only cases with this status: solved, incomplete, error, timeout, crashed (repeatable).")
+def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tuple[str, ...],
+              methods: tuple[str, ...], statuses: tuple[str, ...]) -> None:
+    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed, narrowed
+    by --experiment, --method and --status.
 
     By default the table fits 80 columns: experiment, N, method, status, why the walk stopped (stop cause:
     complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
@@ -297,6 +305,9 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool) -> None:
             rows = store.cases(store.resolve_run(run_id) if run_id else None)
     except StoreError as error:
         raise click.ClickException(str(error)) from None
+    rows = [row for row in rows if (not experiments or row["experiment"] in experiments)
+            and (not methods or (row["method"] or row["strategy"]) in methods)
+            and (not statuses or row["status"] in statuses)]
     columns = WIDE_COLUMNS if wide else SHOW_COLUMNS
     table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""), box=box.SIMPLE_HEAD,
                   title_justify="left", show_edge=False, pad_edge=False)
