@@ -177,7 +177,7 @@ class ResultStore:
         suffix as in :meth:`start_run` when this store uses that id; the id given."""
         return self._add_run({column: run.get(column) for column in RUN_COLUMNS})
 
-    def _add_run(self, run: Mapping[str, Any]) -> str:
+    def _add_run(self, run: dict[str, Any]) -> str:
         stem = run["run_id"]
         with self._write():
             taken = {row[0] for row in self._db.execute(
