@@ -79,7 +79,9 @@ message names the backend status of the QP that failed.
 Convergence: the violation (max-norm) below ``tolerance`` and the stationarity/complementarity residual below
 ``tolerance`` times IPOPT's dual scaling s_d, with the current multipliers or with the ones the QP at x has just
 returned; or, as IPOPT's "acceptable" level, both below ``acceptable_tolerance`` for 15 consecutive iterations or
-when the iteration cannot continue from such a point. Complementarity is IPOPT's product |μ_i|·d_i near a bound.
+when the iteration cannot continue from such a point, which includes a QP step that is no descent direction of the
+ℓ1 merit there (an exact QP step always is one: such a step is the QP's inexactness, finer than its accuracy).
+Complementarity is IPOPT's product |μ_i|·d_i near a bound.
 
 QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as
 failed. PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to

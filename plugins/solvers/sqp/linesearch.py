@@ -50,14 +50,18 @@ class LineSearch(Subproblems):
         """Keep an inexact QP step inside the variable bounds, which the NLP functions may rely on."""
         return np.clip(x, self.lin.lbx, self.lin.ubx)
 
+    def _merit_slope(self, d: np.ndarray) -> float:
+        """φ's directional derivative along d, with the violation's change taken from the linearisation."""
+        return float(self.grad @ d - self.weights @ (self.lin.violations(self.g)
+                                                     - self.lin.violations(self.g + self.jac @ d)))
+
     def _l1_search(self, model: Model, d: np.ndarray):
         """Armijo backtracking on φ = f + Σ μ_i·viol_i(g); returns (point, correction QP or None) or None."""
         def phi(point: Trial | LineSearch) -> float:
             return point.f + self.weights @ self.lin.violations(point.g)
 
         merit = phi(self)
-        derivative = self.grad @ d - self.weights @ (self.lin.violations(self.g)
-                                                     - self.lin.violations(self.g + self.jac @ d))
+        derivative = self._merit_slope(d)
         # rounding in φ itself: in f, and in each g_i (relative to its magnitude) times its weight
         slack = 10 * np.finfo(float).eps * (max(1.0, abs(self.f)) + self.weights @ (1.0 + np.abs(self.g)))
         # Levenberg–Marquardt control of the shift: the ratio of φ's actual to its model's decrease for the full
