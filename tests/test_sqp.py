@@ -356,6 +356,23 @@ def test_a_non_descent_qp_step_short_of_the_acceptable_level_is_no_convergence(m
     assert result.status is not SolverStatus.CONVERGED, result.message
 
 
+def test_steps_that_move_the_merit_only_by_rounding_end_the_solve_after_15_iterations(monkeypatch):
+    """Forward step 2, DMOC N = 25 (from IPOPT's step 1) used to take 2,850 such steps to its iteration limit."""
+    exact = Subproblems._qp
+
+    def rounding_steps(self, model, g, warm):
+        outcome = exact(self, model, g, warm)
+        if outcome.solved and self.iteration >= 1:
+            outcome.x = -1e-14 * outcome.x  # no descent, and a move within φ's rounding slack
+        return outcome
+
+    monkeypatch.setattr(Subproblems, "_qp", rounding_steps)
+    result = _solve(hs071(), qp_solver="clarabel", max_iterations=200)
+    assert result.status is SolverStatus.ERROR, result.message
+    assert "rounding" in result.message
+    assert result.iterations <= 20
+
+
 @pytest.mark.slow
 def test_forward_dmoc_step_at_n_100_stops_where_the_qp_accuracy_is_spent():
     """433 iterations before the non-descent test (270 of them at f = 1.366059e-4), 147 with it (docs/solvers.md)."""

@@ -91,6 +91,8 @@ class Iterate:
         self.restoration: tuple[str, float] | None = None
         """(why restoration started, θ on entry) while restoring."""
         self.log = {"alpha": float("nan"), "regularization": 0.0, "qp_time": 0.0, "flags": ""}
+        self.stalled = 0
+        """Consecutive accepted steps that changed φ by no more than its rounding slack."""
         self.acceptable = 0
         """Consecutive iterates at the acceptable level, with their own multipliers or the QP's."""
         self.streak = 0

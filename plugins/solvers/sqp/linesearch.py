@@ -76,6 +76,7 @@ class LineSearch(Subproblems):
                 self.shift_growth = 0.5 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
             if accepted:
                 self.log["alpha"] = alpha
+                self.stalled = self.stalled + 1 if merit - phi(trial) <= slack else 0
                 return trial, None
             if alpha == 1.0:
                 corrected = self._correction(model, d, trial)
@@ -83,6 +84,7 @@ class LineSearch(Subproblems):
                     point, outcome = corrected
                     if phi(point) <= merit + ARMIJO * derivative + slack:
                         self.log["alpha"], self.log["flags"] = 1.0, self.log["flags"] + "s"
+                        self.stalled = self.stalled + 1 if merit - phi(point) <= slack else 0
                         return point, outcome
             alpha /= 2
         return None

@@ -102,6 +102,8 @@ class Run(Restoration):
                 return self._start_restoration("the filter line search found no acceptable step")
             return self._failure("the line search found no acceptable step")
         self._move(accepted, lam, model)
+        if self.stalled >= _ACCEPTABLE_ITERATIONS:
+            return self._failure(f"φ has not fallen beyond rounding for {self.stalled} iterations")
         return None
 
     def _elastic_step(self, model: Model, reason: str) -> SolverResult | None:
