@@ -318,9 +318,10 @@ def test_gait_step_from_the_transcriptions_guess_ends_at_another_local_minimum()
 
 
 
-def _reversed_steps(monkeypatch: pytest.MonkeyPatch, when) -> list[int]:
-    """Every QP step the solve takes where ``when(run)`` holds is reversed (an ascent direction, as an inexact QP
-    gives at a point more stationary than its accuracy); returns the iterations where that happened."""
+def _reversed_steps(monkeypatch: pytest.MonkeyPatch, when, scale: float = 1.0) -> list[int]:
+    """Every QP step the solve takes where ``when(run)`` holds is reversed and multiplied by ``scale`` (an ascent
+    direction, as an inexact QP gives at a point more stationary than its accuracy); returns the iterations where
+    that happened."""
     reversed_at = []
     exact = Subproblems._qp
 
@@ -328,7 +329,7 @@ def _reversed_steps(monkeypatch: pytest.MonkeyPatch, when) -> list[int]:
         outcome = exact(self, model, g, warm)
         if outcome.solved and when(self):
             reversed_at.append(self.iteration)
-            outcome.x = -outcome.x
+            outcome.x = -scale * outcome.x
         return outcome
 
     monkeypatch.setattr(Subproblems, "_qp", inexact)
@@ -358,15 +359,7 @@ def test_a_non_descent_qp_step_short_of_the_acceptable_level_is_no_convergence(m
 
 def test_steps_that_move_the_merit_only_by_rounding_end_the_solve_after_15_iterations(monkeypatch):
     """Forward step 2, DMOC N = 25 (from IPOPT's step 1) used to take 2,850 such steps to its iteration limit."""
-    exact = Subproblems._qp
-
-    def rounding_steps(self, model, g, warm):
-        outcome = exact(self, model, g, warm)
-        if outcome.solved and self.iteration >= 1:
-            outcome.x = -1e-14 * outcome.x  # no descent, and a move within φ's rounding slack
-        return outcome
-
-    monkeypatch.setattr(Subproblems, "_qp", rounding_steps)
+    _reversed_steps(monkeypatch, lambda run: run.iteration >= 1, scale=1e-14)  # moves within φ's rounding slack
     result = _solve(hs071(), qp_solver="clarabel", max_iterations=200)
     assert result.status is SolverStatus.ERROR, result.message
     assert "rounding" in result.message
@@ -380,7 +373,7 @@ def test_forward_dmoc_step_at_n_100_stops_where_the_qp_accuracy_is_spent():
     problem = WalkProblem(registry.create("experiment", "forward"), registry.create("transcription", "dmoc"),
                           Ipopt(), 100)
     built = problem.transcription.build(problem.structure("second"))
-    data = problem.step_data(1, problem.experiment.initial_state[[0, 1, 4, 5]])
+    data = problem.step_data(1, problem.start_state())
     result = SQP().solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
     assert result.status is SolverStatus.CONVERGED, result.message
     assert result.iterations <= 200
