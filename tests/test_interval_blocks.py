@@ -20,10 +20,16 @@ def _dense(matrix) -> np.ndarray:
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
 @pytest.mark.parametrize("phase", ["first", "second"])
 @pytest.mark.parametrize("absolute_value", ["slack", "smooth"])
-def test_structured_functions_equal_the_flat_graph(transcription, phase, absolute_value):
+@pytest.mark.parametrize("contact", [False, True], ids=["no-contact-rows", "contact-rows"])
+def test_structured_functions_equal_the_flat_graph(transcription, phase, absolute_value, contact):
     transcription = load_registry().create("transcription", transcription)
-    nlp = transcription.build(StepStructure(phase, 9, ProblemOptions(absolute_value=absolute_value))).nlp
+    options = ProblemOptions(absolute_value=absolute_value, unilateral_contact=contact,
+                             friction_coefficient=0.8 if contact else None)
+    nlp = transcription.build(StepStructure(phase, 9, options)).nlp
     assert nlp.interval_blocks, "Hermite–Simpson declares its defects per interval, DMOC its interior momentum balance"
+    if phase == "second":
+        names = {block.function.name() for block in nlp.interval_blocks}
+        assert ({"unilateral_contact", "friction_cone"} <= names) == contact, "one function of each node's variables"
     rng = np.random.default_rng(3)
     x, lam = rng.normal(size=nlp.n_variables), rng.normal(size=nlp.n_constraints)
     p = np.r_[20, 20, 40, 1, 0.5, 1.2, 1.2, 9.81, 0.2, -0.2, -1.1, -0.4, 0.4, 0.0, 0.09, 0.0]
@@ -118,6 +124,36 @@ def test_a_block_grows_by_parts_declared_one_after_another_and_its_interval_part
     x, parameter = np.array([1.0, 2.5, 4.5, 8.0]), np.array([0.5])
     np.testing.assert_allclose(np.asarray(nlp.functions.constraints(x, parameter)).ravel(),
                                [1.0, 0.0, 1.0, 1.5, 3.0, 9.0])
+
+
+def test_columns_that_are_one_function_of_their_own_variables_become_a_block():
+    builder = NLPBuilder()
+    states = builder.variable("states", (2, 4))
+    p = ca.SX.sym("p", 1)
+    builder.constrain_columns("swing", ca.sin(states[0, :]) * states[1, :] - p, 0.0, np.inf)
+    builder.constrain_columns("end", states[0, -1] ** 2)
+    nlp = builder.build(p, ca.sumsqr(states))
+    swing, end = nlp.interval_blocks
+    np.testing.assert_array_equal(swing.variables, [[0, 2, 4, 6], [1, 3, 5, 7]])
+    np.testing.assert_array_equal(swing.rows[0], [[0, 1, 2, 3]])
+    np.testing.assert_array_equal(end.variables, [[6]])
+    x, parameter = np.linspace(0.1, 0.8, 8), np.array([0.3])
+    expected = np.r_[np.sin(x[0::2]) * x[1::2] - 0.3, x[6] ** 2]
+    np.testing.assert_allclose(np.asarray(nlp.functions.constraints(x, parameter)).ravel(), expected)
+    np.testing.assert_array_equal(nlp.lbg, [0, 0, 0, 0, 0])
+    np.testing.assert_array_equal(nlp.ubg, [np.inf] * 4 + [0])
+
+
+def test_columns_that_are_not_one_function_stay_plain_rows():
+    builder = NLPBuilder()
+    states = builder.variable("states", (1, 3))
+    unlike = ca.horzcat(ca.sin(states[0]), ca.cos(states[1]), ca.sin(states[2]))
+    builder.constrain_columns("unlike", unlike)
+    builder.constrain_columns("sizes", ca.horzcat(states[0] * states[1], states[2] ** 2))
+    builder.constrain_columns("none", ca.SX(1, 0))
+    nlp = builder.build(ca.SX.sym("p", 1), ca.sumsqr(states))
+    assert nlp.interval_blocks == ()
+    assert nlp.constraint_blocks == {"unlike": slice(0, 3), "sizes": slice(3, 5), "none": slice(5, 5)}
 
 
 def test_a_block_declared_again_after_another_is_refused():

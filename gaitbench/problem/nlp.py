@@ -280,6 +280,8 @@ class NLPBuilder:
         self._constraints: list[tuple[str, ca.SX, np.ndarray, np.ndarray]] = []
         self._interval_blocks: list[tuple[tuple[str, ...], ca.Function, ca.SX, tuple[int, ...]]] = []
         """(names, function, z, index in ``_constraints`` of each output's part) per interval declaration."""
+        self._column_blocks: list[tuple[str, ca.SX, int]] = []
+        """(name, expression, index in ``_constraints``) per :meth:`constrain_columns` declaration."""
 
     def variable(self, name: str, shape: tuple[int, int], lower=-np.inf, upper=np.inf) -> ca.SX:
         """A (rows × cols) block of decision variables, column-major, with scalar or per-row bounds."""
@@ -318,11 +320,30 @@ class NLPBuilder:
             self.constrain(name, output)
         self._interval_blocks.append((tuple(names), function, z, tuple(parts)))
 
+    def constrain_columns(self, name: str, expression, lower=0.0, upper=0.0) -> None:
+        """Rows ``lower ≤ expression ≤ upper`` as :meth:`constrain`, where column k of the (rows × M) ``expression``
+        is meant to be one function of its own decision variables for every k: a condition at each grid node, such
+        as the ground reaction there, whose second derivatives through the dynamics are costly in the flat graph.
+
+        :meth:`build` checks that it is (each column, its variables renamed alike, serializes to the same function)
+        and then gives the NLP these rows' per-column structure (:class:`IntervalBlock`), so their derivatives come
+        from one compiled function instead of the flat graph. Columns that are not one function stay plain rows:
+        the same constraints either way."""
+        expression = ca.SX(expression)
+        self.constrain(name, expression, lower, upper)
+        self._column_blocks.append((name, expression, len(self._constraints) - 1))
+
     def build(self, parameters: ca.SX, objective: ca.SX) -> NLP:
         x, lbx, ubx, variable_blocks, _ = _stack(self._variables, in_parts=False)
         g, lbg, ubg, constraint_blocks, part_rows = _stack(self._constraints, in_parts=True)
         interval_blocks = tuple(_interval_block(x, names, function, z, [part_rows[part] for part in parts])
                                 for names, function, z, parts in self._interval_blocks)
+        position = {x[i].element_hash(): i for i in range(x.numel())}
+        for name, expression, part in self._column_blocks:
+            columns = _column_function(position, parameters, name, expression)
+            if columns is not None:
+                function, z = columns
+                interval_blocks += (_interval_block(x, (name,), function, z, [part_rows[part]]),)
         return NLP(x=x, p=parameters, f=objective, g=g, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
                    variable_blocks=variable_blocks, constraint_blocks=constraint_blocks,
                    interval_blocks=interval_blocks,
@@ -348,6 +369,32 @@ def _interval_block(x: ca.SX, names: tuple[str, ...], function: ca.Function, z: 
         raise ValueError(f"interval block {names}: a variable appears twice in one interval's variables")
     block_rows = tuple(np.arange(part.start, part.stop).reshape(-1, n_intervals, order="F") for part in rows)
     return IntervalBlock(function, index, block_rows)
+
+
+def _column_function(position: dict[int, int], parameters: ca.SX, name: str,
+                     expression: ca.SX) -> tuple[ca.Function, ca.SX] | None:
+    """(f, z) with column k of ``expression`` = f(z[:, k], p) for every k, z's column k being the decision variables
+    column k depends on, in x's order; ``None`` when the columns are not one such function.
+
+    The test is exact: each column becomes a function of stand-in symbols for its own variables, and every
+    column's function must serialize as the first one does, operation for operation."""
+    n_columns = expression.shape[1]
+    own = []
+    for k in range(n_columns):
+        symbols = [s for s in ca.symvar(expression[:, k]) if s.element_hash() in position]
+        own.append(ca.vertcat(*sorted(symbols, key=lambda s: position[s.element_hash()])))
+    n_z = own[0].numel() if own else 0
+    if n_z == 0 or any(z.numel() != n_z for z in own):
+        return None
+    stand_in = ca.SX.sym("z", n_z)
+    first = None
+    for k, z in enumerate(own):
+        function = ca.Function(name, [stand_in, parameters], [ca.substitute(expression[:, k], z, stand_in)])
+        if first is None:
+            first, reference = function, function.serialize()
+        elif function.serialize() != reference:
+            return None
+    return first, ca.horzcat(*own)
 
 
 def _expand(bound, shape: tuple[int, int]) -> np.ndarray:

@@ -279,10 +279,10 @@ def _add_step_constraints(
         reactions.append(ca.mtimes(mass[2:4, 0:2], ddq) + bias[2:4])
     reaction = ca.horzcat(*reactions)
     if options.unilateral_contact:
-        builder.constrain("unilateral_contact", reaction[1, :], 0.0, np.inf)
+        builder.constrain_columns("unilateral_contact", reaction[1, :], 0.0, np.inf)
     if options.friction_coefficient is not None:
         mu = options.friction_coefficient
-        builder.constrain(
+        builder.constrain_columns(
             "friction_cone",
             ca.vertcat(reaction[0, :] - mu * reaction[1, :], -reaction[0, :] - mu * reaction[1, :]),
             -np.inf,
