@@ -1,8 +1,8 @@
 """Where the time goes: NLP build, cold step solves against N, per-iteration split, sectional solves, D&C against
 one-phase, and whole-suite wall time.
 
-Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks] [suite]
-        [suite-all] [suite-all-large] [suite-all-large-scaled] [suite-forward-full]
+Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/performance.py [steps] [sections] [scaling] [walks]
+        [contact] [suite] [suite-all] [suite-all-large] [suite-all-large-scaled] [suite-forward-full]
         [suite-forward-full-scaled] [suite-all-rest] [executors]
 
 Each part appends its rows to ``benchmarks/results/performance.json`` (replacing that part's earlier rows) and
@@ -20,6 +20,9 @@ wall-clock time of this process.
   reaches. What the scaling does to the results
   of whole walks is measured by ``acot_regression.py --solver-option``.
 - ``walks``: decrease-and-conquer against one-phase, whole walks, with 1 and 2 sectional workers.
+- ``contact``: the cold step with the ground-reaction rows (unilateral contact and a friction cone, off in the
+  thesis suites) against the same step without them: what those rows cost, compiled per node
+  (``NLPBuilder.constrain_columns``).
 - ``suite``: a sample of ``thesis-forward`` (every method at a few N) run with ``gaitbench run`` at 1 and 2 jobs;
   the whole-suite time is extrapolated per experiment and method with a power law in N fitted to the sample, and
   labelled so. ``suite-all``: the same for ``thesis-all`` (all four experiments). ``suite-all-large``: ``thesis-all``
@@ -41,6 +44,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +71,9 @@ WALK_NODES = (20, 40)
 WALK_STEPS = 3
 SCALING_STEP_NODES = (50, 100)
 SCALING_SECTION_NODES = 50
+CONTACT_STEP_NODES = (50, 100)
+FRICTION_COEFFICIENT = 0.8
+"""μ of the friction cone in the ``contact`` part (DECISIONS §2 leaves it a parameter)."""
 OBJECTIVE_SCALING = {"nlp_scaling_obj_target_gradient": 1.0}
 """IPOPT scales the objective so that its gradient at the starting point has max-norm 1. The step costs are COTs
 of 1e-8 … 0.5, their gradients as small, so unscaled the barrier and the constraints steer IPOPT's path."""
@@ -129,6 +136,31 @@ def steps_part(registry) -> list[dict]:
                 "rest_per_iteration_ms": 1e3 * (result.wall_time_s - derivative_s) / iterations,
             })
             print(rows[-1], flush=True)
+    return rows
+
+
+def contact_part(registry) -> list[dict]:
+    """Forward step 1 from the standard guess with and without the ground-reaction rows, per transcription and N."""
+    rows = []
+    for name in TRANSCRIPTIONS:
+        for n_nodes in CONTACT_STEP_NODES:
+            for contact in (False, True):
+                experiment, transcription = registry.create("experiment", "forward"), registry.create(
+                    "transcription", name)
+                solver = registry.create("solver", "ipopt")
+                options = replace(WalkProblem(experiment, transcription, solver, n_nodes).options,
+                                  unilateral_contact=contact, friction_coefficient=FRICTION_COEFFICIENT if contact
+                                  else None)
+                problem = WalkProblem(experiment, transcription, solver, n_nodes, options=options)
+                data = problem.step_data(1, np.asarray(experiment.initial_state)[[0, 1, 4, 5]])
+                built = transcription.build(problem.structure("second"))
+                prepare(solver, built.nlp)
+                result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data))
+                rows.append({"transcription": name, "N": n_nodes, "contact_rows": contact,
+                             "constraints": built.nlp.n_constraints, "status": result.status.value,
+                             "solve_s": result.wall_time_s, "iterations": result.iterations,
+                             "derivative_s": result.function_time_s})
+                print(rows[-1], flush=True)
     return rows
 
 
@@ -387,7 +419,8 @@ def extrapolate(per_case: list[dict], nodes, jobs: int) -> dict:
 
 
 PARTS = {"steps": steps_part, "sections": sections_part, "scaling": scaling_part, "walks": walks_part,
-         "suite": suite_part, "suite-all": suite_all_part, "suite-all-large": suite_all_large_part,
+         "contact": contact_part, "suite": suite_part, "suite-all": suite_all_part,
+         "suite-all-large": suite_all_large_part,
          "suite-all-large-scaled": suite_all_large_scaled_part, "suite-forward-full": suite_forward_full_part,
          "suite-forward-full-scaled": suite_forward_full_scaled_part, "suite-all-rest": suite_all_rest_part,
          "executors": executors_part}
