@@ -228,6 +228,22 @@ def test_a_store_snapshot_keeps_finished_cases_and_the_walks_in_flight(tmp_path)
         assert copy.claim(in_flight.key, "r2", None) == "claimed"  # the claim stayed with the live store
 
 
+def test_savings_are_summarized_verified_and_claimed_beside_the_published_range():
+    import pandas as pd
+
+    completion = _completion_module()
+    savings = pd.DataFrame({
+        "experiment": ["forward"] * 3, "method": ["D&C-DC"] * 3, "baseline": ["OP-DC"] * 3, "N": [10, 20, 30],
+        "savings_percent": [5.0, -2.0, 12.0], "claimed_savings_percent": [20.0, 30.0, None]})
+    published = pd.DataFrame({"experiment": ["forward"], "comparison": ["D&C-DC vs OP-DC"],
+                              "published_min_percent": [12.24], "published_max_percent": [85.41]})
+    thesis = {("forward", "D&C-DC"): "D&C-DC", ("forward", "OP-DC"): "OP-DC"}
+    assert completion.summarize_savings(savings, published, thesis).to_dict("records") == [{
+        "experiment": "forward", "comparison": "D&C-DC vs OP-DC", "N compared": 3, "N with a saving": 2,
+        "verified saving: median (range)": "+5.0 % (-2.0 … +12.0)", "claimed saving: median": "+25.0 %",
+        "thesis: range": "+12.24 … +85.41 %"}]
+
+
 def test_a_re_rendered_completion_record_keeps_its_notes():
     completion = _completion_module()
     existing = "# Completion: s (in progress)\n\nChanges:\n- a note\n\n3 of 4 walks complete (75 %).\n\nold table\n"
