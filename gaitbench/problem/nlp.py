@@ -338,7 +338,7 @@ class NLPBuilder:
         g, lbg, ubg, constraint_blocks, part_rows = _stack(self._constraints, in_parts=True)
         interval_blocks = tuple(_interval_block(x, names, function, z, [part_rows[part] for part in parts])
                                 for names, function, z, parts in self._interval_blocks)
-        position = {x[i].element_hash(): i for i in range(x.numel())}
+        position = {x[i].element_hash(): i for i in range(x.numel())} if self._column_blocks else {}
         for name, expression, part in self._column_blocks:
             columns = _column_function(position, parameters, name, expression)
             if columns is not None:

@@ -60,6 +60,9 @@ class LineSearch(Subproblems):
         def phi(point: Trial | LineSearch) -> float:
             return point.f + self.weights @ self.lin.violations(point.g)
 
+        def count_stall(point: Trial) -> None:
+            self.stalled = self.stalled + 1 if merit - phi(point) <= slack else 0
+
         merit = phi(self)
         derivative = self._merit_slope(d)
         # rounding in φ itself: in f, and in each g_i (relative to its magnitude) times its weight
@@ -76,7 +79,7 @@ class LineSearch(Subproblems):
                 self.shift_growth = 0.5 if ratio >= 0.75 else 1.0 if ratio >= 0.25 else 4.0
             if accepted:
                 self.log["alpha"] = alpha
-                self.stalled = self.stalled + 1 if merit - phi(trial) <= slack else 0
+                count_stall(trial)
                 return trial, None
             if alpha == 1.0:
                 corrected = self._correction(model, d, trial)
@@ -84,7 +87,7 @@ class LineSearch(Subproblems):
                     point, outcome = corrected
                     if phi(point) <= merit + ARMIJO * derivative + slack:
                         self.log["alpha"], self.log["flags"] = 1.0, self.log["flags"] + "s"
-                        self.stalled = self.stalled + 1 if merit - phi(point) <= slack else 0
+                        count_stall(point)
                         return point, outcome
             alpha /= 2
         return None

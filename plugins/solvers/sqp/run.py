@@ -12,6 +12,9 @@ from plugins.solvers.sqp.hessian import Model
 from plugins.solvers.sqp.restoration import Restoration
 
 _ACCEPTABLE_ITERATIONS = 15
+"""Consecutive iterates at the acceptable level that end a solve as converged (IPOPT's acceptable_iter)."""
+_STALLED_ITERATIONS = 15
+"""Consecutive accepted steps within φ's rounding that end a solve as making no progress."""
 _TRUSTED_MULTIPLIER = 1e6
 """A QP whose multipliers exceed this is treated like a failed one: its linearisation is nearly inconsistent."""
 
@@ -102,7 +105,7 @@ class Run(Restoration):
                 return self._start_restoration("the filter line search found no acceptable step")
             return self._failure("the line search found no acceptable step")
         self._move(accepted, lam, model)
-        if self.stalled >= _ACCEPTABLE_ITERATIONS:
+        if self.stalled >= _STALLED_ITERATIONS:
             return self._failure(f"φ has not fallen beyond rounding for {self.stalled} iterations")
         return None
 
