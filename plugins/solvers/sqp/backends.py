@@ -26,12 +26,17 @@ _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
 """The backend keywords ``qp_tolerance`` sets. quadprog (a dual active-set method solving to machine precision) has
 none, nor have backends not listed here."""
 
-_BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000}, "piqp": {"max_iter": 100}}
+_BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000},
+                                     "piqp": {"max_iter": 100, "reg_finetune_lower_limit": 1e-10}}
 """Fixed extra options. OSQP's ADMM alone reaches tight tolerances slowly; its polishing step solves the
-identified active set's equality QP exactly. PIQP solves the gait QPs it solves at all in at most 95 iterations
-(forward step 2, HS N = 100, and step 1, DMOC N = 100, 113 QPs); on the others (31 of 50 late-step QPs) it ends
-at its limit with a dual residual of 1e-2–5 whatever the limit, so 100 iterations instead of 250 bound what such a
-failure costs (190 ms at HS N = 100) before the fallback solves the QP (docs/solvers.md, the sqp section's "Speed")."""
+identified active set's equality QP exactly. PIQP: near its solution it lowers its proximal regularisation from
+``reg_lower_limit`` (1e-10) to ``reg_finetune_lower_limit`` (1e-13 by default) to reach its tolerance; on the
+convexified gait QPs, whose Hessian shift is as small as 1e-10·max|H|, its iterates then diverge from a point
+where the QP was solved to a duality gap of 1e-8 (the dual residual climbs from 2e-9 to 1e-1), and it ends at its
+iteration limit. With the floor kept at 1e-10 it solves half of the QPs it failed that way, in the same iterations
+as the others (docs/solvers.md, the sqp section's "PIQP's regularisation floor"). It solves the gait QPs it solves
+at all in at most 95 iterations; on the others it ends at its limit whatever the limit, so 100 iterations instead
+of 250 bound what such a failure costs before the fallback solves the QP."""
 
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
