@@ -29,11 +29,12 @@ from nlp_problems import (
 
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP, NLPBuilder
-from gaitbench.solve.evaluation import NLPEvaluator
+from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solve.solver import SolverStatus
 from gaitbench.solve.walk import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
+from plugins.solvers.sqp.backends import QPBackends
 from plugins.solvers.sqp.iterate import least_squares_multipliers
 from plugins.solvers.sqp.subproblems import Subproblems
 
@@ -465,6 +466,33 @@ def test_a_failed_qp_is_solved_again_by_the_fallback_backend(monkeypatch):
     assert set(calls) == {"piqp", "clarabel"}
     monkeypatch.setattr(qpsolvers, "solve_problem", failing_piqp)
     assert _solve(problem, qp_solver="piqp", fallback_qp_solver="none").status is not SolverStatus.CONVERGED
+
+
+def _saved_qp(path: Path) -> qpsolvers.Problem:
+    """A QP saved by ``np.savez`` as its vectors and the CSC parts of P, G and A."""
+    saved = np.load(path)
+    matrices = {name: sp.csc_matrix((saved[f"{name}_data"], saved[f"{name}_indices"], saved[f"{name}_indptr"]),
+                                    shape=tuple(saved[f"{name}_shape"])) for name in ("P", "G", "A")}
+    return qpsolvers.Problem(matrices["P"], saved["q"], matrices["G"], saved["h"], matrices["A"], saved["b"],
+                             saved["lb"], saved["ub"])
+
+
+def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
+    """A QP of `sqp`'s forward HS N = 50 walk (step 2; n = 695, a convexification shift of ~1e-10·max|H|). PIQP
+    with its own settings reaches its solution by iteration ~20, lowers its regularisation to 1e-13 to meet the
+    1e-10 tolerance, diverges and ends at its limit; with the backends' floor of 1e-10 it solves it, to the
+    objective Clarabel finds to five digits (docs/solvers.md, "PIQP's regularisation floor")."""
+    problem = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_finetune.npz")
+    evaluator = type("Counter", (), {"evaluations": {"qp": 0}})()
+    backends = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator)
+    solved = backends.solve(problem, None, {"flags": "", "qp_time": 0.0})
+    assert solved.solved, solved.status
+    objective = 0.5 * solved.x @ problem.P @ solved.x + problem.q @ solved.x
+    reference = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10,
+                                        tol_feas=1e-10).x
+    assert objective == pytest.approx(0.5 * reference @ problem.P @ reference + problem.q @ reference, rel=1e-5)
+    without_floor = qpsolvers.solve_problem(problem, solver="piqp", max_iter=100, eps_abs=1e-10, eps_rel=1e-10)
+    assert not without_floor.found  # the saved QP still shows the failure the floor avoids
 
 
 def test_registered_as_a_solver_plugin(tmp_path: Path):
