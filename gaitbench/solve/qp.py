@@ -1,7 +1,8 @@
-"""Reading a ``qpsolvers`` solution the same way in every solver that builds on QP subproblems (``sqp``, ``fsqp``).
+"""Calling and reading ``qpsolvers`` backends the same way in every solver that builds on QP subproblems (``sqp``,
+``fsqp``).
 
-Why here: which backend statuses still carry a usable step is a fact about the QP backends, not about one method,
-and two solver plugins must agree on it.
+Why here: which backend settings the gait QPs need, and which backend statuses still carry a usable step, are facts
+about the QP backends, not about one method, and two solver plugins must agree on them.
 """
 
 from __future__ import annotations
@@ -10,6 +11,14 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     import qpsolvers
+
+BACKEND_SETTINGS: dict[str, dict] = {"piqp": {"reg_finetune_lower_limit": 1e-10}}
+"""Backend settings every QP of a gait NLP gets. PIQP: near its solution it lowers its proximal regularisation from
+``reg_lower_limit`` (1e-10) to ``reg_finetune_lower_limit`` (1e-13 by default) to reach its tolerance; on the
+convexified gait QPs, whose Hessian shift is as small as 1e-10·max|H|, its iterates then diverge from a point where
+the QP was solved to a duality gap of 1e-8 (the dual residual climbs from 2e-9 to 1e-1), and it ends at its
+iteration limit. With the floor kept at 1e-10 it solves half of the QPs it failed that way, in the same iterations
+as the others (docs/solvers.md, the sqp section's "PIQP's regularisation floor")."""
 
 INACCURATE_STATUSES = frozenset({"AlmostSolved", "solved inaccurate"})
 """Statuses ``qpsolvers`` reports as not found whose solutions are still used (Clarabel's and OSQP's reduced-accuracy

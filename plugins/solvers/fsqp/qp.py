@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import qpsolvers
 
-from gaitbench.solve.qp import INACCURATE_STATUSES, backend_status
+from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, backend_status
 from gaitbench.solve.silence import quiet_stdout
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.outcome import Breakdown
@@ -19,13 +19,14 @@ Clarabel, which solves the convexified QPs PIQP stops on."""
 
 
 def solve_qp(problem: qpsolvers.Problem) -> qpsolvers.Solution:
-    """The QP by each of ``_QP_SOLVERS`` in turn until one solves it (or returns a reduced-accuracy optimum)."""
+    """The QP by each of ``_QP_SOLVERS`` in turn, with the settings every gait QP gets (``BACKEND_SETTINGS``), until
+    one solves it (or returns a reduced-accuracy optimum)."""
     statuses = []
     for solver in _QP_SOLVERS:
         try:
             with warnings.catch_warnings(), quiet_stdout():
                 warnings.simplefilter("ignore")
-                solution = qpsolvers.solve_problem(problem, solver=solver)
+                solution = qpsolvers.solve_problem(problem, solver=solver, **BACKEND_SETTINGS.get(solver, {}))
         except Exception as error:  # a backend that rejects the problem counts as a failed QP
             statuses.append(f"{solver}: {type(error).__name__}")
             continue

@@ -12,7 +12,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
-from gaitbench.solve.qp import INACCURATE_STATUSES, backend_status
+from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, backend_status
 from gaitbench.solve.silence import quiet_stdout
 
 _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
@@ -27,16 +27,12 @@ _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
 none, nor have backends not listed here."""
 
 _BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000},
-                                     "piqp": {"max_iter": 100, "reg_finetune_lower_limit": 1e-10}}
-"""Fixed extra options. OSQP's ADMM alone reaches tight tolerances slowly; its polishing step solves the
-identified active set's equality QP exactly. PIQP: near its solution it lowers its proximal regularisation from
-``reg_lower_limit`` (1e-10) to ``reg_finetune_lower_limit`` (1e-13 by default) to reach its tolerance; on the
-convexified gait QPs, whose Hessian shift is as small as 1e-10·max|H|, its iterates then diverge from a point
-where the QP was solved to a duality gap of 1e-8 (the dual residual climbs from 2e-9 to 1e-1), and it ends at its
-iteration limit. With the floor kept at 1e-10 it solves half of the QPs it failed that way, in the same iterations
-as the others (docs/solvers.md, the sqp section's "PIQP's regularisation floor"). It solves the gait QPs it solves
-at all in at most 95 iterations; on the others it ends at its limit whatever the limit, so 100 iterations instead
-of 250 bound what such a failure costs before the fallback solves the QP."""
+                                     "piqp": {**BACKEND_SETTINGS["piqp"], "max_iter": 100}}
+"""Fixed extra options, besides the settings every gait QP gets (``BACKEND_SETTINGS``). OSQP's ADMM alone reaches
+tight tolerances slowly; its polishing step solves the identified active set's equality QP exactly. PIQP solves the
+gait QPs it solves at all in at most 95 iterations; on the others it ends at its limit whatever the limit, so 100
+iterations instead of 250 bound what such a failure costs before the fallback solves the QP (docs/solvers.md, the
+sqp section's "Speed")."""
 
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
