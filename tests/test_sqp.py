@@ -8,6 +8,7 @@ import subprocess
 import sys
 from functools import cache
 from pathlib import Path
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -483,10 +484,11 @@ def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
     1e-10 tolerance, diverges and ends at its limit; with the backends' floor of 1e-10 it solves it, to the
     objective Clarabel finds to five digits (docs/solvers.md, "PIQP's regularisation floor")."""
     problem = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_finetune.npz")
-    evaluator = type("Counter", (), {"evaluations": {"qp": 0}})()
+    evaluator = SimpleNamespace(evaluations={"qp": 0})  # the one part of an NLPEvaluator the backends use
     backends = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator)
     solved = backends.solve(problem, None, {"flags": "", "qp_time": 0.0})
     assert solved.solved, solved.status
+    assert evaluator.evaluations["qp"] == 1  # PIQP alone: no fallback was given
     objective = 0.5 * solved.x @ problem.P @ solved.x + problem.q @ solved.x
     reference = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10,
                                         tol_feas=1e-10).x
