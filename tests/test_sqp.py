@@ -35,7 +35,7 @@ from gaitbench.solve.solver import SolverStatus
 from gaitbench.solve.walk import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
-from plugins.solvers.sqp.backends import QPBackends
+from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends
 from plugins.solvers.sqp.iterate import least_squares_multipliers
 from plugins.solvers.sqp.subproblems import Subproblems
 
@@ -493,7 +493,8 @@ def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
     reference = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10,
                                         tol_feas=1e-10).x
     assert objective == pytest.approx(0.5 * reference @ problem.P @ reference + problem.q @ reference, rel=1e-5)
-    without_floor = qpsolvers.solve_problem(problem, solver="piqp", max_iter=100, eps_abs=1e-10, eps_rel=1e-10)
+    without_floor = qpsolvers.solve_problem(problem, solver="piqp", eps_abs=1e-10, eps_rel=1e-10,
+                                            **_BACKEND_OPTIONS["piqp"])  # every setting of sqp's call but the floor
     assert not without_floor.found  # the saved QP still shows the failure the floor avoids
 
 

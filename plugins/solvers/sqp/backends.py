@@ -26,8 +26,7 @@ _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
 """The backend keywords ``qp_tolerance`` sets. quadprog (a dual active-set method solving to machine precision) has
 none, nor have backends not listed here."""
 
-_BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000},
-                                     "piqp": {**BACKEND_SETTINGS["piqp"], "max_iter": 100}}
+_BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 20000}, "piqp": {"max_iter": 100}}
 """Fixed extra options, besides the settings every gait QP gets (``BACKEND_SETTINGS``). OSQP's ADMM alone reaches
 tight tolerances slowly; its polishing step solves the identified active set's equality QP exactly. PIQP solves the
 gait QPs it solves at all in at most 95 iterations; on the others it ends at its limit whatever the limit, so 100
@@ -88,7 +87,7 @@ class QPBackends:
     def _call(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """One backend call, counted in ``evaluations["qp"]`` and timed; backend warnings and exceptions are
         turned into an unsolved outcome with the backend's status."""
-        options = dict(_BACKEND_OPTIONS.get(solver, {}))
+        options = {**BACKEND_SETTINGS.get(solver, {}), **_BACKEND_OPTIONS.get(solver, {})}
         options.update({key: self.tolerance for key in _TOLERANCE_KEYWORDS.get(solver, ())})
         if self.deadline.time_limit_s is not None and solver in _TIME_LIMITED:
             options["time_limit"] = max(self.deadline.time_limit_s - self.deadline.elapsed_s, 1e-3)
