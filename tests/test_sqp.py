@@ -506,3 +506,19 @@ def test_registered_as_a_solver_plugin(tmp_path: Path):
     assert registry.names("solver") == ["sqp"]
     solver = registry.create("solver", "sqp", qp_solver="daqp", hessian="bfgs", merit="filter")
     assert (solver.name, solver.qp_solver, solver.hessian, solver.merit) == ("sqp", "daqp", "bfgs", "filter")
+
+
+def test_print_level_two_names_the_blocks_that_hold_the_violation_and_the_step(capsys):
+    """Below each iteration's line: the violated constraint blocks with their part of the ℓ1 merit, and the variable
+    blocks the last step moved (how the late-step crawl was read, docs/solvers.md)."""
+    start = np.array([2.0, 0.0])  # off the unit circle by x² + y² − 1 = 3
+    result = SQP(print_level=2).solve(_maratos(), [], start)
+    assert result.converged, result.message
+    lines = capsys.readouterr().out.splitlines()[2:-1]
+    rows, where = lines[0::2], lines[1::2]
+    assert len(rows) == len(where) == result.iterations + 1
+    assert where[0].split() == ["violation:", "circle", "3.0e+00", "(merit", "0.0e+00);", "step:", "none"]
+    first_step = np.linalg.norm(SQP(max_iterations=1).solve(_maratos(), [], start).x - start)
+    assert where[1].endswith(f"step: x {first_step:.1e}")
+    last = where[-1].split()
+    assert last[1] == "circle" and float(last[2]) < 1e-8 < float(where[-2].split()[2])

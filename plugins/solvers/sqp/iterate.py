@@ -98,6 +98,8 @@ class Iterate:
         self.streak = 0
         """``acceptable`` before this iteration's test."""
         self.x: np.ndarray | None = None
+        self.step: np.ndarray | None = None
+        """The last accepted step (None before the first)."""
         trial = self._trial(np.clip(x0, nlp.lbx, nlp.ubx))
         if trial is None:
             raise FloatingPointError("the objective or constraints are not finite at the initial point")
@@ -141,6 +143,27 @@ class Iterate:
         alpha = f"{log['alpha']:9.2e}" if np.isfinite(log["alpha"]) else f"{'-':>9}"
         print(f"{self.iteration:5d} {self.f:15.8e} {violation:9.2e} {dual:9.2e} {alpha} {penalty} "
               f"{1e3 * log['qp_time']:8.2f} {log['regularization']:8.1e} {log['flags']}")
+        if self.o.print_level >= 2:
+            print(f"      {self._where()}")
+
+    def _where(self) -> str:
+        """Where the violation is and what the last step moved, by the NLP's named blocks: the two constraint blocks
+        with the most ℓ1 violation (with their part of the ℓ1 merit, Σ μ_i·viol_i) and the two variable blocks the
+        step moved most (‖d‖₂). This is how the late-step crawl was read: violation the merit does not weigh, on
+        rows with tiny multipliers, and steps along variables without curvature (docs/solvers.md)."""
+        nlp = self.evaluator.nlp
+        violations = self.lin.violations(self.g)
+        rows = sorted(((float(np.sum(violations[block])), name, float(self.weights[block] @ violations[block]))
+                       for name, block in nlp.constraint_blocks.items()), reverse=True)
+        merit = self.o.merit == "l1"
+        where = ", ".join(f"{name} {total:.1e}" + (f" (merit {weighted:.1e})" if merit else "")
+                          for total, name, weighted in rows[:2] if total > 0) or "none"
+        moved = "none"
+        if self.step is not None:
+            blocks = sorted(((float(np.linalg.norm(self.step[block])), name)
+                             for name, block in nlp.variable_blocks.items()), reverse=True)
+            moved = ", ".join(f"{name} {size:.1e}" for size, name in blocks[:2] if size > 0) or "none"
+        return f"violation: {where}; step: {moved}"
 
     def _infeasible(self, reason: str, why: str) -> SolverResult:
         return self._result(SolverStatus.INFEASIBLE, f"{reason}; {why}: a local minimiser of the constraint "
@@ -162,6 +185,7 @@ class Iterate:
             raise FloatingPointError("the derivatives are not finite at an accepted point")
         if self.bfgs is not None and self.x is not None:
             self._update_bfgs(trial.x - self.x, grad + jac.T @ self.lam - self.grad - self.jac.T @ self.lam)
+        self.step = None if self.x is None else trial.x - self.x
         self.x, self.f, self.g, self.theta, self.grad, self.jac = trial.x, trial.f, trial.g, trial.theta, grad, jac
 
     def _least_squares_multipliers(self) -> np.ndarray:

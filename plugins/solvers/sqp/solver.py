@@ -22,7 +22,8 @@ class SQP:
     HS N = 50, step 6 of an ``sqp`` walk takes 965, IPOPT 1,852 from the same start), ``time_limit_s`` (checked
     once per iteration and passed on to the backends that take one; ``None`` for none), ``tolerance`` (on the
     constraint violation, max-norm, and on the stationarity/complementarity residual scaled as IPOPT does),
-    ``print_level`` (≥ 1: one log line per iteration).
+    ``print_level`` (≥ 1: one log line per iteration; ≥ 2: below each, the constraint blocks holding the most
+    violation, with their part of the ℓ1 merit, and the variable blocks the last step moved most).
 
     Specific options, with defaults:
 
