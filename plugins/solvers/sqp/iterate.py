@@ -183,9 +183,9 @@ class Iterate:
         jac = sp.csr_matrix(self.evaluator.jacobian(trial.x))
         if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(jac.data))):
             raise FloatingPointError("the derivatives are not finite at an accepted point")
-        if self.bfgs is not None and self.x is not None:
-            self._update_bfgs(trial.x - self.x, grad + jac.T @ self.lam - self.grad - self.jac.T @ self.lam)
         self.step = None if self.x is None else trial.x - self.x
+        if self.bfgs is not None and self.step is not None:
+            self._update_bfgs(self.step, grad + jac.T @ self.lam - self.grad - self.jac.T @ self.lam)
         self.x, self.f, self.g, self.theta, self.grad, self.jac = trial.x, trial.f, trial.g, trial.theta, grad, jac
 
     def _least_squares_multipliers(self) -> np.ndarray:
