@@ -522,3 +522,26 @@ def test_print_level_two_names_the_blocks_that_hold_the_violation_and_the_step(c
     assert where[1].endswith(f"step: x {first_step:.1e}")
     last = where[-1].split()
     assert last[1] == "circle" and float(last[2]) < 1e-8 < float(where[-2].split()[2])
+
+
+def test_released_linear_variables_lose_the_shift_and_get_a_step_bound():
+    """The release behind the end of the late-step crawl: a variable with an empty Hessian column loses the shift,
+    the others keep it, and the QP bounds its step by LINEAR_STEP·(1 + |x_i|) inside its own bounds."""
+    from plugins.solvers.sqp.hessian import LINEAR_STEP, Model, convexify, release_linear_variables
+
+    H = sp.csc_matrix(np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    jacobian = sp.csr_matrix(np.array([[1.0, 1.0, -1.0]]))
+    model, _ = convexify(H, 1e-3, 1.0, jacobian, lambda: (np.zeros(0, dtype=int), np.zeros(0, dtype=int)))
+    released = release_linear_variables(model, H)
+    assert model.shift == pytest.approx(1e-3)
+    assert released.linear.tolist() == [False, True, True]
+    assert released.P.diagonal().tolist() == pytest.approx([2.0 + 1e-3, 0.0, 0.0])
+    assert sp.csc_matrix(released.curvature).diagonal().tolist() == pytest.approx([2.0 + 1e-3, 0.0, 0.0])
+    assert release_linear_variables(Model(H, H, np.zeros(0, dtype=int), np.zeros(0), 0.0), H).linear is None
+
+    lin = SimpleNamespace(bounds=lambda x: (np.array([-5.0, -5.0, -0.5]), np.array([5.0, 5.0, 5.0])))
+    iterate = SimpleNamespace(lin=lin, x=np.array([1.0, 3.0, 0.5]), n=3)
+    lb, ub = Subproblems._step_bounds(iterate, released)
+    assert lb.tolist() == pytest.approx([-5.0, -4.0 * LINEAR_STEP, -0.5])
+    assert ub.tolist() == pytest.approx([5.0, 4.0 * LINEAR_STEP, 1.5 * LINEAR_STEP])
+    assert Subproblems._step_bounds(iterate, model)[0].tolist() == [-5.0, -5.0, -0.5]

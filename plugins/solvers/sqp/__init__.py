@@ -41,6 +41,11 @@ a step was far too long, the violation rose to 1e-2–1, and the next Hessian ne
 hundreds of iterations (forward HS N = 20, step 3: iteration limit; DMOC N = 100: time limit). The ratio control
 converged on all five first steps measured (HS and DMOC, N = 50 and 100; DMOC N = 20) and on 3-step walks.
 
+After 20 consecutive iterations with δ at its floor, the variables H has no curvature in (the gait steps' power
+slacks) lose δ and have their step bounded by 1 + |x_i| instead (:func:`.hessian.release_linear_variables`), when
+P stays positive definite without it: along the cost's flat valleys their only curvature was δ, and the QP was
+nearly unbounded there (docs/solvers.md, "The late-step crawl").
+
 With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
 the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.
 

@@ -27,6 +27,8 @@ class Model:
     weights: np.ndarray
     """ρ/‖∇g_i‖² for those rows, to correct their multipliers."""
     shift: float
+    linear: np.ndarray | None = None
+    """The variables the shift was taken off (:func:`release_linear_variables`), whose steps the QP bounds."""
 
 
 def convexify(H: sp.csc_matrix, shift: float, shift_growth: float, jacobian: sp.csr_matrix,
@@ -65,6 +67,38 @@ def convexify(H: sp.csc_matrix, shift: float, shift_growth: float, jacobian: sp.
             return Model(P, curvature, rows, 1e2 * scale * inverse_norms, shift), shift
         shift *= 4
     raise FloatingPointError("no shift up to 1e10·max|H| makes the Hessian of the Lagrangian positive definite")
+
+
+LINEAR_STEP = 1.0
+"""The step bound on a released variable, relative to 1 + |x_i|: once released, only its bounds and the rows it
+enters limit it, and on the gait steps those leave directions along which the cost is flat."""
+
+
+def release_linear_variables(model: Model, H: sp.csc_matrix) -> Model:
+    """``model`` with the shift taken off the variables H has no curvature in (an empty column; on the gait steps the
+    power slacks s± of the charged powers, which enter the cost and their split rows linearly), their steps bounded
+    by :data:`LINEAR_STEP` instead; ``model`` itself when that leaves P not positive definite on the rest.
+
+    Why: the shift was those variables' only curvature, so the QP's step along them was the reduced gradient over
+    the shift. Along the cost's flat valleys (reduced gradients ~1e-8) that made the QP nearly unbounded, PIQP
+    failed it, and the steps, of the same direction at every iteration, moved f by ~2e-8 each while keeping the
+    split rows violated: the late-step crawl (docs/solvers.md). Released and bounded, the step on them is the
+    linear programme's, to a bound or to where the rows stop it; a bound alone, with the shift kept, did not end
+    the crawl on DMOC (forward DMOC N = 100, step 2: iteration limit on every rung). Released from the first
+    iteration it moved the first steps' paths (forward HS N = 50, 3-step walk: ACOT 0.0557 against 0.0504), so
+    ``Subproblems._model`` releases only once the shift has sat at its floor."""
+    linear = np.asarray(abs(H).sum(axis=0)).ravel() == 0
+    if model.shift == 0 or not linear.any():
+        return model
+    release = sp.diags(model.shift * linear.astype(float), format="csc")
+    P = (model.P - release).tocsc()
+    scale = max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
+    # P is now singular along the released variables the rows do not tie down: test the rest with a rounding-level
+    # diagonal on them (in the augmented forms the shift on them may have been what made P definite)
+    if model.rows.size and not positive_definite(P + sp.diags(1e-12 * scale * linear.astype(float), format="csc")):
+        return model
+    curvature = (sp.csc_matrix(model.curvature) - release).tocsc()
+    return Model(P, curvature, model.rows, model.weights, model.shift, linear)
 
 
 def working_set(lin: Linearization, x: np.ndarray, g: np.ndarray, lam: np.ndarray,

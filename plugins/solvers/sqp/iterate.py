@@ -85,6 +85,8 @@ class Iterate:
         self.shift_growth = 0.5
         """Factor from the last shift to the first one tried next (``LineSearch._l1_search``; the filter always
         halves)."""
+        self.at_floor = 0
+        """Consecutive iterations whose shift sat at its floor (``Subproblems._model``)."""
         self.bfgs: np.ndarray | None = np.eye(self.n) if options.hessian == "bfgs" else None
         self.bfgs_scaled = False
         self.warm: QPOutcome | None = None

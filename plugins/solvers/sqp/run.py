@@ -114,7 +114,7 @@ class Run(Restoration):
         Its multipliers (up to W on relaxed rows) set the merit weights, not the next Hessian."""
         self.log["flags"] += "e"
         weight = max(1e2, 10 * float(np.max(np.abs(self.lam), initial=0.0)))
-        outcome = self._elastic_qp(model.P, self.grad, weight)
+        outcome = self._elastic_qp(model.P, self.grad, weight, model)
         if not outcome.solved:  # the restoration's QP, with P = I, is far better conditioned
             return self._start_restoration(f"{reason}, and so did its elastic version ({outcome.status})")
         d = outcome.x

@@ -8,8 +8,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from plugins.solvers.sqp.backends import QPOutcome
-from plugins.solvers.sqp.hessian import Model, convexify, working_set
+from plugins.solvers.sqp.hessian import LINEAR_STEP, Model, convexify, release_linear_variables, working_set
 from plugins.solvers.sqp.iterate import Iterate
+
+_FLOOR_ITERATIONS = 20
+"""Consecutive iterations with the shift at its floor after which the linear variables are released: how the
+late-step crawl shows (docs/solvers.md, "The step bound on the linear power parts")."""
 
 
 class Subproblems(Iterate):
@@ -25,7 +29,12 @@ class Subproblems(Iterate):
         model, self.shift = convexify(H, self.shift, self.shift_growth, self.jac,
                                       lambda: working_set(self.lin, self.x, self.g, self.lam,
                                                           -(self.grad + self.jac.T @ self.lam)))
-        return model
+        self.at_floor = self.at_floor + 1 if self.shift == 0 else 0
+        # only where the crawl shows (the first steps' paths are sensitive to any change of their QPs), and not for
+        # the dense backends (quadprog, DAQP), which need P strictly definite
+        if self.at_floor < _FLOOR_ITERATIONS or self.dense:
+            return model
+        return release_linear_variables(model, H)
 
     def _qp(self, model: Model, g: np.ndarray, warm: QPOutcome | None) -> QPOutcome:
         """The SQP subproblem with the constraints' constant term ``g`` (g(x), or g(x+d) − J d for a correction)."""
@@ -34,16 +43,31 @@ class Subproblems(Iterate):
             step = (scipy.sparse.linalg.spsolve(sp.csc_matrix(P), -self.grad) if sp.issparse(P)
                     else scipy.linalg.cho_solve(scipy.linalg.cho_factor(P), -self.grad))
             return QPOutcome(True, "unconstrained", step, np.zeros(0), np.zeros(0), None)
-        lb, ub = self.lin.bounds(self.x)
+        lb, ub = self._step_bounds(model)
         problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense)
         return self.backends.solve(problem, warm, self.log)
 
-    def _elastic_qp(self, P, q: np.ndarray, weight: float) -> QPOutcome:
+    def _step_bounds(self, model: Model | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Bounds on d: lbx ≤ x + d ≤ ubx, and |d_i| ≤ LINEAR_STEP·(1 + |x_i|) on the variables ``model``
+        released (:func:`.hessian.release_linear_variables`)."""
+        lb, ub = self.lin.bounds(self.x)
+        if model is None or model.linear is None:
+            return lb, ub
+        linear = model.linear
+        lb = np.full(self.n, -np.inf) if lb is None else lb.copy()
+        ub = np.full(self.n, np.inf) if ub is None else ub.copy()
+        radius = LINEAR_STEP * (1.0 + np.abs(self.x[linear]))
+        lb[linear] = np.maximum(lb[linear], -radius)
+        ub[linear] = np.minimum(ub[linear], radius)
+        return lb, ub
+
+    def _elastic_qp(self, P, q: np.ndarray, weight: float, model: Model | None = None) -> QPOutcome:
         """min ½dᵀPd + qᵀd + W·Σ(p + n) s.t. lbg ≤ g + J d − p + n ≤ ubg, bounds on x + d, p, n ≥ 0: always
-        feasible, with multipliers bounded by W; the result's ``x`` is d alone."""
+        feasible, with multipliers bounded by W; the result's ``x`` is d alone. With the iteration's ``model``, the
+        bounds on the variables it released too."""
         n, m = self.n, self.m
         jacobian = sp.hstack([self.jac, -sp.eye(m), sp.eye(m)], format="csr")
-        lb, ub = self.lin.bounds(self.x)
+        lb, ub = self._step_bounds(model)
         lb = np.concatenate([np.full(n, -np.inf) if lb is None else lb, np.zeros(2 * m)])
         ub = np.concatenate([np.full(n, np.inf) if ub is None else ub, np.full(2 * m, np.inf)])
         q = np.concatenate([q, np.full(2 * m, weight)])
