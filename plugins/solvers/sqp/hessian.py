@@ -31,13 +31,18 @@ class Model:
     """The variables the shift was taken off (:func:`release_linear_variables`), whose steps the QP bounds."""
 
 
+def hessian_scale(H: sp.csc_matrix) -> float:
+    """max(1, max|H|): what the shift's floor and every rounding-level diagonal are relative to."""
+    return max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
+
+
 def convexify(H: sp.csc_matrix, shift: float, shift_growth: float, jacobian: sp.csr_matrix,
               working_set: Callable[[], tuple[np.ndarray, np.ndarray]]) -> tuple[Model, float]:
     """H made positive definite (package docstring), and the shift to remember for the next iteration's damping.
 
     ``shift`` is the last iteration's, ``shift_growth`` the factor the line search chose for it; ``working_set``
     gives the (rows, variables) to augment, asked only when the shift alone does not suffice."""
-    scale = max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
+    scale = hessian_scale(H)
     floor = 1e-10 * scale
     damping = shift * shift_growth  # the Levenberg–Marquardt part (``LineSearch._l1_search``)
     if shift_growth > 1:  # at most max|H|: beyond, a gradient step that only gets shorter
@@ -92,7 +97,7 @@ def release_linear_variables(model: Model, H: sp.csc_matrix) -> Model:
         return model
     release = sp.diags(model.shift * linear.astype(float), format="csc")
     P = (model.P - release).tocsc()
-    scale = max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
+    scale = hessian_scale(H)
     # P is now singular along the released variables the rows do not tie down: test the rest with a rounding-level
     # diagonal on them (in the augmented forms the shift on them may have been what made P definite)
     if model.rows.size and not positive_definite(P + sp.diags(1e-12 * scale * linear.astype(float), format="csc")):
