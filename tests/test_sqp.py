@@ -35,7 +35,7 @@ from gaitbench.solve.solver import SolverStatus
 from gaitbench.solve.walk import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
-from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, FALLBACK_FIRST, QPBackends
+from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends
 from plugins.solvers.sqp.iterate import least_squares_multipliers
 from plugins.solvers.sqp.subproblems import Subproblems
 
@@ -496,28 +496,6 @@ def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
     without_floor = qpsolvers.solve_problem(problem, solver="piqp", eps_abs=1e-10, eps_rel=1e-10,
                                             **_BACKEND_OPTIONS["piqp"])  # every setting of sqp's call but the floor
     assert not without_floor.found  # the saved QP still shows the failure the floor avoids
-
-
-def test_after_a_qp_the_chosen_backend_fails_the_fallback_goes_first():
-    """A QP of `sqp`'s forward HS N = 20 walk (n = 275) that PIQP fails at its iteration limit and Clarabel solves.
-    After it the next FALLBACK_FIRST QPs go to Clarabel first, one call each, and the one after to PIQP again
-    (here the QP of the test above, which both solve)."""
-    failing = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_fails.npz")
-    solvable = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_finetune.npz")
-    evaluator = SimpleNamespace(evaluations={"qp": 0})
-    backends = QPBackends("piqp", "clarabel", 1e-10, Deadline(None), evaluator)
-
-    def solve(problem: qpsolvers.Problem) -> tuple[str, int]:
-        log = {"flags": "", "qp_time": 0.0}
-        calls = evaluator.evaluations["qp"]
-        assert backends.solve(problem, None, log).solved
-        return log["flags"], evaluator.evaluations["qp"] - calls
-
-    assert solve(failing) == ("f", 2)  # PIQP, then Clarabel
-    assert FALLBACK_FIRST > 0
-    assert [solve(solvable) for _ in range(FALLBACK_FIRST + 1)] == [("F", 1)] * FALLBACK_FIRST + [("", 1)]
-    assert not QPBackends("piqp", None, 1e-10, Deadline(None), evaluator).solve(
-        failing, None, {"flags": "", "qp_time": 0.0}).solved  # the saved QP still shows the failure
 
 
 def test_registered_as_a_solver_plugin(tmp_path: Path):

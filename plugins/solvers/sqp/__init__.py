@@ -96,8 +96,6 @@ failed. PIQP, the default, stops at its iteration limit on some convexified gait
 Its proximal regularisation is kept at or above 1e-10 (its own fine-tuning goes to 1e-13, from where its iterates
 diverge on these QPs), and its limit is 100 iterations, not its own 250: the QPs it solves take at most 95, and
 the ones it fails it fails whatever the limit (``backends._BACKEND_OPTIONS``, ``gaitbench.solve.qp.BACKEND_SETTINGS``).
-It fails them in runs, the QPs of consecutive iterations being alike, so the QP after a failure goes to the fallback
-first (``backends.FALLBACK_FIRST``).
 
 Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
 interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords).

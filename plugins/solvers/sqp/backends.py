@@ -33,14 +33,6 @@ gait QPs it solves at all in at most 95 iterations; on the others it ends at its
 iterations instead of 250 bound what such a failure costs before the fallback solves the QP (docs/solvers.md, the
 sqp section's "Speed")."""
 
-FALLBACK_FIRST = 1
-"""After the chosen backend fails a QP that the fallback solves, this many next QPs go to the fallback first. The QPs of
-consecutive iterations are alike, and PIQP fails those of the late gait steps in runs (forward HS N = 100, step 2:
-341 of 601 QPs, in runs of ~24, each at its 100-iteration limit, 61 ms, before Clarabel solved it). One QP, not
-more: the forward walks at N = 20 and 50 keep their step COTs and take 1.2–1.7× less time with 1; with 3 two of them
-took 2× longer, their steps stalling on Clarabel's less accurate solutions (docs/solvers.md, "The fallback
-first")."""
-
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
 solve's limit (PIQP, ProxQP and quadprog have none, and are only stopped between iterations)."""
@@ -76,38 +68,21 @@ class QPBackends:
         self.evaluator = evaluator
         self.time = 0.0
         """Seconds spent in backend calls so far."""
-        self.fallback_first = 0
-        """How many more QPs go to the fallback first (:data:`FALLBACK_FIRST`)."""
 
     def solve(self, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """The QP by the chosen backend, and by the fallback backend (cold) when the first one fails (flag "f" in the
-        iteration's ``log``, which also gets the time). For :data:`FALLBACK_FIRST` QPs after such a failure the
-        fallback goes first (flag "F"), and the chosen backend only gets the ones it fails."""
-        fallback = self.fallback
-        if fallback is None or fallback == self.solver:
-            return self._call(self.solver, problem, warm, log)
-        fallback_problem = problem
-        if fallback not in qpsolvers.sparse_solvers and sp.issparse(problem.P):
-            fallback_problem = qpsolvers.Problem(*(part.toarray() if sp.issparse(part) else part
-                                                   for part in problem.unpack()))
-        if self.fallback_first:
-            self.fallback_first -= 1
-            first = self._call(fallback, fallback_problem, None, log)
-            if first.solved:
-                log["flags"] += "F"
-                return first
-            outcome = self._call(self.solver, problem, warm, log)
-            return outcome if outcome.solved else QPOutcome(False, f"{fallback}: {first.status}; "
-                                                                   f"{self.solver}: {outcome.status}")
+        iteration's ``log``, which also gets the time)."""
         outcome = self._call(self.solver, problem, warm, log)
-        if outcome.solved:
+        fallback = self.fallback
+        if outcome.solved or fallback is None or fallback == self.solver:
             return outcome
-        second = self._call(fallback, fallback_problem, None, log)
-        if not second.solved:
-            return QPOutcome(False, f"{outcome.status}; {fallback}: {second.status}")
-        log["flags"] += "f"
-        self.fallback_first = FALLBACK_FIRST
-        return second
+        if fallback not in qpsolvers.sparse_solvers and sp.issparse(problem.P):
+            problem = qpsolvers.Problem(*(part.toarray() if sp.issparse(part) else part for part in problem.unpack()))
+        second = self._call(fallback, problem, None, log)
+        if second.solved:
+            log["flags"] += "f"
+            return second
+        return QPOutcome(False, f"{outcome.status}; {fallback}: {second.status}")
 
     def _call(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """One backend call, counted in ``evaluations["qp"]`` and timed; backend warnings and exceptions are
