@@ -37,6 +37,7 @@ from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
 from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends
 from plugins.solvers.sqp.iterate import least_squares_multipliers
+from plugins.solvers.sqp.solver import LONG_BUDGET
 from plugins.solvers.sqp.subproblems import Subproblems
 
 
@@ -435,6 +436,15 @@ def test_a_two_step_forward_walk_at_ipopts_acot_or_lower(transcription: str):
 def test_a_three_step_forward_walk_at_ipopts_acot_or_lower(transcription: str, n_nodes: int):
     """The issue's done-when walks (``gaitbench solve -e forward -s sqp --steps 3``)."""
     _walks_to_ipopts_acot(transcription, n_nodes, 3)
+
+
+def test_the_last_resort_is_a_longer_budget_with_the_same_options():
+    solver = SQP(qp_solver="clarabel", merit="filter", tolerance=1e-7)
+    [(name, variant)] = solver.last_resorts()
+    assert name == "more-iterations"
+    assert variant.max_iterations == LONG_BUDGET > solver.max_iterations
+    assert (variant.qp_solver, variant.merit, variant.tolerance) == ("clarabel", "filter", 1e-7)
+    assert variant.last_resorts() == []  # a budget at least as long has none
 
 
 def test_remedies_are_other_paths_and_keep_the_options():

@@ -15,6 +15,10 @@ _HESSIANS = ("exact", "bfgs")
 _MERITS = ("l1", "filter")
 
 
+LONG_BUDGET = 10_000
+"""The iteration budget of the ``more-iterations`` last resort (:meth:`SQP.last_resorts`)."""
+
+
 class SQP:
     """Line-search SQP with QP subproblems solved through ``qpsolvers``; see the package docstring for the method.
 
@@ -96,6 +100,15 @@ class SQP:
             variants.append(("clarabel", SQP(**{**self._arguments, "qp_solver": "clarabel",
                                                 "fallback_qp_solver": self.qp_solver})))
         return variants
+
+    def last_resorts(self) -> list[tuple[str, SQP]]:
+        """A longer budget, :data:`LONG_BUDGET` iterations, after the walk's other rungs: on the thesis cost's flat
+        valleys `sqp` can crawl past 3,000 iterations where nothing else is wrong (stairs, HS, step 1 as the
+        reference column walks it: converged at 3,417, 7,126 and 9,037 iterations at N = 80, 90 and 100, where every
+        other rung stopped at 3,000; docs/solvers.md, "The reference column"). Last, because it is the costliest."""
+        if self.max_iterations >= LONG_BUDGET:
+            return []
+        return [("more-iterations", SQP(**{**self._arguments, "max_iterations": LONG_BUDGET}))]
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Solve from ``initial_guess``; every failure, including exceptions, becomes a status."""
