@@ -555,3 +555,83 @@ def test_released_linear_variables_lose_the_shift_and_get_a_step_bound():
     assert lb.tolist() == pytest.approx([-5.0, -4.0 * LINEAR_STEP, -0.5])
     assert ub.tolist() == pytest.approx([5.0, 4.0 * LINEAR_STEP, 1.5 * LINEAR_STEP])
     assert Subproblems._step_bounds(iterate, model)[0].tolist() == [-5.0, -5.0, -0.5]
+
+
+def _split_power() -> NLP:
+    """A charged power P = u₀u₁ split as s⁺ − s⁻ (the gait steps' form), a second split that costs nothing to raise
+    along its row, and a slack that enters two rows: only the first is a slack pair."""
+    b = NLPBuilder()
+    u = b.variable("u", (2, 1))
+    positive = b.variable("positive", (1, 1), lower=0.0)
+    negative = b.variable("negative", (1, 1), lower=0.0)
+    free = b.variable("free", (2, 1), lower=0.0)
+    shared = b.variable("shared", (1, 1), lower=0.0)
+    b.constrain("split", u[0] * u[1] - positive + negative)
+    b.constrain("free_split", u[0] - u[1] - free[0] + free[1])
+    b.constrain("shared_rows", ca.vertcat(u[0] + shared, u[1] - 2 * shared), -np.inf, 10.0)
+    objective = (u[0] - 2) ** 2 + (u[1] - 1) ** 2 + 3 * positive + 0.5 * negative + shared
+    return b.build(ca.SX.sym("p", 0), objective)
+
+
+def test_slack_pairs_are_reset_to_the_cheapest_values_that_satisfy_their_row():
+    """A magical step (plugins/solvers/sqp/slacks.py): the pair's row holds exactly afterwards, with one slack at
+    its bound, and the objective falls by the cost the reset saves."""
+    from plugins.solvers.sqp.linearization import Linearization
+    from plugins.solvers.sqp.slacks import SlackPairs
+
+    nlp = _split_power()
+    evaluator = NLPEvaluator(nlp, np.zeros(0))
+    lin = Linearization(nlp)
+    index = np.arange(nlp.n_variables)
+    u, positive, negative = (index[nlp.variable_blocks[name]] for name in ("u", "positive", "negative"))
+    x = np.zeros(nlp.n_variables)
+    x[u] = [1.5, 2.0]
+    pairs = SlackPairs.find(evaluator, lin, evaluator.gradient(x), sp.csr_matrix(evaluator.jacobian(x)))
+    assert (pairs.down.tolist(), pairs.up.tolist()) == (positive.tolist(), negative.tolist())
+    split = np.arange(nlp.n_constraints)[nlp.constraint_blocks["split"]]
+    for power_slacks, expected in (((1.0, 0.4), (3.0, 0.0)), ((0.0, 5.0), (3.0, 0.0))):
+        x[positive], x[negative] = power_slacks
+        reset = pairs.reset(x, evaluator.constraints(x), lin)
+        assert (reset[positive].item(), reset[negative].item()) == pytest.approx(expected)
+        assert evaluator.constraints(reset)[split].item() == pytest.approx(0.0, abs=1e-15)
+        others = np.setdiff1d(index, [*positive, *negative])
+        np.testing.assert_array_equal(reset[others], x[others])
+    x[u] = [-1.5, 2.0]  # P = −3, held by both slacks above their cheapest values
+    x[positive], x[negative] = 1.0, 4.0
+    reset = pairs.reset(x, evaluator.constraints(x), lin)
+    assert (reset[positive].item(), reset[negative].item()) == pytest.approx((0.0, 3.0))
+    assert evaluator.objective(x) - evaluator.objective(reset) == pytest.approx(3 * 1.0 + 0.5 * 1.0)
+
+
+@pytest.mark.parametrize("floor_iterations", [0, 20])
+def test_slack_pairs_are_reset_only_once_the_shift_sits_at_its_floor(monkeypatch, floor_iterations: int):
+    """The reset is for the late-step crawl: before the shift has sat at its floor for 20 iterations it never runs,
+    so the first steps' paths are those without it (on this small problem the solve ends before that). Where it
+    runs (the floor count set to 0 here), a reset point holds its split row exactly and never has a higher merit."""
+    import plugins.solvers.sqp.subproblems as subproblems
+    from plugins.solvers.sqp.linesearch import LineSearch
+
+    monkeypatch.setattr(subproblems, "_FLOOR_ITERATIONS", floor_iterations)
+    nlp = _split_power()
+    split = np.arange(nlp.n_constraints)[nlp.constraint_blocks["split"]]
+    resets = []
+    original = LineSearch._reset_slacks
+
+    def spy(self, trial):
+        point = original(self, trial)
+        if point is not trial:
+            resets.append((self._phi(trial) - self._phi(point), abs(point.g[split].item())))
+        return point
+
+    monkeypatch.setattr(LineSearch, "_reset_slacks", spy)
+    result = SQP().solve(nlp, [], np.zeros(nlp.n_variables))
+    assert result.converged, result.message
+    if floor_iterations:
+        assert resets == []
+    else:
+        assert resets
+        assert all(fall >= 0 and violation <= 1e-12 for fall, violation in resets)
+    u = result.x[nlp.variable_blocks["u"]]
+    power = u[0] * u[1]
+    assert result.x[nlp.variable_blocks["positive"]].item() == pytest.approx(max(power, 0.0), abs=1e-7)
+    assert result.x[nlp.variable_blocks["negative"]].item() == pytest.approx(max(-power, 0.0), abs=1e-7)

@@ -44,7 +44,12 @@ converged on all five first steps measured (HS and DMOC, N = 50 and 100; DMOC N 
 After 20 consecutive iterations with δ at its floor, the variables H has no curvature in (the gait steps' power
 slacks) lose δ and have their step bounded by 1 + |x_i| instead (:func:`.hessian.release_linear_variables`), when
 P stays positive definite without it: along the cost's flat valleys their only curvature was δ, and the QP was
-nearly unbounded there (docs/solvers.md, "The late-step crawl").
+nearly unbounded there (docs/solvers.md, "The late-step crawl"). From then on, too, each accepted point gets a
+magical step on the NLP's slack pairs (:mod:`.slacks`): two linear variables that split one equality row, as the
+gait steps' P = s⁺ − s⁻ does, are set to the cheapest values that satisfy the row given the rest of x, when that
+does not raise φ. Those rows' weights follow multipliers of ~1e-6, so φ hardly sees the violation the long steps
+leave on the bilinear powers (~1e-3), and without the reset the acceptable level was out of reach (docs/solvers.md,
+"The slack pairs' reset").
 
 With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
 the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.
@@ -107,8 +112,8 @@ Options on the command line: ``-s sqp -o qp_solver=daqp -o hessian=bfgs -o merit
 Modules: :mod:`.solver` holds the options. One solve is a :class:`.run.Run`, built in layers, each class on the one
 before: :mod:`.iterate` (the point, its multipliers, the KKT test and the result), :mod:`.subproblems` (the QPs of an
 iteration), :mod:`.linesearch` (both globalisations), :mod:`.restoration`, :mod:`.run` (the outer loop). They use
-:mod:`.linearization` (the QPs' ``qpsolvers`` form), :mod:`.backends` (the backend calls) and :mod:`.hessian` (the
-convexification and BFGS).
+:mod:`.linearization` (the QPs' ``qpsolvers`` form), :mod:`.backends` (the backend calls), :mod:`.hessian` (the
+convexification and BFGS) and :mod:`.slacks` (the slack pairs' reset).
 """
 
 from __future__ import annotations

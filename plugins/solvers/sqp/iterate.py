@@ -16,6 +16,7 @@ from gaitbench.solve.solver import SolverResult, SolverStatus
 from plugins.solvers.sqp.backends import QPBackends, QPOutcome
 from plugins.solvers.sqp.hessian import damped_bfgs_update
 from plugins.solvers.sqp.linearization import Linearization
+from plugins.solvers.sqp.slacks import SlackPairs
 
 if TYPE_CHECKING:
     from plugins.solvers.sqp.solver import SQP
@@ -107,6 +108,8 @@ class Iterate:
             raise FloatingPointError("the objective or constraints are not finite at the initial point")
         self._accept(trial)
         self.lam = self._least_squares_multipliers()
+        self.slack_pairs = SlackPairs.find(evaluator, self.lin, self.grad, self.jac)
+        """The NLP's slack pairs, reset at accepted points once the crawl shows (``LineSearch._reset_slacks``)."""
         theta0 = max(1.0, trial.theta)
         self.theta_max, self.theta_min = 1e4 * theta0, 1e-4 * theta0
 

@@ -34,7 +34,22 @@ class LineSearch(Subproblems):
             self.warm = correction
             lam = self._multipliers(correction, model)
         self.lam = lam
-        self._accept(trial)
+        self._accept(self._reset_slacks(trial))
+
+    def _reset_slacks(self, trial: Trial) -> Trial:
+        """``trial`` with its slack pairs at their cheapest values (:mod:`.slacks`), once the crawl shows and when
+        that does not raise the ℓ1 merit; ``trial`` itself otherwise."""
+        if self.slack_pairs is None or self.o.merit != "l1" or not self._crawling():
+            return trial
+        reset = self._trial(self.slack_pairs.reset(trial.x, trial.g, self.lin))
+        if reset is None or self._phi(reset) > self._phi(trial):
+            return trial
+        self.log["flags"] += "m"
+        return reset
+
+    def _phi(self, point: Trial | LineSearch) -> float:
+        """The ℓ1 merit φ = f + Σ μ_i·viol_i(g) at ``point``, with the current weights."""
+        return point.f + self.weights @ self.lin.violations(point.g)
 
     def _correction(self, model: Model, d: np.ndarray, trial: Trial | None) -> tuple[Trial, QPOutcome] | None:
         """A second-order correction step from x, when the full step ``trial`` was rejected and did not reduce θ."""
@@ -57,8 +72,7 @@ class LineSearch(Subproblems):
 
     def _l1_search(self, model: Model, d: np.ndarray):
         """Armijo backtracking on φ = f + Σ μ_i·viol_i(g); returns (point, correction QP or None) or None."""
-        def phi(point: Trial | LineSearch) -> float:
-            return point.f + self.weights @ self.lin.violations(point.g)
+        phi = self._phi
 
         def count_stall(point: Trial) -> None:
             self.stalled = self.stalled + 1 if merit - phi(point) <= slack else 0

@@ -32,9 +32,13 @@ class Subproblems(Iterate):
         self.at_floor = self.at_floor + 1 if self.shift == 0 else 0
         # only where the crawl shows (the first steps' paths are sensitive to any change of their QPs), and not for
         # the dense backends (quadprog, DAQP), which need P strictly definite
-        if self.at_floor < _FLOOR_ITERATIONS or self.dense:
+        if not self._crawling() or self.dense:
             return model
         return release_linear_variables(model, H)
+
+    def _crawling(self) -> bool:
+        """Whether the shift has sat at its floor for :data:`_FLOOR_ITERATIONS`: how the late-step crawl shows."""
+        return self.at_floor >= _FLOOR_ITERATIONS
 
     def _qp(self, model: Model, g: np.ndarray, warm: QPOutcome | None) -> QPOutcome:
         """The SQP subproblem with the constraints' constant term ``g`` (g(x), or g(x+d) − J d for a correction)."""
