@@ -635,3 +635,28 @@ def test_slack_pairs_are_reset_only_once_the_shift_sits_at_its_floor(monkeypatch
     power = u[0] * u[1]
     assert result.x[nlp.variable_blocks["positive"]].item() == pytest.approx(max(power, 0.0), abs=1e-7)
     assert result.x[nlp.variable_blocks["negative"]].item() == pytest.approx(max(-power, 0.0), abs=1e-7)
+
+
+def test_a_slack_reset_that_would_raise_the_merit_or_comes_before_the_crawl_is_not_taken():
+    """``LineSearch._reset_slacks`` on one point: taken once the shift has sat at its floor, with the ℓ1 merit, where
+    it lowers φ; the point itself before the crawl, where covering the power costs more than the merit's weights
+    save, and with the filter."""
+    from plugins.solvers.sqp.run import Run
+    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+
+    nlp = _split_power()
+    split = np.arange(nlp.n_constraints)[nlp.constraint_blocks["split"]]
+    x = np.zeros(nlp.n_variables)
+    x[nlp.variable_blocks["u"]] = [1.5, 2.0]  # P = 3, held by neither slack
+    run = Run(SQP(), NLPEvaluator(nlp, np.zeros(0)), x, Deadline(None))
+    trial = run._trial(x)
+    run.weights = np.full(nlp.n_constraints, 10.0)  # above the slacks' costs: covering P lowers φ
+    assert run._reset_slacks(trial) is trial
+    run.at_floor = _FLOOR_ITERATIONS
+    reset = run._reset_slacks(trial)
+    assert reset.g[split].item() == pytest.approx(0.0, abs=1e-15) and run._phi(reset) < run._phi(trial)
+    run.weights = np.zeros(nlp.n_constraints)  # φ = f, which covering P raises by 3·3
+    assert run._reset_slacks(trial) is trial
+    filtered = Run(SQP(merit="filter"), NLPEvaluator(nlp, np.zeros(0)), x, Deadline(None))
+    filtered.at_floor = _FLOOR_ITERATIONS
+    assert filtered._reset_slacks(trial) is trial
