@@ -55,7 +55,7 @@ class SlackPairs:
         candidates, rows, coefficients = candidates[keep], rows[keep], coefficients[keep]
         order = np.argsort(rows, kind="stable")
         candidates, rows, coefficients = candidates[order], rows[order], coefficients[order]
-        unique, first, count = np.unique(rows, return_index=True, return_counts=True)
+        _, first, count = np.unique(rows, return_index=True, return_counts=True)
         pairs = first[count == 2]
         first_up = coefficients[pairs] > 0
         opposite = first_up != (coefficients[pairs + 1] > 0)
