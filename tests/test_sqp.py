@@ -438,13 +438,20 @@ def test_a_three_step_forward_walk_at_ipopts_acot_or_lower(transcription: str, n
     _walks_to_ipopts_acot(transcription, n_nodes, 3)
 
 
-def test_the_last_resort_is_a_longer_budget_with_the_same_options():
+def test_the_last_resorts_are_the_crawl_floor_then_a_longer_budget_with_the_same_options():
+    from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR
+
     solver = SQP(qp_solver="clarabel", merit="filter", tolerance=1e-7)
-    [(name, variant)] = solver.last_resorts()
-    assert name == "more-iterations"
-    assert variant.max_iterations == LONG_BUDGET > solver.max_iterations
-    assert (variant.qp_solver, variant.merit, variant.tolerance) == ("clarabel", "filter", 1e-7)
-    assert variant.last_resorts() == []  # a budget at least as long has none
+    [(floor_name, floor), (budget_name, budget)] = solver.last_resorts()
+    assert (floor_name, budget_name) == ("crawl-floor", "more-iterations")
+    assert floor.crawl_shift_floor == CRAWL_SHIFT_FLOOR < solver.crawl_shift_floor == SHIFT_FLOOR
+    assert budget.max_iterations == LONG_BUDGET > solver.max_iterations == floor.max_iterations
+    for variant in (floor, budget):
+        assert (variant.qp_solver, variant.merit, variant.tolerance) == ("clarabel", "filter", 1e-7)
+    assert [name for name, _ in floor.last_resorts()] == ["more-iterations"]
+    assert [name for name, _ in budget.last_resorts()] == ["crawl-floor"]
+    with pytest.raises(ValueError, match="crawl_shift_floor"):
+        SQP(crawl_shift_floor=1e-8)
 
 
 def test_remedies_are_other_paths_and_keep_the_options():
@@ -555,6 +562,34 @@ def test_released_linear_variables_lose_the_shift_and_get_a_step_bound():
     assert lb.tolist() == pytest.approx([-5.0, -4.0 * LINEAR_STEP, -0.5])
     assert ub.tolist() == pytest.approx([5.0, 4.0 * LINEAR_STEP, 1.5 * LINEAR_STEP])
     assert Subproblems._step_bounds(iterate, model)[0].tolist() == [-5.0, -5.0, -0.5]
+
+
+def test_the_crawl_floor_lowers_the_shift_floor_once_the_shift_sits_at_its_floor():
+    """``crawl_shift_floor``: before the crawl shows the shift's floor is SHIFT_FLOOR·max|H|, after it the crawl
+    floor (by default SHIFT_FLOOR still); a shift between the two still counts as at the floor (the crawl goes on),
+    one above SHIFT_FLOOR's ends it."""
+    from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR, hessian_scale
+    from plugins.solvers.sqp.run import Run
+    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+
+    nlp = _split_power()
+    x = np.zeros(nlp.n_variables)
+    x[nlp.variable_blocks["u"]] = [1.5, 2.0]
+    default = Run(SQP(), NLPEvaluator(nlp, np.zeros(0)), x, Deadline(None))
+    default.at_floor = _FLOOR_ITERATIONS
+    scale = hessian_scale(sp.csc_matrix(default.evaluator.hessian_lagrangian(default.x, 1.0, default.lam)))
+    assert default._model().shift == pytest.approx(SHIFT_FLOOR * scale)
+    run = Run(SQP(crawl_shift_floor=CRAWL_SHIFT_FLOOR), NLPEvaluator(nlp, np.zeros(0)), x, Deadline(None))
+    assert run._model().shift == pytest.approx(SHIFT_FLOOR * scale) and run.at_floor == 1
+    run.at_floor = _FLOOR_ITERATIONS
+    assert run._model().shift == pytest.approx(CRAWL_SHIFT_FLOOR * scale) and run.at_floor == _FLOOR_ITERATIONS + 1
+    run.shift, run.shift_growth = 10 * CRAWL_SHIFT_FLOOR * scale, 1.0
+    assert run._model().shift == pytest.approx(10 * CRAWL_SHIFT_FLOOR * scale)
+    assert run.at_floor == _FLOOR_ITERATIONS + 2
+    run.shift = 10 * SHIFT_FLOOR * scale
+    assert run._model().shift == pytest.approx(10 * SHIFT_FLOOR * scale) and run.at_floor == 0
+    run.shift = 0.0
+    assert run._model().shift == pytest.approx(SHIFT_FLOOR * scale)  # no longer crawling: the usual floor
 
 
 def _split_power() -> NLP:

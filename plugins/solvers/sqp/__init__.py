@@ -49,7 +49,10 @@ magical step on the NLP's slack pairs (:mod:`.slacks`): two linear variables tha
 gait steps' P = s⁺ − s⁻ does, are set to the cheapest values that satisfy the row given the rest of x, when that
 does not raise φ. Those rows' weights follow multipliers of ~1e-6, so φ hardly sees the violation the long steps
 leave on the bilinear powers (~1e-3), and without the reset the acceptable level was out of reach (docs/solvers.md,
-"The slack pairs' reset").
+"The slack pairs' reset"). The walk's ``crawl-floor`` last resort (``crawl_shift_floor``) also lowers δ₀ from then on,
+to 1e-12·max(1, max|H|), the crawl still counted from 1e-10's floor: max|H| is set by the stiffest terms, so 1e-10
+of it can be the only curvature along a valley, and the steps along it the reduced gradient over δ₀
+(docs/solvers.md, "The crawl floor").
 
 With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
 the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.

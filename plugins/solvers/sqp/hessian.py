@@ -31,24 +31,36 @@ class Model:
     """The variables the shift was taken off (:func:`release_linear_variables`), whose steps the QP bounds."""
 
 
+SHIFT_FLOOR = 1e-10
+"""The shift's floor relative to max|H|: H + δI with δ at the floor lifts only directions without curvature."""
+CRAWL_SHIFT_FLOOR = 1e-12
+"""The floor of the ``crawl-floor`` last resort once the late-step crawl shows (``Subproblems._model``). max|H| is
+set by the stiffest terms (~2e4 on the stairs steps), so 1e-10 of it (2e-6) can be the only curvature along the
+cost's valleys, and the steps along them their reduced gradient over it: stairs step 3 at N = 80 slid to the
+iteration limit, f falling ~2e-4 an iteration; with 1e-12 it converges in 477 (docs/solvers.md, "The crawl
+floor"). Not lower: at 1e-13 PIQP fails the QPs and the iteration cycles through elastic steps."""
+
+
 def hessian_scale(H: sp.csc_matrix) -> float:
     """max(1, max|H|): what the shift's floor and every rounding-level diagonal are relative to."""
     return max(1.0, float(np.max(np.abs(H.data), initial=0.0)))
 
 
 def convexify(H: sp.csc_matrix, shift: float, shift_growth: float, jacobian: sp.csr_matrix,
-              working_set: Callable[[], tuple[np.ndarray, np.ndarray]]) -> tuple[Model, float]:
+              working_set: Callable[[], tuple[np.ndarray, np.ndarray]],
+              relative_floor: float = SHIFT_FLOOR) -> tuple[Model, float]:
     """H made positive definite (package docstring), and the shift to remember for the next iteration's damping.
 
     ``shift`` is the last iteration's, ``shift_growth`` the factor the line search chose for it; ``working_set``
-    gives the (rows, variables) to augment, asked only when the shift alone does not suffice."""
+    gives the (rows, variables) to augment, asked only when the shift alone does not suffice; ``relative_floor``
+    is the shift's floor relative to max|H|, below which the remembered shift is 0."""
     scale = hessian_scale(H)
-    floor = 1e-10 * scale
+    floor = relative_floor * scale
     damping = shift * shift_growth  # the Levenberg–Marquardt part (``LineSearch._l1_search``)
     if shift_growth > 1:  # at most max|H|: beyond, a gradient step that only gets shorter
         damping = min(max(damping, 1e-8 * scale), scale)
     floor = max(floor, damping)
-    kept_shift = damping if damping > 1e-10 * scale else 0.0
+    kept_shift = damping if damping > relative_floor * scale else 0.0
     identity = sp.eye(H.shape[0], format="csc")
     regularised = (H + floor * identity).tocsc()
     if positive_definite(regularised):

@@ -9,6 +9,7 @@ import qpsolvers
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.solver import SolverResult, SolverStatus
+from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR
 from plugins.solvers.sqp.run import Run
 
 _HESSIANS = ("exact", "bfgs")
@@ -50,6 +51,8 @@ class SQP:
       KKT residual stay below it for 15 consecutive iterations, or when the iteration cannot continue (QP or line
       search failure) from such a point: interior-point backends are accurate to ~1e-10 relative, which on the
       gait steps (multipliers ~30 times constraint gradients ~7000) bounds the attainable stationarity near 1e-8.
+    - ``crawl_shift_floor=1e-10``: the shift's floor relative to max|H| once the late-step crawl shows (the shift at
+      its floor, 1e-10·max|H|, for 20 iterations); the ``crawl-floor`` last resort lowers it to 1e-12.
 
     A bad option value raises ValueError at construction (the CLI reports it).
     """
@@ -59,7 +62,8 @@ class SQP:
     def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
                  print_level: int = 0, qp_solver: str = "piqp", qp_tolerance: float = 1e-10,
                  hessian: str = "exact", merit: str = "l1", second_order_correction: bool = True,
-                 acceptable_tolerance: float = 1e-6, fallback_qp_solver: str | None = "clarabel") -> None:
+                 acceptable_tolerance: float = 1e-6, fallback_qp_solver: str | None = "clarabel",
+                 crawl_shift_floor: float = SHIFT_FLOOR) -> None:
         if qp_solver not in qpsolvers.available_solvers:
             raise ValueError(f"unknown QP solver {qp_solver!r}; available: "
                              f"{', '.join(sorted(qpsolvers.available_solvers))}")
@@ -73,6 +77,9 @@ class SQP:
             raise ValueError(f"unknown merit {merit!r}; choose one of {', '.join(_MERITS)}")
         if max_iterations < 0 or min(tolerance, qp_tolerance, acceptable_tolerance) <= 0:
             raise ValueError("max_iterations must be ≥ 0, the tolerances > 0")
+        if not 0 < crawl_shift_floor <= SHIFT_FLOOR:
+            raise ValueError(f"crawl_shift_floor must be in (0, {SHIFT_FLOOR:g}]: the crawl floor is the usual one "
+                             f"or lower")
         self.max_iterations = int(max_iterations)
         self.time_limit_s = time_limit_s
         self.tolerance = float(tolerance)
@@ -84,10 +91,12 @@ class SQP:
         self.merit = merit
         self.second_order_correction = bool(second_order_correction)
         self.acceptable_tolerance = max(float(acceptable_tolerance), self.tolerance)
+        self.crawl_shift_floor = float(crawl_shift_floor)
         self._arguments = {"max_iterations": max_iterations, "time_limit_s": time_limit_s, "tolerance": tolerance,
                            "print_level": print_level, "qp_solver": qp_solver, "qp_tolerance": qp_tolerance,
                            "hessian": hessian, "merit": merit, "second_order_correction": second_order_correction,
-                           "acceptable_tolerance": acceptable_tolerance, "fallback_qp_solver": fallback_qp_solver}
+                           "acceptable_tolerance": acceptable_tolerance, "fallback_qp_solver": fallback_qp_solver,
+                           "crawl_shift_floor": crawl_shift_floor}
 
     def remedies(self) -> list[tuple[str, SQP]]:
         """Variants for the walk's retry ladder, each another path through the same NLP: the filter instead of the
@@ -102,13 +111,20 @@ class SQP:
         return variants
 
     def last_resorts(self) -> list[tuple[str, SQP]]:
-        """A longer budget, :data:`LONG_BUDGET` iterations, after the walk's other rungs: on the thesis cost's flat
-        valleys `sqp` can crawl past 3,000 iterations where nothing else is wrong (stairs, HS, step 1 as the
-        reference column walks it: converged at 3,417, 7,126 and 9,037 iterations at N = 80, 90 and 100, where every
-        other rung stopped at 3,000; docs/solvers.md, "The reference column"). Last, because it is the costliest."""
-        if self.max_iterations >= LONG_BUDGET:
-            return []
-        return [("more-iterations", SQP(**{**self._arguments, "max_iterations": LONG_BUDGET}))]
+        """After the walk's other rungs, the crawl's two remedies, cheaper first. ``crawl-floor``: the shift's floor
+        lowered to :data:`.hessian.CRAWL_SHIFT_FLOOR` once the crawl shows, whose steps along the cost's valleys
+        are then 100 times longer (stairs step 3, HS N = 80, from the walk's state: 477 iterations where the first
+        attempt slid to its 3,000th; docs/solvers.md, "The crawl floor"). ``more-iterations``: :data:`LONG_BUDGET`
+        iterations, on which the slide itself converges (the stairs step 1 as the reference column walks it, at
+        N = 80, 90 and 100: 3,417, 7,126 and 9,037 iterations before the slack pairs' reset; "The reference
+        column"). Last resorts because either moves where a solve ends on the valley, which the first attempt and
+        the other rungs leave as it was."""
+        resorts = []
+        if self.crawl_shift_floor > CRAWL_SHIFT_FLOOR:
+            resorts.append(("crawl-floor", SQP(**{**self._arguments, "crawl_shift_floor": CRAWL_SHIFT_FLOOR})))
+        if self.max_iterations < LONG_BUDGET:
+            resorts.append(("more-iterations", SQP(**{**self._arguments, "max_iterations": LONG_BUDGET})))
+        return resorts
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Solve from ``initial_guess``; every failure, including exceptions, becomes a status."""

@@ -8,7 +8,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from plugins.solvers.sqp.backends import QPOutcome
-from plugins.solvers.sqp.hessian import LINEAR_STEP, Model, convexify, release_linear_variables, working_set
+from plugins.solvers.sqp.hessian import (
+    LINEAR_STEP,
+    SHIFT_FLOOR,
+    Model,
+    convexify,
+    hessian_scale,
+    release_linear_variables,
+    working_set,
+)
 from plugins.solvers.sqp.iterate import Iterate
 
 _FLOOR_ITERATIONS = 20
@@ -28,8 +36,10 @@ class Subproblems(Iterate):
             raise FloatingPointError("the Hessian of the Lagrangian is not finite")
         model, self.shift = convexify(H, self.shift, self.shift_growth, self.jac,
                                       lambda: working_set(self.lin, self.x, self.g, self.lam,
-                                                          -(self.grad + self.jac.T @ self.lam)))
-        self.at_floor = self.at_floor + 1 if self.shift == 0 else 0
+                                                          -(self.grad + self.jac.T @ self.lam)),
+                                      self.o.crawl_shift_floor if self._crawling() else SHIFT_FLOOR)
+        # at the floor by the usual one, so that the lower floor does not end the crawl it is for
+        self.at_floor = self.at_floor + 1 if self.shift <= SHIFT_FLOOR * hessian_scale(H) else 0
         # only where the crawl shows (the first steps' paths are sensitive to any change of their QPs), and not for
         # the dense backends (quadprog, DAQP), which need P strictly definite
         if not self._crawling() or self.dense:
