@@ -50,7 +50,7 @@ gait steps' P = s⁺ − s⁻ does, are set to the cheapest values that satisfy 
 does not raise φ. Those rows' weights follow multipliers of ~1e-6, so φ hardly sees the violation the long steps
 leave on the bilinear powers (~1e-3), and without the reset the acceptable level was out of reach (docs/solvers.md,
 "The slack pairs' reset"). The walk's ``crawl-floor`` last resort (``crawl_shift_floor``) also lowers δ₀ from then on,
-to 1e-12·max(1, max|H|), the crawl still counted from 1e-10's floor: max|H| is set by the stiffest terms, so 1e-10
+to 1e-12·max(1, max|H|), the crawl still counted from 1e-10's floor: max|H| is set by H's largest entries, so 1e-10
 of it can be the only curvature along a valley, and the steps along it the reduced gradient over δ₀
 (docs/solvers.md, "The crawl floor").
 

@@ -35,10 +35,11 @@ SHIFT_FLOOR = 1e-10
 """The shift's floor relative to max|H|: H + δI with δ at the floor lifts only directions without curvature."""
 CRAWL_SHIFT_FLOOR = 1e-12
 """The floor of the ``crawl-floor`` last resort once the late-step crawl shows (``Subproblems._model``). max|H| is
-set by the stiffest terms (~2e4 on the stairs steps), so 1e-10 of it (2e-6) can be the only curvature along the
-cost's valleys, and the steps along them their reduced gradient over it: stairs step 3 at N = 80 slid to the
-iteration limit, f falling ~2e-4 an iteration; with 1e-12 it converges in 477 (docs/solvers.md, "The crawl
-floor"). Not lower: at 1e-13 PIQP fails the QPs and the iteration cycles through elastic steps."""
+set by H's largest entries (~2e4 on the stairs step 3 at N = 80; ~7e6 where multipliers reach ~5e5), so 1e-10 of
+it can be the only curvature along the cost's valleys, and the steps along them their reduced gradient over it:
+that step slid to the iteration limit, f falling ~2e-4 an iteration; with 1e-12 it converges in 477
+(docs/solvers.md, "The crawl floor"). Not lower: at 1e-13 PIQP fails the QPs and the iteration cycles through
+elastic steps."""
 
 
 def hessian_scale(H: sp.csc_matrix) -> float:
