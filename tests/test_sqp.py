@@ -369,6 +369,35 @@ def test_steps_that_move_the_merit_only_by_rounding_end_the_solve_after_15_itera
     assert result.iterations <= 20
 
 
+def test_elastic_steps_that_move_the_merit_only_by_rounding_end_the_solve_after_15_iterations(monkeypatch):
+    """Upward slope, HS N = 100, step 11, on Clarabel's QPs: from iteration 250 every QP failed, and elastic steps at
+    α ~ 1e-8 went on to the iteration limit, one second each (2,217 s); they count as stalled steps too. Here: min
+    x₀ + x₁ on the circle x₀² + x₁² = 2 from a feasible, non-stationary point, every QP failing and every elastic
+    step moving x within φ's rounding."""
+    b = NLPBuilder()
+    x = b.variable("x", (2, 1))
+    b.constrain("circle", x[0] ** 2 + x[1] ** 2 - 2)
+    nlp = b.build(ca.SX.sym("p", 0), x[0] + x[1])
+    exact_qp, exact_elastic = Subproblems._qp, Subproblems._elastic_qp
+
+    def failing(self, model, g, warm):
+        outcome = exact_qp(self, model, g, warm)
+        outcome.solved = False
+        return outcome
+
+    def rounding(self, *args, **kwargs):
+        outcome = exact_elastic(self, *args, **kwargs)
+        outcome.x = 1e-16 * outcome.x
+        return outcome
+
+    monkeypatch.setattr(Subproblems, "_qp", failing)
+    monkeypatch.setattr(Subproblems, "_elastic_qp", rounding)
+    result = SQP(qp_solver="clarabel", max_iterations=200).solve(nlp, np.zeros(0), np.array([np.sqrt(2.0), 0.0]))
+    assert result.status is SolverStatus.ERROR, result.message
+    assert "rounding" in result.message
+    assert result.iterations <= 16
+
+
 @pytest.mark.slow
 def test_forward_dmoc_step_at_n_100_stops_where_the_qp_accuracy_is_spent():
     """433 iterations before the non-descent test (270 of them at f = 1.366059e-4), 147 with it (docs/solvers.md)."""

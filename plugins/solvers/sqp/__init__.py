@@ -94,9 +94,10 @@ Convergence: the violation (max-norm) below ``tolerance`` and the stationarity/c
 returned; or, as IPOPT's "acceptable" level, both below ``acceptable_tolerance`` for 15 consecutive iterations or
 when the iteration cannot continue from such a point, which includes a QP step that is no descent direction of the
 ℓ1 merit there (an exact QP step always is one: such a step is the QP's inexactness, finer than its accuracy).
-Complementarity is IPOPT's product |μ_i|·d_i near a bound. A solve whose accepted steps change φ by no more than
-its rounding for 15 consecutive iterations cannot progress: it ends there, as ERROR short of the acceptable level
-(the walk's retry ladder takes over), instead of taking such steps until its iteration limit.
+Complementarity is IPOPT's product |μ_i|·d_i near a bound. A solve whose accepted steps, optimality or elastic,
+change φ by no more than its rounding for 15 consecutive iterations cannot progress: it ends there, as ERROR short
+of the acceptable level (the walk's retry ladder takes over), instead of taking such steps until its iteration
+limit.
 
 QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as
 failed. PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to
