@@ -9,10 +9,12 @@ leaves its walk complete but unverified), the N of those that stopped with the c
 the store, the solve retries the walks needed (docs/solvers.md, "Retries") and the steps solved
 again after a dead end (back-ups, docs/deviations.md "Dead ends"). Then each method's lowest ACOT over N beside
 the thesis's published minimum (the report's ``published_acot`` table, over the complete walks only), and D&C's
-energy savings, verified and claimed, beside the published ranges. Then the costly steps: every verified step COT
-above :data:`COSTLY_STEP_COT` by experiment, method and step, and, for Decrease & Conquer, how often its complete
-Second Phase solution (candidate k0 = 0, verified) lies below the polished step it reported. Every figure is read
-from the store (the walk files for the last two); the table names the commits the cases ran at.
+energy savings, verified and claimed, beside the published ranges. Then the retry ladder: per method and rung,
+how often it was tried and converged and what it cost, the time of the tries that failed apart. Then the costly
+steps: every verified step COT above :data:`COSTLY_STEP_COT` by experiment, method and step, and, for Decrease &
+Conquer, how often its complete Second Phase solution (candidate k0 = 0, verified) lies below the polished step it
+reported. Every figure is read from the store (the walk files for the last three); the table names the commits the
+cases ran at.
 """
 
 from __future__ import annotations
@@ -167,6 +169,54 @@ def last_tries_summary(steps: pd.DataFrame) -> str:
     return "Last tries in the complete walks: " + "; ".join(parts) + "."
 
 
+FAILED_FIRST_ATTEMPT = "first attempt (failed)"
+
+
+def ladder_tries(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
+    """One row per try of a step that climbed the retry ladder, in every walk with a walk file: its failed first
+    attempt, where recorded, and each rung after it (wherever a strategy nests them), with status and time."""
+    rows = []
+    for case in prepare(frame).itertuples():
+        if not isinstance(case.walk_path, str) or not (store / case.walk_path).exists():
+            continue
+        walk = json.loads((store / case.walk_path).read_text())
+        for details in _ladders(walk.get("steps", [])):
+            first = [{"remedy": FAILED_FIRST_ATTEMPT, **details["first_attempt"]}] if "first_attempt" in details else []
+            tries = [*first, *details["retries"]]
+            rows += [{"experiment": case.experiment, "method": case.method, "N": case.N, "remedy": entry["remedy"],
+                      "converged": entry.get("status") == "converged", "time_s": entry.get("solve_time_s") or 0.0}
+                     for entry in tries]
+    return pd.DataFrame(rows, columns=["experiment", "method", "N", "remedy", "converged", "time_s"])
+
+
+def _ladders(node):
+    """Every dictionary below ``node`` that records a climbed retry ladder: a non-empty ``retries`` list of rungs,
+    with the failed ``first_attempt`` where the strategy records it (One Phase does, a D&C step's does not)."""
+    if isinstance(node, dict):
+        retries = node.get("retries")
+        if isinstance(retries, list) and retries and all(isinstance(entry, dict) and "remedy" in entry
+                                                          for entry in retries):
+            yield node
+        for value in node.values():
+            yield from _ladders(value)
+    elif isinstance(node, list):
+        for value in node:
+            yield from _ladders(value)
+
+
+def ladder_table(tries: pd.DataFrame) -> pd.DataFrame:
+    """Per method and rung, in the order the rungs were first tried: how often it was tried and converged, and the
+    time it took, in all and on the tries that failed (what a rung that seldom converges costs)."""
+    rows = []
+    for method, group in tries.groupby("method", sort=True):
+        for remedy, rung in group.groupby("remedy", sort=False):
+            rows.append({"method": method, "rung": remedy, "tried": len(rung),
+                         "converged": "—" if remedy == FAILED_FIRST_ATTEMPT else int(rung["converged"].sum()),
+                         "time (s)": f"{rung['time_s'].sum():,.0f}",
+                         "of it failed (s)": f"{rung.loc[~rung['converged'], 'time_s'].sum():,.0f}"})
+    return pd.DataFrame(rows, columns=["method", "rung", "tried", "converged", "time (s)", "of it failed (s)"])
+
+
 def markdown_table(table: pd.DataFrame) -> str:
     lines = ["| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
     lines += ["| " + " | ".join(str(value) for value in row) + " |" for row in table.itertuples(index=False)]
@@ -205,6 +255,12 @@ def render(store: Path) -> str:
         markdown_table(savings_summary_table(frame)),
         "",
     ]
+    tries = ladder_tries(frame, store)
+    if not tries.empty:
+        lines += ["The retry ladder (docs/solvers.md, \"Retries\"): per method, each step's failed first attempt "
+                  "(where the walk records it: not in D&C's) and every rung tried after it, in the order first tried, "
+                  "over all walks with a walk file; times are the solves' own.", "",
+                  markdown_table(ladder_table(tries)), ""]
     steps = step_cots(frame, store)
     if not steps.empty:
         lines += [f"Costly steps: verified step COTs above {COSTLY_STEP_COT:g} in complete walks (a D&C step's is its "

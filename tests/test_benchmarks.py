@@ -244,6 +244,39 @@ def test_savings_are_summarized_verified_and_claimed_beside_the_published_range(
         "thesis: range": "+12.24 … +85.41 %"}]
 
 
+def test_the_retry_ladder_is_tabulated_per_method_and_rung_in_the_order_first_tried():
+    import pandas as pd
+
+    completion = _completion_module()
+    walk_steps = [
+        {"details": {"first_attempt": {"status": "error", "solve_time_s": 4.0},
+                     "retries": [{"remedy": "filter", "status": "iteration_limit", "solve_time_s": 50.0},
+                                 {"remedy": "clarabel", "status": "converged", "solve_time_s": 30.0}]}},
+        {"details": {"retries": []}},  # a step that needed no retry
+        {"details": {"rescued_from": {"first_attempt": {"status": "error", "solve_time_s": 1.0},
+                                      "retries": [{"remedy": "clarabel", "status": "error", "solve_time_s": 5.0}]}}},
+        {"details": {"retries": [{"remedy": "adaptive-mu", "status": "converged", "solve_time_s": 2.0}]}},
+    ]
+    ladders = list(completion._ladders(walk_steps))
+    assert [len(ladder["retries"]) for ladder in ladders] == [2, 1, 1]
+    tries = pd.DataFrame([
+        {"method": "reference", "remedy": "first attempt (failed)", "converged": False, "time_s": 4.0},
+        {"method": "reference", "remedy": "filter", "converged": False, "time_s": 50.0},
+        {"method": "reference", "remedy": "clarabel", "converged": True, "time_s": 30.0},
+        {"method": "reference", "remedy": "clarabel", "converged": False, "time_s": 5.0},
+        {"method": "D&C-DC", "remedy": "adaptive-mu", "converged": True, "time_s": 2.0},
+    ])
+    assert completion.ladder_table(tries).to_dict("records") == [
+        {"method": "D&C-DC", "rung": "adaptive-mu", "tried": 1, "converged": 1, "time (s)": "2",
+         "of it failed (s)": "0"},
+        {"method": "reference", "rung": "first attempt (failed)", "tried": 1, "converged": "—", "time (s)": "4",
+         "of it failed (s)": "4"},
+        {"method": "reference", "rung": "filter", "tried": 1, "converged": 0, "time (s)": "50",
+         "of it failed (s)": "50"},
+        {"method": "reference", "rung": "clarabel", "tried": 2, "converged": 1, "time (s)": "35",
+         "of it failed (s)": "5"}]
+
+
 def test_a_re_rendered_completion_record_keeps_its_notes():
     completion = _completion_module()
     existing = "# Completion: s (in progress)\n\nChanges:\n- a note\n\n3 of 4 walks complete (75 %).\n\nold table\n"
