@@ -205,6 +205,36 @@ def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
     assert not run_alive(row | {"pid": os.getpid()})  # this process, but not one of its runs
 
 
+def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Path, monkeypatch) -> None:
+    """A case whose checkpoint holds steps is named by its suite's label, with the steps saved, the hours spent and
+    whether a live run holds it; one whose suite can no longer be read keeps its key."""
+    from gaitbench.cli.run_commands import walks_in_flight
+    from gaitbench.run.suite import load_suite
+
+    suite = tiny_suite(tmp_path / "tiny.toml", "tiny", [6, 7], ["hermite-simpson"])
+    solving, resumable = load_suite(suite).cases
+    store_dir = tmp_path / "store"
+    with ResultStore.create(store_dir) as store:
+        store.start_run({"run_id": "r1", "suite": "tiny", "suite_path": str(suite), "started_at": "now"})
+        store.start_run({"run_id": "r0", "suite": "gone", "suite_path": str(tmp_path / "gone.toml"),
+                         "started_at": "then"})
+        rows = store.runs()
+    checkpoints = store_dir / "checkpoints"
+    checkpoints.mkdir()
+    (checkpoints / f"{solving.key}.json").write_text('{"saved": 3, "of": 11, "elapsed_s": 5400.0}')
+    (checkpoints / f"{resumable.key}.json").write_text('{"saved": 1, "of": 11, "elapsed_s": 36.0}')
+    (checkpoints / "0123456789abcdef.json").write_text('{"saved": 7, "of": 11, "elapsed_s": 720.0}')
+    expected = {solving.key: (solving.label, "3 of 11", "1.50", "solving"),
+                resumable.key: (resumable.label, "1 of 11", "0.01", "resumable"),
+                "0123456789abcdef": ("0123456789abcdef", "7 of 11", "0.20", "resumable")}
+    assert walks_in_flight(store_dir, rows, {solving.key}) == [expected[key] for key in sorted(expected)]
+    monkeypatch.setenv("COLUMNS", "200")
+    listed = run_cli("runs", "list", str(store_dir))
+    assert listed.code == 0, listed.output
+    assert "walks in flight" in listed.output and "3 of 11" in listed.output and "resumable" in listed.output
+    assert walks_in_flight(tmp_path / "no-store", rows, set()) == []
+
+
 # --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------
 
 @pytest.fixture

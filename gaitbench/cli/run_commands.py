@@ -234,7 +234,9 @@ def runs() -> None:
 @runs.command("list")
 @click.argument("stores", nargs=-1, type=click.Path(path_type=Path))
 def runs_list(stores: tuple[Path, ...]) -> None:
-    """List the runs of each STORE (default: every store under ./results)."""
+    """List the runs of each STORE (default: every store under ./results), then the walks in flight: each case
+    whose checkpoint holds solved steps, how many, the time spent on it, and whether a live run is solving it now
+    or `gaitbench run --resume` would take it up from there."""
     from gaitbench.run.store import DATABASE, ResultStore, run_alive
     from gaitbench.run.store_schema import StoreError
 
@@ -244,16 +246,54 @@ def runs_list(stores: tuple[Path, ...]) -> None:
     table = Table(title="runs")
     for column in ("store", "run", "suite", "executor", "jobs", "cases", "done", "failed", "skipped", "finished"):
         table.add_column(column)
+    in_flight = Table(title="walks in flight")
+    for column in ("store", "case", "steps saved", "time (h)", "now"):
+        in_flight.add_column(column)
     for path in paths:
         try:
             with ResultStore.open(path) as store:
-                for row in store.runs():
+                runs_rows = store.runs()
+                for row in runs_rows:
                     table.add_row(str(path), row["run_id"], row["suite"], row["executor"], str(row["jobs"]),
                                   str(row["cases_total"]), str(row["cases_done"]), str(row["cases_failed"] or 0),
                                   str(row["cases_skipped"]), row["finished_at"] or _unfinished(row, run_alive))
+                for cells in walks_in_flight(path, runs_rows, store.live_claims()):
+                    in_flight.add_row(str(path), *cells)
         except StoreError as error:
             raise click.ClickException(str(error)) from None
     Console().print(table)
+    if in_flight.row_count:
+        Console().print(in_flight)
+
+
+def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> list[tuple[str, str, str, str]]:
+    """(case, steps saved, hours spent, solving or resumable) for each checkpoint of ``store_dir`` with a progress
+    file. A case is named by its label in the suite of the store's runs that holds it (the key where no run's
+    suite file can still be read)."""
+    from gaitbench.run.store import CHECKPOINTS_DIR
+    from gaitbench.solve.checkpoint import saved_progress
+
+    progress = saved_progress(store_dir / CHECKPOINTS_DIR)
+    if not progress:
+        return []
+    labels = _case_labels({row["suite_path"] for row in runs_rows if row.get("suite_path")})
+    return [(labels.get(key, key), f"{saved.get('saved', '?')} of {saved.get('of') or '?'}",
+             _number(saved.get("elapsed_s", 0.0) / 3600, ".2f"), "solving" if key in live else "resumable")
+            for key, saved in sorted(progress.items())]
+
+
+def _case_labels(suite_paths: set[str]) -> dict[str, str]:
+    """Case key → label over the suites that can still be read; a suite that cannot is skipped, not an error."""
+    from gaitbench.run.suite import load_suite
+    from gaitbench.run.suite_spec import SuiteError
+
+    labels = {}
+    for suite_path in sorted(suite_paths):
+        try:
+            labels.update({case.key: case.label for case in load_suite(suite_path).cases})
+        except SuiteError:  # a moved or edited suite only costs the label
+            continue
+    return labels
 
 
 SHOW_COLUMNS = ("experiment", "N", "method", "status", "stop cause", "ACOT")
