@@ -206,8 +206,8 @@ def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
 
 
 def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Path, monkeypatch) -> None:
-    """A case whose checkpoint holds steps is named by its suite's label, with the steps saved, the hours spent and
-    whether a live run holds it; one whose suite can no longer be read keeps its key."""
+    """A case whose checkpoint holds steps is named by its suite's label, with the steps saved, the hours spent, when
+    the last was saved and whether a live run holds it; one whose suite can no longer be read keeps its key."""
     from gaitbench.cli.run_commands import walks_in_flight
     from gaitbench.run.suite import load_suite
 
@@ -224,9 +224,13 @@ def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Pa
     (checkpoints / f"{solving.key}.json").write_text('{"saved": 3, "of": 11, "elapsed_s": 5400.0}')
     (checkpoints / f"{resumable.key}.json").write_text('{"saved": 1, "of": 11, "elapsed_s": 36.0}')
     (checkpoints / "0123456789abcdef.json").write_text('{"saved": 7, "of": 11, "elapsed_s": 720.0}')
-    expected = {solving.key: (solving.label, "3 of 11", "1.50", "solving"),
-                resumable.key: (resumable.label, "1 of 11", "0.01", "resumable"),
-                "0123456789abcdef": ("0123456789abcdef", "7 of 11", "0.20", "resumable")}
+    saved_at = 4_102_444_800  # 2100-01-01 00:00 UTC
+    for path in checkpoints.iterdir():
+        os.utime(path, (saved_at, saved_at))
+    at = "2100-01-01 00:00"
+    expected = {solving.key: (solving.label, "3 of 11", "1.50", at, "solving"),
+                resumable.key: (resumable.label, "1 of 11", "0.01", at, "resumable"),
+                "0123456789abcdef": ("0123456789abcdef", "7 of 11", "0.20", at, "resumable")}
     assert walks_in_flight(store_dir, rows, {solving.key}) == [expected[key] for key in sorted(expected)]
     monkeypatch.setenv("COLUMNS", "200")
     listed = run_cli("runs", "list", str(store_dir))

@@ -6,6 +6,7 @@ import math
 import os
 import time
 from contextlib import ExitStack
+from datetime import datetime, timezone
 from pathlib import Path
 
 import click
@@ -247,7 +248,7 @@ def runs_list(stores: tuple[Path, ...]) -> None:
     for column in ("store", "run", "suite", "executor", "jobs", "cases", "done", "failed", "skipped", "finished"):
         table.add_column(column)
     in_flight = Table(title="walks in flight")
-    for column in ("store", "case", "steps saved", "time (h)", "now"):
+    for column in ("store", "case", "steps saved", "time (h)", "last saved (UTC)", "now"):
         in_flight.add_column(column)
     for path in paths:
         try:
@@ -266,20 +267,31 @@ def runs_list(stores: tuple[Path, ...]) -> None:
         Console().print(in_flight)
 
 
-def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> list[tuple[str, str, str, str]]:
-    """(case, steps saved, hours spent, solving or resumable) for each checkpoint of ``store_dir`` with a progress
-    file. A case is named by its label in the suite of the store's runs that holds it (the key where no run's
-    suite file can still be read)."""
+def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> list[tuple[str, ...]]:
+    """(case, steps saved, hours spent, when the last step was saved, solving or resumable) for each checkpoint of
+    ``store_dir`` with a progress file: a step of an hour shows as a save time that stays put. A case is named by
+    its label in the suite of the store's runs that holds it (the key where no run's suite file can still be
+    read)."""
     from gaitbench.run.store import CHECKPOINTS_DIR
-    from gaitbench.solve.checkpoint import saved_progress
+    from gaitbench.solve.checkpoint import progress_file, saved_progress
 
-    progress = saved_progress(store_dir / CHECKPOINTS_DIR)
+    directory = store_dir / CHECKPOINTS_DIR
+    progress = saved_progress(directory)
     if not progress:
         return []
     labels = _case_labels({row["suite_path"] for row in runs_rows if row.get("suite_path")})
     return [(labels.get(key, key), f"{saved.get('saved', '?')} of {saved.get('of') or '?'}",
-             _number(saved.get("elapsed_s", 0.0) / 3600, ".2f"), "solving" if key in live else "resumable")
+             _number(saved.get("elapsed_s", 0.0) / 3600, ".2f"), _saved_at(progress_file(directory / key)),
+             "solving" if key in live else "resumable")
             for key, saved in sorted(progress.items())]
+
+
+def _saved_at(path: Path) -> str:
+    """The time a progress file was last written, to the minute, in UTC; blank when it is gone."""
+    try:
+        return datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).strftime("%Y-%m-%d %H:%M")
+    except OSError:
+        return ""
 
 
 def _case_labels(suite_paths: set[str]) -> dict[str, str]:
