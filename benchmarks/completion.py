@@ -112,7 +112,12 @@ COSTLY_STEP_COT = 3.0
 """A step COT above this is costly: several times a typical step's (0.03–0.9 on these terrains)."""
 
 
-def step_cots(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
+def read_walks(frame: pd.DataFrame, store: Path) -> dict[str, dict]:
+    """Every case's walk file, read once for the tables that look into the steps, by its path in the store."""
+    return {path: json.loads((store / path).read_text()) for path in frame["walk_path"] if isinstance(path, str)}
+
+
+def step_cots(frame: pd.DataFrame, walks: dict[str, dict]) -> pd.DataFrame:
     """One row per solved step of every complete walk: its verified COT (a D&C step's polished one), for D&C the
     verified COT of its complete Second Phase solution, and which of the walk's last tries the step took (a back-up
     onto it, a coarse-grid rescue, a complete solution standing in for a failed polish)."""
@@ -120,8 +125,7 @@ def step_cots(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
     for case in prepare(frame).itertuples():
         if not isinstance(case.walk_path, str) or case.stop_cause != "complete":
             continue
-        walk = json.loads((store / case.walk_path).read_text())
-        for step in walk["steps"]:
+        for step in walks[case.walk_path]["steps"]:
             details = step.get("details") or {}
             decrease_and_conquer = "polished" in details
             cot = (details["polished"].get("cot") if decrease_and_conquer else step.get("cot"))
@@ -172,15 +176,14 @@ def last_tries_summary(steps: pd.DataFrame) -> str:
 FAILED_FIRST_ATTEMPT = "first attempt (failed)"
 
 
-def ladder_tries(frame: pd.DataFrame, store: Path) -> pd.DataFrame:
+def ladder_tries(frame: pd.DataFrame, walks: dict[str, dict]) -> pd.DataFrame:
     """One row per try of a step that climbed the retry ladder, in every walk with a walk file: its failed first
     attempt, where recorded, and each rung after it (wherever a strategy nests them), with status and time."""
     rows = []
     for case in prepare(frame).itertuples():
-        if not isinstance(case.walk_path, str) or not (store / case.walk_path).exists():
+        if not isinstance(case.walk_path, str):
             continue
-        walk = json.loads((store / case.walk_path).read_text())
-        for details in _ladders(walk.get("steps", [])):
+        for details in _ladders(walks[case.walk_path].get("steps", [])):
             first = [{"remedy": FAILED_FIRST_ATTEMPT, **details["first_attempt"]}] if "first_attempt" in details else []
             tries = [*first, *details["retries"]]
             rows += [{"experiment": case.experiment, "method": case.method, "N": case.N, "remedy": entry["remedy"],
@@ -255,13 +258,14 @@ def render(store: Path) -> str:
         markdown_table(savings_summary_table(frame)),
         "",
     ]
-    tries = ladder_tries(frame, store)
+    walks = read_walks(frame, store)
+    tries = ladder_tries(frame, walks)
     if not tries.empty:
         lines += ["The retry ladder (docs/solvers.md, \"Retries\"): per method, each step's failed first attempt "
                   "(where the walk records it: not in D&C's) and every rung tried after it, in the order first tried, "
                   "over all walks with a walk file; times are the solves' own.", "",
                   markdown_table(ladder_table(tries)), ""]
-    steps = step_cots(frame, store)
+    steps = step_cots(frame, walks)
     if not steps.empty:
         lines += [f"Costly steps: verified step COTs above {COSTLY_STEP_COT:g} in complete walks (a D&C step's is its "
                   "polished one).", "", markdown_table(costly_steps_table(steps)), "",
