@@ -81,9 +81,10 @@ class Solver(Protocol):
 
     Two optional members are used when present: ``prepare(nlp) -> None`` builds what the solver reuses across
     solves of ``nlp`` ahead of the first one (a strategy calls it before forking workers), and
-    ``remedies() -> list[tuple[str, Solver]]`` names variants of the solver worth a retry after a failed solve, and
-    ``last_resorts()``, of the same form, variants tried only after every other rung of the retry ladder has failed,
-    because they tend to reach worse optima (docs/solvers.md, "Retries").
+    ``remedies() -> list[tuple[str, Solver]]`` names variants of the solver worth a retry after a failed solve;
+    ``seed_remedies()``, of the same form, variants worth one only when the retry starts from a trajectory (the
+    First-Phase seed, say), not from the blended guess; and ``last_resorts()``, variants tried only after every other
+    rung of the retry ladder has failed, because they tend to reach worse optima (docs/solvers.md, "Retries").
     """
 
     name: str

@@ -483,14 +483,15 @@ def test_the_last_resorts_are_the_crawl_floor_then_a_longer_budget_with_the_same
         SQP(crawl_shift_floor=1e-8)
 
 
-def test_remedies_are_other_paths_clarabel_first_and_keep_the_options():
+def test_remedies_are_other_paths_clarabel_from_any_start_the_filter_from_a_seed_and_keep_the_options():
     solver = SQP(max_iterations=77, qp_tolerance=1e-9)
-    variants = dict(solver.remedies())
-    assert list(variants) == ["clarabel", "filter"]
-    assert (variants["filter"].merit, variants["filter"].qp_solver) == ("filter", "piqp")
-    assert (variants["clarabel"].qp_solver, variants["clarabel"].fallback_qp_solver) == ("clarabel", "piqp")
-    assert all(v.max_iterations == 77 and v.qp_tolerance == 1e-9 for v in variants.values())
-    assert dict(variants["filter"].remedies()).keys() == {"clarabel"}
+    (name, clarabel), = solver.remedies()
+    (seed_name, filter_), = solver.seed_remedies()
+    assert (name, seed_name) == ("clarabel", "filter")
+    assert (filter_.merit, filter_.qp_solver) == ("filter", "piqp")
+    assert (clarabel.qp_solver, clarabel.fallback_qp_solver) == ("clarabel", "piqp")
+    assert all(v.max_iterations == 77 and v.qp_tolerance == 1e-9 for v in (clarabel, filter_))
+    assert clarabel.remedies() == [] and filter_.seed_remedies() == []
 
 
 def test_a_failed_qp_is_solved_again_by_the_fallback_backend(monkeypatch):

@@ -209,6 +209,35 @@ def test_a_last_resort_comes_after_every_other_rung_from_the_same_guess():
         "scripted-remedy", "first-phase-seed", "use-ipopt"]
 
 
+class FailsTheSecondPhase(FailingFirst):
+    """Fails every 4-DOF solve and solves the 2-DOF First Phase (with IPOPT), so the First-Phase seed exists."""
+
+    def solve(self, nlp, parameters, initial_guess):
+        if nlp.n_variables < self.second_phase_size:
+            return Ipopt().solve(nlp, parameters, initial_guess)
+        return super().solve(nlp, parameters, initial_guess)
+
+
+def test_seed_remedies_are_tried_only_from_a_trajectory_never_from_the_blended_guess():
+    """``sqp``'s filter solved none of the reference column's 63 steps it was tried on from the blended guess, and
+    every step it was tried on from the First-Phase seed."""
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = FailsTheSecondPhase(remedies=False)
+    solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
+    solver.seed_remedies = lambda: [("use-ipopt", Ipopt())]
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
+    built = problem.transcription.build(problem.structure("second"))
+    solver.second_phase_size = built.nlp.n_variables
+    data = problem.step_data(1, problem.start_state())
+    outcome = solve_with_retries(problem, 1, built, data)
+    assert outcome.solved
+    assert [entry["remedy"] for entry in outcome.details["retries"]] == [
+        "scripted-remedy", "first-phase-seed", "first-phase-seed+scripted-remedy", "first-phase-seed+use-ipopt"]
+    seed = outcome.trajectory.seed()
+    from_seed = solve_with_retries(problem, 1, built, data, seed=seed)
+    assert [entry["remedy"] for entry in from_seed.details["retries"]] == ["scripted-remedy", "use-ipopt"]
+
+
 def test_ipopt_s_last_resort_is_a_small_initial_barrier_parameter_unless_one_is_set():
     (name, variant), = Ipopt().last_resorts()
     assert name == "small-mu-init" and variant.options["ipopt"]["mu_init"] == 1e-3

@@ -348,9 +348,11 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     """:func:`solve_and_verify`, and when the solve fails with a :data:`RETRIED_STATUSES` status, the retry
     ladder (docs/solvers.md, "Retries") until a rung solves the step:
 
-    1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess;
+    1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess, and when
+       that guess is a trajectory ``seed``, each of its seed remedies (``solver.seed_remedies()``) too;
     2. ``first-phase-seed`` (4-DOF steps only, and only with ``reseed``): the step's 2-DOF First-Phase problem
-       solved, and the 4-DOF problem started from its trajectory, with the solver and then each of its remedies.
+       solved, and the 4-DOF problem started from its trajectory, with the solver and then each of its remedies
+       and seed remedies.
        A caller whose result means "the optimum near *this* seed" (decrease-and-conquer's polish) passes
        ``reseed=False``;
     3. each of the solver's last resorts (``solver.last_resorts()``; IPOPT: a small initial barrier parameter) from
@@ -389,7 +391,7 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
 def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
             phase: str, reseed: bool):
     """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
-    for name, variant in solver_remedies(problem.solver):
+    for name, variant in solver_remedies(problem.solver, seeded=seed is not None):
         yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
     if phase == "second" and reseed:
         yield from _first_phase_rungs(problem, index, built, data)
@@ -398,7 +400,8 @@ def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: Step
 
 
 def _first_phase_rungs(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData):
-    """Rung 2: the 4-DOF step started from its First Phase's trajectory, with the solver and each remedy."""
+    """Rung 2: the 4-DOF step started from its First Phase's trajectory, with the solver and each remedy, seed
+    remedies included."""
     first_phase: list[StepOutcome] = []
 
     def seeded(variant: Solver | None) -> StepOutcome:
@@ -414,7 +417,7 @@ def _first_phase_rungs(problem: WalkProblem, index: int, built: TranscribedStep,
     yield "first-phase-seed", lambda: seeded(None)
     if not first_phase[0].solved:
         return  # no seed: the remedies below would only repeat the First Phase's failure
-    for name, variant in solver_remedies(problem.solver):
+    for name, variant in solver_remedies(problem.solver, seeded=True):
         yield f"first-phase-seed+{name}", lambda variant=variant: seeded(variant)
 
 
@@ -423,13 +426,15 @@ def _failed_in(outcome: StepOutcome) -> dict:
     return {"failed_in": outcome.details["failed_in"]} if "failed_in" in outcome.details else {}
 
 
-def solver_remedies(solver: Solver) -> list[tuple[str, Solver]]:
-    """The solver's variants worth a retry after a failed solve (its optional ``remedies()``), named."""
-    return solver_variants(solver, "remedies")
+def solver_remedies(solver: Solver, seeded: bool) -> list[tuple[str, Solver]]:
+    """The solver's variants worth a retry after a failed solve (its optional ``remedies()``), named; ``seeded``:
+    the retry starts from a trajectory, not the blended guess, so its ``seed_remedies()`` follow."""
+    return solver_variants(solver, "remedies") + (solver_variants(solver, "seed_remedies") if seeded else [])
 
 
 def solver_variants(solver: Solver, kind: str) -> list[tuple[str, Solver]]:
-    """The solver's named variants of one kind, ``remedies`` or ``last_resorts``: empty where it has none."""
+    """The solver's named variants of one kind, ``remedies``, ``seed_remedies`` or ``last_resorts``: empty where
+    it has none."""
     method = getattr(solver, kind, None)
     return list(method()) if method is not None else []
 

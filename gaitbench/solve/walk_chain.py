@@ -141,7 +141,8 @@ class LookAhead:
         guess = chain.guess(problem, index, known)
         started = time.perf_counter()
         attempts = []
-        variants = [("", problem.solver), *solver_remedies(problem.solver),
+        seeded = any(seed is not None for _, seed in known)  # a step started from a trajectory, not blended
+        variants = [("", problem.solver), *solver_remedies(problem.solver, seeded),
                     *solver_variants(problem.solver, "last_resorts")]
         for remedy, solver in variants:
             if attempts and problem.out_of_time:

@@ -99,18 +99,23 @@ class SQP:
                            "crawl_shift_floor": crawl_shift_floor}
 
     def remedies(self) -> list[tuple[str, SQP]]:
-        """Variants for the walk's retry ladder, each another path through the same NLP: Clarabel's QPs instead of
-        PIQP's, then the filter instead of the ℓ1 merit. Clarabel first because, from the first attempt's guess, it
-        is the one that solves: in the reference column's 43 walks it converged on 31 of the 50 steps it was tried
-        on, the filter on none of them, each try running to its iteration limit (2,523 s); from the First-Phase
-        seed the filter solved all three steps it was tried on (docs/solvers.md, "Retries")."""
-        variants = []
-        if self.qp_solver != "clarabel":
-            variants.append(("clarabel", SQP(**{**self._arguments, "qp_solver": "clarabel",
-                                                "fallback_qp_solver": self.qp_solver})))
-        if self.merit != "filter":
-            variants.append(("filter", SQP(**{**self._arguments, "merit": "filter"})))
-        return variants
+        """Variants for the walk's retry ladder from any start: Clarabel's QPs instead of PIQP's. From the first
+        attempt's guess it is the one that solves: in the reference column's 43 walks it converged on 31 of the 50
+        steps it was tried on (docs/solvers.md, "Retries")."""
+        if self.qp_solver == "clarabel":
+            return []
+        return [("clarabel", SQP(**{**self._arguments, "qp_solver": "clarabel", "fallback_qp_solver": self.qp_solver}))]
+
+    def seed_remedies(self) -> list[tuple[str, SQP]]:
+        """Variants for retries started from a trajectory (the First-Phase seed, a coarse grid's solution, a back-up
+        window), never from the blended guess: the filter instead of the ℓ1 merit. From the blended guess the first
+        QP step is huge (‖d‖∞ = 8,869 on a stairs step) and the filter goes into restoration at once and stays
+        there: tried so on 63 of the reference column's steps, it solved none, each try running to its iteration
+        limit (3,472 s); from the First-Phase seed it solved all three steps it was tried on (docs/solvers.md,
+        "Retries")."""
+        if self.merit == "filter":
+            return []
+        return [("filter", SQP(**{**self._arguments, "merit": "filter"}))]
 
     def last_resorts(self) -> list[tuple[str, SQP]]:
         """After the walk's other rungs, the crawl's two remedies, cheaper first. ``crawl-floor``: the shift's floor
