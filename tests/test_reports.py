@@ -643,3 +643,10 @@ def test_provenance_lists_the_plugins_that_failed_to_load():
         {"run_id": "r1", "item": "plugin_problems",
          "value": "/p/gentle_slope.py: import failed: ImportError: half-finished plugin"},
         {"run_id": "r2", "item": "plugin_problems", "value": "none"}]
+
+
+def test_provenance_shows_the_cpu_and_its_vector_extensions_as_one_row_each():
+    runs = [{"run_id": "r1", "provenance": {"cpu": "Intel(R) Xeon(R) Processor",
+                                            "vector_extensions": ["AVX512F", "AVX2"]}}]
+    table = tables.provenance_table(runs).set_index("item")["value"]
+    assert table["cpu"] == "Intel(R) Xeon(R) Processor" and table["vector_extensions"] == "AVX512F AVX2"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import signal
 import sqlite3
 import subprocess
@@ -23,6 +24,7 @@ from gaitbench.cli.main import main
 from gaitbench.run import executors
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.executors import DaskExecutor, ExecutorError, InProcessExecutor, LocalPoolExecutor
+from gaitbench.run.provenance import VECTOR_EXTENSIONS
 from gaitbench.run.runner import CaseOutcome, RunRefused, case_row, failed_outcome, run_case, run_suite
 from gaitbench.run.store import DATABASE, ResultStore
 from gaitbench.run.store_schema import CASE_COLUMNS, StoreError
@@ -183,6 +185,11 @@ def test_local_pool_records_real_walks(local_store: Path) -> None:
         assert row["max_defect"] < 1e-6
         assert row["provenance"]["packages"]["casadi"]
         assert row["provenance"]["git_commit"].split("+")[0] == _checkout_commit()  # which code computed it
+        # which CPU: its kernels can change a long walk's path (docs/results.md, "Reproducing a result")
+        assert row["provenance"]["cpu"] and row["provenance"]["cpu"] != "unknown"
+        assert set(row["provenance"]["vector_extensions"]) <= set(VECTOR_EXTENSIONS)
+        if platform.machine() == "x86_64":
+            assert "SSE42" in row["provenance"]["vector_extensions"]
         walk = (local_store / row["walk_path"]).read_text()
         assert '"complete": true' in walk and (local_store / row["walk_path"]).with_suffix(".npz").exists()
 

@@ -347,6 +347,8 @@ def provenance_table(runs: Iterable[dict]) -> pd.DataFrame:
                             for problem in value)
                 if not value:
                     rows.append({"run_id": run_id, "item": key, "value": "none"})
+            elif isinstance(value, list):  # the CPU's vector extensions
+                rows.append({"run_id": run_id, "item": key, "value": " ".join(map(str, value))})
             else:
                 rows.append({"run_id": run_id, "item": key, "value": value})
     return pd.DataFrame(rows, columns=PROVENANCE_COLUMNS)

@@ -34,8 +34,38 @@ def provenance() -> dict[str, Any]:
         "machine": platform.machine(),
         "hostname": socket.gethostname(),
         "cpus": os.cpu_count(),
+        "cpu": cpu_model(),
+        "vector_extensions": vector_extensions(),
         "packages": package_versions(),
     }
+
+
+VECTOR_EXTENSIONS = ("AVX512F", "AVX2", "FMA3", "AVX", "SSE42", "ASIMD", "SVE")
+"""The CPU's vector instruction sets that select different compiled kernels in the solvers' libraries (PIQP ships an
+AVX-512 and an AVX2 build; OpenBLAS picks kernels by CPU), and so can change a result's last bits and, over a long
+walk, its path: the downward slope at N = 130 walked at the same code on two machines differed from its fourth step's
+back-up window on (docs/results.md, "Reproducing a result")."""
+
+
+def cpu_model() -> str:
+    """The processor's model name (Linux's /proc/cpuinfo), else what ``platform.processor()`` says."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def vector_extensions() -> list[str]:
+    """The :data:`VECTOR_EXTENSIONS` this CPU has, as NumPy's runtime dispatch detects them."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # NumPy moved its private module
+        return []
+    return [name for name in VECTOR_EXTENSIONS if features.get(name)]
 
 
 def package_versions() -> dict[str, str | None]:
