@@ -196,14 +196,19 @@ def test_a_first_phase_that_fails_ends_the_ladder_instead_of_being_recorded_once
     assert "failed_in" not in rungs[0] and rungs[1]["failed_in"] == "first phase"
 
 
+def _forward_step_1(solver) -> tuple[WalkProblem, object, object]:
+    """Forward step 1 at N = 10 for ``solver``: the problem, its built 4-DOF step and the step's data."""
+    problem = WalkProblem(REGISTRY.create("experiment", "forward"), HermiteSimpson(), solver, 10, steps=1)
+    return problem, problem.transcription.build(problem.structure("second")), problem.step_data(
+        1, problem.start_state())
+
+
 def test_a_last_resort_comes_after_every_other_rung_from_the_same_guess():
-    experiment = REGISTRY.create("experiment", "forward")
     solver = FailingFirst(remedies=False)
     solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
     solver.last_resorts = lambda: [("use-ipopt", Ipopt())]
-    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
-    built = problem.transcription.build(problem.structure("second"))
-    outcome = solve_with_retries(problem, 1, built, problem.step_data(1, problem.start_state()))
+    problem, built, data = _forward_step_1(solver)
+    outcome = solve_with_retries(problem, 1, built, data)
     assert outcome.solved
     assert [entry["remedy"] for entry in outcome.details["retries"]] == [
         "scripted-remedy", "first-phase-seed", "use-ipopt"]
@@ -221,14 +226,11 @@ class FailsTheSecondPhase(FailingFirst):
 def test_seed_remedies_are_tried_only_from_a_trajectory_never_from_the_blended_guess():
     """``sqp``'s filter solved none of the reference column's 63 steps it was tried on from the blended guess, and
     every step it was tried on from the First-Phase seed."""
-    experiment = REGISTRY.create("experiment", "forward")
     solver = FailsTheSecondPhase(remedies=False)
     solver.remedies = lambda: [("scripted-remedy", FailingFirst(remedies=False))]
     solver.seed_remedies = lambda: [("use-ipopt", Ipopt())]
-    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=1)
-    built = problem.transcription.build(problem.structure("second"))
+    problem, built, data = _forward_step_1(solver)
     solver.second_phase_size = built.nlp.n_variables
-    data = problem.step_data(1, problem.start_state())
     outcome = solve_with_retries(problem, 1, built, data)
     assert outcome.solved
     assert [entry["remedy"] for entry in outcome.details["retries"]] == [
