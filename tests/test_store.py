@@ -190,6 +190,14 @@ def test_a_second_run_after_a_finished_one_is_still_refused_without_resume(tmp_p
         run_suite(suite_of(cases), tmp_path, Instant())
 
 
+def test_a_run_records_its_suite_s_absolute_path_so_runs_list_finds_it_from_anywhere(tmp_path: Path,
+                                                                                     monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    run_suite(suite_of([fake_case(6)]), tmp_path / "store", Instant())  # the suite named as `test.toml`
+    with ResultStore.open(tmp_path / "store") as store:
+        assert [run["suite_path"] for run in store.runs()] == [str(tmp_path.resolve() / "test.toml")]
+
+
 def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
     from gaitbench.run.store import run_alive
 

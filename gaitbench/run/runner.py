@@ -293,7 +293,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
         if getattr(executor, "local_files", False):  # its workers can write in the store's directory
             pending = [replace(case, checkpoint=str(store.directory / checkpoint_file(case.key))) for case in pending]
         run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,
-                                  "suite_path": str(suite.path), "suite_text": suite.text,
+                                  # absolute: `runs list` reads it from any directory to name the walks in flight
+                                  "suite_path": str(Path(suite.path).resolve()), "suite_text": suite.text,
                                   "executor": executor.name, "jobs": executor.jobs,
                                   "cases_total": len(suite.cases), "cases_skipped": len(present),
                                   "started_at": _now(), "provenance": run_provenance(suite)})
