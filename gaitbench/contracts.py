@@ -79,12 +79,13 @@ class Transcription(Protocol):
 class Solver(Protocol):
     """Solves NLPs (a ``solver`` plugin, built as ``factory(**options)``).
 
-    Two optional members are used when present: ``prepare(nlp) -> None`` builds what the solver reuses across
-    solves of ``nlp`` ahead of the first one (a strategy calls it before forking workers), and
-    ``remedies() -> list[tuple[str, Solver]]`` names variants of the solver worth a retry after a failed solve;
-    ``seed_remedies()``, of the same form, variants worth one only when the retry starts from a trajectory (the
-    First-Phase seed, say), not from the blended guess; and ``last_resorts()``, variants tried only after every other
-    rung of the retry ladder has failed, because they tend to reach worse optima (docs/solvers.md, "Retries").
+    Optional members are used when present: ``prepare(nlp) -> None`` builds what the solver reuses across solves of
+    ``nlp`` ahead of the first one (a strategy calls it before forking workers). The retry ladder (docs/solvers.md,
+    "Retries") asks for named variants, each a ``list[tuple[str, Solver]]``: ``continuations()``, started from the
+    last iterate of a solve that ran out of iterations, before any other rung; ``remedies()``, worth a retry after
+    a failed solve; ``seed_remedies()``, worth one only when the retry starts from a trajectory (the First-Phase
+    seed, say), not from the blended guess; and ``last_resorts()``, tried only after every other rung has failed,
+    because they tend to reach worse optima.
     """
 
     name: str

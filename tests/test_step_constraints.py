@@ -240,6 +240,53 @@ def test_seed_remedies_are_tried_only_from_a_trajectory_never_from_the_blended_g
     assert [entry["remedy"] for entry in from_seed.details["retries"]] == ["scripted-remedy", "use-ipopt"]
 
 
+class StopsAtItsLimit(FailingFirst):
+    """Ends every solve at its iteration limit, at a point of its own (the guess shifted), and remembers its starts."""
+
+    status = SolverStatus.ITERATION_LIMIT
+
+    def __init__(self):
+        super().__init__(remedies=False)
+        self.starts = []
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.starts.append(np.asarray(initial_guess, dtype=float).copy())
+        return SolverResult(self.status, "scripted", np.asarray(initial_guess) + 1e-3, np.nan, np.nan, 3000, 0.0, 0.0)
+
+
+class Continues:
+    """A continuation that records where it started and solves with IPOPT from there."""
+
+    name = "continues"
+
+    def __init__(self):
+        self.starts = []
+
+    def solve(self, nlp, parameters, initial_guess):
+        self.starts.append(np.asarray(initial_guess, dtype=float).copy())
+        return Ipopt().solve(nlp, parameters, initial_guess)
+
+
+@pytest.mark.parametrize("status", [SolverStatus.ITERATION_LIMIT, SolverStatus.ERROR])
+def test_a_solve_that_ran_out_of_iterations_is_continued_from_its_last_iterate_before_any_other_rung(status):
+    """Forward N = 120, step 6 in the reference column: the first attempt reached its limit 752 iterations before
+    an optimum at COT 0.688, and the First-Phase seed gave 1.488. A solve that failed otherwise is not continued."""
+    solver = StopsAtItsLimit()
+    solver.status = status
+    continuation = Continues()
+    solver.continuations = lambda: [("continue", continuation)]
+    solver.remedies = lambda: [("use-ipopt", Ipopt())]
+    problem, built, data = _forward_step_1(solver)
+    outcome = solve_with_retries(problem, 1, built, data)
+    assert outcome.solved
+    if status is SolverStatus.ITERATION_LIMIT:
+        assert [entry["remedy"] for entry in outcome.details["retries"]] == ["continue"]
+        assert np.array_equal(continuation.starts[0], solver.starts[0] + 1e-3)  # where the first attempt stopped
+    else:
+        assert [entry["remedy"] for entry in outcome.details["retries"]] == ["use-ipopt"]
+        assert continuation.starts == []
+
+
 def test_ipopt_s_last_resort_is_a_small_initial_barrier_parameter_unless_one_is_set():
     (name, variant), = Ipopt().last_resorts()
     assert name == "small-mu-init" and variant.options["ipopt"]["mu_init"] == 1e-3

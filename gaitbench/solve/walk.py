@@ -319,12 +319,15 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
 
 
 def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,
-                     seed: Seed | None = None, phase: str = "second", solver: Solver | None = None) -> StepOutcome:
+                     seed: Seed | None = None, phase: str = "second", solver: Solver | None = None,
+                     start: np.ndarray | None = None) -> StepOutcome:
     """Step ``index``'s NLP solved from ``seed`` (the blended guess by default), decoded, verified and chained.
 
-    ``solver`` replaces the problem's solver for this solve (a retry's variant of it)."""
+    ``solver`` replaces the problem's solver for this solve (a retry's variant of it); ``start``, a point of the
+    NLP's own variables, replaces the guess (a continuation from where an earlier solve stopped)."""
     solver = solver or problem.solver
-    result = solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data, seed))
+    guess = built.initial_guess(data, seed) if start is None else start
+    result = solver.solve(built.nlp, data.parameter_vector(), guess)
     if not result.converged:
         return StepOutcome(index, data.stance, result.status.value, f"{result.status.value}: {result.message}",
                            result)
@@ -348,6 +351,9 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     """:func:`solve_and_verify`, and when the solve fails with a :data:`RETRIED_STATUSES` status, the retry
     ladder (docs/solvers.md, "Retries") until a rung solves the step:
 
+    0. when the solve ran out of iterations, each of the solver's continuations (``solver.continuations()``; ``sqp``:
+       itself), started from the solve's last iterate: a solve cut by its budget while converging reaches its own
+       optimum, where another start may reach a worse one;
     1. each of the solver's own remedies (``solver.remedies()``; IPOPT: adaptive μ) from the same guess, and when
        that guess is a trajectory ``seed``, each of its seed remedies (``solver.seed_remedies()``) too;
     2. ``first-phase-seed`` (4-DOF steps only, and only with ``reseed``): the step's 2-DOF First-Phase problem
@@ -370,7 +376,7 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
     if outcome.solved or outcome.status not in RETRIED_STATUSES:
         return outcome
     first_attempt, retries = outcome, []
-    for remedy, attempt in _ladder(problem, index, built, data, seed, phase, reseed):
+    for remedy, attempt in _ladder(problem, index, built, data, seed, phase, reseed, first_attempt):
         if problem.out_of_time:  # a rung started after the deadline could run a whole solve's limit past it
             outcome = replace(first_attempt, status=SolverStatus.TIME_LIMIT.value,
                               message=f"time limit: the walk's time ran out during step {index}'s retries")
@@ -389,8 +395,14 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
 
 
 def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
-            phase: str, reseed: bool):
+            phase: str, reseed: bool, failed: StepOutcome):
     """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
+    stopped_at = failed.solver_result.x if failed.solver_result is not None else None
+    if (failed.status == SolverStatus.ITERATION_LIMIT.value and stopped_at is not None
+            and np.all(np.isfinite(stopped_at))):
+        for name, variant in solver_variants(problem.solver, "continuations"):
+            yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, phase=phase,
+                                                                 solver=variant, start=stopped_at)
     for name, variant in solver_remedies(problem.solver, seeded=seed is not None):
         yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
     if phase == "second" and reseed:
@@ -433,8 +445,8 @@ def solver_remedies(solver: Solver, seeded: bool) -> list[tuple[str, Solver]]:
 
 
 def solver_variants(solver: Solver, kind: str) -> list[tuple[str, Solver]]:
-    """The solver's named variants of one kind, ``remedies``, ``seed_remedies`` or ``last_resorts``: empty where
-    it has none."""
+    """The solver's named variants of one kind, ``continuations``, ``remedies``, ``seed_remedies`` or
+    ``last_resorts``: empty where it has none."""
     method = getattr(solver, kind, None)
     return list(method()) if method is not None else []
 

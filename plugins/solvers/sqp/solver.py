@@ -98,6 +98,13 @@ class SQP:
                            "acceptable_tolerance": acceptable_tolerance, "fallback_qp_solver": fallback_qp_solver,
                            "crawl_shift_floor": crawl_shift_floor}
 
+    def continuations(self) -> list[tuple[str, SQP]]:
+        """After a solve that ran out of iterations, the same solver again from its last iterate: on the gait steps
+        such a solve is often still converging along the cost's valleys. The reference column's forward step 6 at
+        N = 120 reached its limit 752 iterations before an optimum at COT 0.688, and the First-Phase seed then gave
+        1.488 (docs/solvers.md, "Why forward at N = 120 lies above its neighbours")."""
+        return [("continue", self)]
+
     def remedies(self) -> list[tuple[str, SQP]]:
         """Variants for the walk's retry ladder from any start: Clarabel's QPs instead of PIQP's. From the first
         attempt's guess it is the one that solves: in the reference column's 43 walks it converged on 31 of the 50
