@@ -9,7 +9,8 @@ import pytest
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.terrain import terrain_clearance
 from gaitbench.plugins import load_registry
-from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.walk import WalkProblem, solve_with_retries
@@ -196,7 +197,7 @@ def test_a_first_phase_that_fails_ends_the_ladder_instead_of_being_recorded_once
     assert "failed_in" not in rungs[0] and rungs[1]["failed_in"] == "first phase"
 
 
-def _forward_step_1(solver) -> tuple[WalkProblem, object, object]:
+def _forward_step_1(solver) -> tuple[WalkProblem, TranscribedStep, StepData]:
     """Forward step 1 at N = 10 for ``solver``: the problem, its built 4-DOF step and the step's data."""
     problem = WalkProblem(REGISTRY.create("experiment", "forward"), HermiteSimpson(), solver, 10, steps=1)
     return problem, problem.transcription.build(problem.structure("second")), problem.step_data(
