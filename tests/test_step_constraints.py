@@ -322,6 +322,32 @@ def test_a_look_ahead_window_tries_the_solver_s_last_resorts_after_its_remedies(
         "none", "scripted-remedy", "use-ipopt"]
 
 
+@pytest.mark.parametrize("status", [SolverStatus.ITERATION_LIMIT, SolverStatus.ERROR])
+def test_a_look_ahead_window_that_ran_out_of_iterations_is_continued_from_its_last_iterate_first(status):
+    """The reference column's back-up windows: stairs N = 100, step 2, reached the limit with the first attempt
+    and the filter, Clarabel's rung ended in an error, and 3,631 iterations from the start solved it. A window,
+    like a step alone, is continued where its first attempt stopped; one that failed otherwise is not."""
+    from gaitbench.solve.walk_chain import LookAhead
+
+    experiment = REGISTRY.create("experiment", "forward")
+    solver = StopsAtItsLimit()
+    solver.status = status
+    continuation = Continues()
+    solver.continuations = lambda: [("continue", continuation)]
+    solver.last_resorts = lambda: [("use-ipopt", Ipopt())]
+    problem = WalkProblem(experiment, HermiteSimpson(), solver, 10, steps=2)
+    built = problem.transcription.build(problem.structure("second", walked=True))
+    outcome = LookAhead(built, 2, fallback=False).solve_step(problem, 1, problem.start_state())
+    assert outcome.solved
+    remedies = [attempt["remedy"] for attempt in outcome.details["look_ahead"]["attempts"]]
+    if status is SolverStatus.ITERATION_LIMIT:
+        assert remedies == ["none", "continue"]
+        assert np.array_equal(continuation.starts[0], solver.starts[0] + 1e-3)  # where the first attempt stopped
+    else:
+        assert remedies == ["none", "use-ipopt"]
+        assert continuation.starts == []
+
+
 def test_no_rung_starts_after_the_walk_s_deadline_and_the_step_ends_with_its_time_limit():
     import time
 

@@ -397,12 +397,11 @@ def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep,
 def _ladder(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData, seed: Seed | None,
             phase: str, reseed: bool, failed: StepOutcome):
     """The rungs of the retry ladder as (remedy, attempt) pairs; attempts run lazily, the First Phase once."""
-    stopped_at = failed.solver_result.x if failed.solver_result is not None else None
-    if (failed.status == SolverStatus.ITERATION_LIMIT.value and stopped_at is not None
-            and np.all(np.isfinite(stopped_at))):
+    stopped = stopped_at(failed)
+    if stopped is not None:
         for name, variant in solver_variants(problem.solver, "continuations"):
             yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, phase=phase,
-                                                                 solver=variant, start=stopped_at)
+                                                                 solver=variant, start=stopped)
     for name, variant in solver_remedies(problem.solver, seeded=seed is not None):
         yield name, lambda variant=variant: solve_and_verify(problem, index, built, data, seed, phase, variant)
     if phase == "second" and reseed:
@@ -436,6 +435,15 @@ def _first_phase_rungs(problem: WalkProblem, index: int, built: TranscribedStep,
 def _failed_in(outcome: StepOutcome) -> dict:
     """Where a rung failed when it was not the 4-DOF solve itself (the First Phase that seeds it)."""
     return {"failed_in": outcome.details["failed_in"]} if "failed_in" in outcome.details else {}
+
+
+def stopped_at(failed: StepOutcome) -> np.ndarray | None:
+    """The last iterate of a solve cut by its iteration limit, where the solver's continuations start; None after
+    any other failure (an error's or an infeasible solve's last point is no way on)."""
+    x = failed.solver_result.x if failed.solver_result is not None else None
+    if failed.status != SolverStatus.ITERATION_LIMIT.value or x is None or not np.all(np.isfinite(x)):
+        return None
+    return x
 
 
 def solver_remedies(solver: Solver, seeded: bool) -> list[tuple[str, Solver]]:

@@ -32,6 +32,7 @@ from gaitbench.solve.walk import (
     solve_with_retries,
     solver_remedies,
     solver_variants,
+    stopped_at,
 )
 
 INITIAL_STATE = PARAMETER_LAYOUT["initial_state"]
@@ -110,7 +111,8 @@ class WalkChain:
 class LookAhead:
     """One Phase with a receding horizon: step i is solved together with the next ``horizon − 1`` steps, and only
     step i is committed (DECISIONS §7). Each window starts from the previous window's later steps; its last step
-    from the blended guess. A window that fails after the solver's remedies and last resorts falls back to step i
+    from the blended guess. A window that fails after the solver's continuations (when it ran out of iterations),
+    remedies and last resorts falls back to step i
     alone, with the retry ladder, and says so in the step's details (unless ``fallback`` is off: then the failure
     is returned). Upward slope, HS, N = 150: the back-up window of steps 5–6 from step 5's trajectory reached
     IPOPT's 3000 iterations with both μ strategies, and converges in 420 with μ₀ = 1e-3 (its last resort).
@@ -142,13 +144,11 @@ class LookAhead:
         started = time.perf_counter()
         attempts = []
         seeded = any(seed is not None for _, seed in known)  # a step started from a trajectory, not blended
-        variants = [("", problem.solver), *solver_remedies(problem.solver, seeded),
-                    *solver_variants(problem.solver, "last_resorts")]
-        for remedy, solver in variants:
+        for remedy, attempt in self._rungs(problem, index, chain, p, guess, seeded):
             if attempts and problem.out_of_time:
                 break  # the step alone below then ends with the walk's time limit too
-            outcome = self._commit(problem, index, chain, solver, p, guess)
-            attempts.append({"remedy": remedy or "none", **outcome.summary()})
+            outcome = attempt()
+            attempts.append({"remedy": remedy, **outcome.summary()})
             if outcome.solved:
                 break
         window = {"horizon": count, "attempts": attempts, "time_s": time.perf_counter() - started}
@@ -159,9 +159,31 @@ class LookAhead:
         outcome.details = {**outcome.details, "look_ahead": window}
         return outcome
 
+    def _rungs(self, problem: WalkProblem, index: int, chain: WalkChain, p: np.ndarray, guess: np.ndarray,
+               seeded: bool):
+        """The window's solves as (remedy, attempt) pairs, run lazily, as the step's retry ladder has them: the
+        solver from ``guess``; when that ran out of iterations, its continuations from the last iterate; its
+        remedies (with the seed remedies when the window starts from a trajectory) and last resorts from ``guess``.
+        """
+        first: list[StepOutcome] = []
+
+        def first_attempt() -> StepOutcome:
+            first.append(self._commit(problem, index, chain, problem.solver, p, guess))
+            return first[0]
+
+        yield "none", first_attempt
+        stopped = stopped_at(first[0])
+        if stopped is not None:
+            for name, variant in solver_variants(problem.solver, "continuations"):
+                yield name, lambda variant=variant: self._commit(problem, index, chain, variant, p, stopped)
+        for name, variant in [*solver_remedies(problem.solver, seeded),
+                              *solver_variants(problem.solver, "last_resorts")]:
+            yield name, lambda variant=variant: self._commit(problem, index, chain, variant, p, guess)
+
     def _commit(self, problem: WalkProblem, index: int, chain: WalkChain, solver: Solver, p: np.ndarray,
                 guess: np.ndarray) -> StepOutcome:
-        """The window solved; step ``index`` decoded, verified and chained; the later steps kept as seeds."""
+        """The window solved from ``guess``; step ``index`` decoded, verified and chained; the later steps kept as
+        seeds."""
         result = solver.solve(chain.nlp, p, guess)
         stance = chain.stance(0)
         if not result.converged:
