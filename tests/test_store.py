@@ -247,6 +247,27 @@ def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Pa
     assert walks_in_flight(tmp_path / "no-store", rows, set()) == []
 
 
+def test_walks_in_flight_are_named_from_the_suite_text_a_run_recorded_when_its_file_is_gone(tmp_path: Path) -> None:
+    """Runs recorded before suite paths were made absolute hold `suites/thesis-all.toml`, unreadable from another
+    directory; the suite's text, recorded with the run, still names their walks."""
+    from gaitbench.cli.run_commands import walks_in_flight
+    from gaitbench.run.suite import load_suite
+
+    suite = tiny_suite(tmp_path / "tiny.toml", "tiny", [6], ["hermite-simpson"])
+    case, = load_suite(suite).cases
+    text = suite.read_text()
+    suite.unlink()
+    store_dir = tmp_path / "store"
+    with ResultStore.create(store_dir) as store:
+        store.start_run({"run_id": "r1", "suite": "tiny", "suite_path": "suites/tiny.toml", "suite_text": text,
+                         "started_at": "now"})
+        rows = store.runs()
+    (store_dir / "checkpoints").mkdir()
+    (store_dir / "checkpoints" / f"{case.key}.json").write_text('{"saved": 2, "of": 11, "elapsed_s": 36.0}')
+    (named,) = walks_in_flight(store_dir, rows, set())
+    assert named[:2] == (case.label, "2 of 11")
+
+
 # --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------
 
 @pytest.fixture

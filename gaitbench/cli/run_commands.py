@@ -279,7 +279,7 @@ def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> l
     progress = saved_progress(directory)
     if not progress:
         return []
-    labels = _case_labels({row["suite_path"] for row in runs_rows if row.get("suite_path")})
+    labels = _case_labels({(row["suite_path"], row.get("suite_text")) for row in runs_rows if row.get("suite_path")})
     return [(labels.get(key, key), f"{saved.get('saved', '?')} of {saved.get('of') or '?'}",
              _number(saved.get("elapsed_s", 0.0) / 3600, ".2f"), _saved_at(progress_file(directory / key)),
              "solving" if key in live else "resumable")
@@ -294,16 +294,18 @@ def _saved_at(path: Path) -> str:
         return ""
 
 
-def _case_labels(suite_paths: set[str]) -> dict[str, str]:
-    """Case key → label over the suites that can still be read; a suite that cannot is skipped, not an error."""
+def _case_labels(suites: set[tuple[str, str | None]]) -> dict[str, str]:
+    """Case key → label over the runs' suites, (path, text as the run recorded it): the recorded text names the
+    cases that run had, wherever the file has gone since (a run recorded without it reads the file). A suite that
+    cannot be read or expanded is skipped, not an error."""
     from gaitbench.run.suite import load_suite
     from gaitbench.run.suite_spec import SuiteError
 
     labels = {}
-    for suite_path in sorted(suite_paths):
+    for suite_path, text in sorted(suites, key=lambda suite: (suite[0], suite[1] or "")):
         try:
-            labels.update({case.key: case.label for case in load_suite(suite_path).cases})
-        except SuiteError:  # a moved or edited suite only costs the label
+            labels.update({case.key: case.label for case in load_suite(suite_path, text=text).cases})
+        except SuiteError:  # a suite whose plugins are gone only costs the label
             continue
     return labels
 

@@ -83,17 +83,20 @@ class Method:
     parts: dict[str, Variant]
 
 
-def load_suite(path: str | Path, registry: PluginRegistry | None = None) -> Suite:
+def load_suite(path: str | Path, registry: PluginRegistry | None = None, text: str | None = None) -> Suite:
     """Read, check and expand the suite file at ``path``.
 
     ``registry`` defaults to the entry-point plugins plus the suite's ``[suite].plugins`` directories (and
-    ``$GAITBENCH_PLUGINS_DIR``); a given registry is used as it is. Raises :class:`SuiteError`.
+    ``$GAITBENCH_PLUGINS_DIR``); a given registry is used as it is. ``text``, when given, is the suite as a run
+    recorded it (the file at ``path`` may since have moved or changed), and the file is not read. Raises
+    :class:`SuiteError`.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SuiteError(path, "", f"cannot read the suite file: {exc}") from None
+    if text is None:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SuiteError(path, "", f"cannot read the suite file: {exc}") from None
     spec = parse_suite(path, text)
     plugin_dirs = _plugin_dirs(path, spec)
     if registry is None:
