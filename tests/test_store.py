@@ -268,6 +268,35 @@ def test_walks_in_flight_are_named_from_the_suite_text_a_run_recorded_when_its_f
     assert named[:2] == (case.label, "2 of 11")
 
 
+def test_a_run_whose_output_is_no_terminal_logs_each_case_and_each_saved_step_with_the_time(tmp_path: Path) -> None:
+    """A batch job's log (`nohup gaitbench run ... > log`) gets no progress bar; hour-long walks show there as a
+    timestamped line per case finished and per step saved."""
+    import re
+
+    from gaitbench.cli.run_commands import _StepsInFlight
+    from gaitbench.run.suite import load_suite
+
+    suite = tiny_suite(tmp_path / "tiny.toml", "tiny", [6], ["hermite-simpson"])
+    result = run_cli("run", str(suite), "--store", str(tmp_path / "store"), "--executor", "inprocess",
+                     "--no-report")
+    assert result.code == 0, result.output
+    stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d "
+    assert re.search(stamp + r"1 cases to run", result.output)
+    assert re.search(stamp + r"\[1/1\] solved: forward N=6 .*: ACOT \d\.\d{4}, \d+ s", result.output)
+
+    case, = load_suite(suite).cases
+    watcher = _StepsInFlight(tmp_path / "flight", [case])
+    (tmp_path / "flight" / "checkpoints").mkdir(parents=True)
+    progress = tmp_path / "flight" / "checkpoints" / f"{case.key}.json"
+    (tmp_path / "flight" / "checkpoints" / "0123456789abcdef.json").write_text('{"saved": 4, "of": 11}')
+    seen: dict[str, int] = {}
+    progress.write_text('{"saved": 2, "of": 11, "elapsed_s": 5400.0}')
+    assert watcher.new_steps(seen) == [f"step 2 of 11 saved ({case.label.split(':')[0]}), 1.50 h"]
+    assert watcher.new_steps(seen) == []  # nothing new; another suite's walk is never named
+    progress.write_text('{"saved": 3, "of": 11, "elapsed_s": 750.0}')
+    assert watcher.new_steps(seen) == [f"step 3 of 11 saved ({case.label.split(':')[0]}), 12.5 min"]
+
+
 # --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------
 
 @pytest.fixture
