@@ -180,7 +180,7 @@ def test_a_resumed_case_s_time_limit_counts_the_time_before_its_stop(tmp_path: P
 
 
 def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) -> None:
-    from gaitbench.cli.run_commands import steps_in_flight
+    from gaitbench.cli.run_progress import steps_in_flight
     from gaitbench.solve.checkpoint import remove_checkpoint, saved_progress
 
     step = StepOutcome(1, 1, "converged", "", next_state=np.zeros(4))

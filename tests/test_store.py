@@ -273,7 +273,7 @@ def test_a_run_whose_output_is_no_terminal_logs_each_case_and_each_saved_step_wi
     timestamped line per case finished and per step saved."""
     import re
 
-    from gaitbench.cli.run_commands import _StepsInFlight
+    from gaitbench.cli.run_progress import StepsInFlight
     from gaitbench.run.suite import load_suite
 
     suite = tiny_suite(tmp_path / "tiny.toml", "tiny", [6], ["hermite-simpson"])
@@ -285,7 +285,7 @@ def test_a_run_whose_output_is_no_terminal_logs_each_case_and_each_saved_step_wi
     assert re.search(stamp + r"\[1/1\] solved: forward N=6 .*: ACOT \d\.\d{4}, \d+ s", result.output)
 
     case, = load_suite(suite).cases
-    watcher = _StepsInFlight(tmp_path / "flight", [case])
+    watcher = StepsInFlight(tmp_path / "flight", [case])
     (tmp_path / "flight" / "checkpoints").mkdir(parents=True)
     progress = tmp_path / "flight" / "checkpoints" / f"{case.key}.json"
     (tmp_path / "flight" / "checkpoints" / "0123456789abcdef.json").write_text('{"saved": 4, "of": 11}')
