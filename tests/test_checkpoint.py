@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -177,6 +178,27 @@ def test_a_resumed_case_s_time_limit_counts_the_time_before_its_stop(tmp_path: P
     assert (row["status"], row["stop_cause"], row["stop_step"], row["steps_solved"]) == \
         ("incomplete", "time_limit", 3, 2)
     assert row["wall_time_s"] >= 10.0
+
+
+def test_a_walk_stopped_by_its_time_limit_keeps_its_steps_for_a_run_with_a_larger_limit(tmp_path: Path) -> None:
+    """The reference column's stairs walk at N = 130 spent its 2 h on 7 steps; with its checkpoint kept, a run
+    with a larger limit and --retry-incomplete solves step 8 on, not steps 1-7 again."""
+    whole = REGISTRY.create("strategy", "one-phase").solve(_problem())
+    case = _case(time_limit_s=5)
+    path = _stopped_run(tmp_path / "store", case)
+    saved = WalkCheckpoint.open(path, {"case": case.key, "code": code_fingerprint()})
+    saved.save(saved.steps, saved.backed_up, elapsed_s=10.0)
+    suite = SimpleNamespace(name="test", path=Path("t.toml"), text="", cases=[case])
+    run_suite(suite, tmp_path / "store", InProcessExecutor())
+    assert load_results(tmp_path / "store").iloc[0]["stop_cause"] == "time_limit"
+    assert path.exists() and progress_file(path).exists()  # kept beside the recorded row
+
+    suite.cases = [replace(case, time_limit_s=600)]
+    run_suite(suite, tmp_path / "store", InProcessExecutor(), resume=True, retry_incomplete=True)
+    row = load_results(tmp_path / "store").iloc[0]
+    assert row["status"] == "solved" and row["acot"] == whole.acot
+    assert _walk_file(tmp_path / "store", case)["resumed"]["steps"] == 2  # steps 1 and 2 were not solved again
+    assert not path.exists()  # recorded whole
 
 
 def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) -> None:
