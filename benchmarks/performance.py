@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -261,9 +262,11 @@ def walks_part(registry) -> list[dict]:
 
 def sampled_suite(suite: str, sample_nodes, time_limit_s: int, ipopt_options: dict | None = None,
                   experiments: tuple[str, ...] = ()) -> str:
-    """The text of ``suites/<suite>.toml`` at ``sample_nodes`` with ``time_limit_s``, its IPOPT methods solving with
-    ``ipopt_options`` if given, and only ``experiments`` if given."""
+    """The text of ``suites/<suite>.toml`` at ``sample_nodes`` with ``time_limit_s`` for every case (a method's own
+    limit dropped), its IPOPT methods solving with ``ipopt_options`` if given, and only ``experiments`` if given."""
     sample = (HERE.parent / "suites" / f"{suite}.toml").read_text()
+    head, methods = sample.split("[[method]]", 1)
+    sample = head + "[[method]]" + re.sub(r"(?m)^time_limit_s = .*\n", "", methods)
     replacements = [("N = { start = 10, stop = 200, step = 10 }", f"N = {list(sample_nodes)}"),
                     ("time_limit_s = 7200", f"time_limit_s = {time_limit_s}")]
     if experiments:

@@ -77,7 +77,8 @@ def test_shipped_suite_loads_with_expected_case_count(name):
     assert len({case.key for case in suite.cases}) == len(suite.cases)
     assert f"{EXPECTED_CASES[name]} cases" in path.read_text().split("\n[suite]")[0], "header states the count"
     assert suite.output == Path(f"results/{name}")
-    assert all(case.time_limit_s == suite.time_limit_s for case in suite.cases)
+    assert all(case.time_limit_s == (21600 if case.method == "reference" else suite.time_limit_s)
+               for case in suite.cases)
 
 
 def test_every_shipped_suite_is_tested():
@@ -460,6 +461,29 @@ def test_explicit_methods_carry_their_labels(tmp_path):
     first = suite.cases[0]
     assert (first.method, first.transcription.name, first.solver.options) == ("A", "dmoc", {"tolerance": 1e-6})
     assert len(suite.cases) == 2 * 5
+
+
+def test_a_method_s_own_time_limit_replaces_the_suite_s_for_its_cases_alone(tmp_path):
+    """The reference column's `sqp` walks at N >= 130 outgrow the 2 h that bound the IPOPT methods' cases."""
+    text = BASE.split("transcriptions")[0].replace('name = "t"', 'name = "t"\ntime_limit_s = 60') + """
+        [[method]]
+        label = "fast"
+        transcription = "dmoc"
+        solver = "ipopt"
+        strategy = "one-phase"
+
+        [[method]]
+        label = "slow"
+        transcription = "hermite-simpson"
+        solver = "sqp"
+        strategy = "one-phase"
+        time_limit_s = 600
+        """
+    suite = _load(tmp_path, textwrap.dedent(text))
+    assert {case.method: case.time_limit_s for case in suite.cases} == {"fast": 60.0, "slow": 600.0}
+    bad = textwrap.dedent(text).replace("time_limit_s = 600", "time_limit_s = 0")
+    with pytest.raises(SuiteError, match=r"\[\[method\]\]\[1\]\.time_limit_s: expected a positive number"):
+        _load(tmp_path, bad)
 
 
 def test_n_range_is_inclusive(tmp_path):

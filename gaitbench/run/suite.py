@@ -81,6 +81,8 @@ class Method:
     label: str
     key: str
     parts: dict[str, Variant]
+    time_limit_s: float | None = None
+    """Its cases' limit where the method sets one (``[[method]].time_limit_s``), else the suite's."""
 
 
 def load_suite(path: str | Path, registry: PluginRegistry | None = None, text: str | None = None) -> Suite:
@@ -150,7 +152,7 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
                 strategy=method.parts["strategy"].choice, steps=spec.steps,
                 objective=method.parts["objective"].choice if "objective" in method.parts else DEFAULT_OBJECTIVE,
                 problem_options=dict(spec.problem_options), repetition=repetition, tracking=spec.tracking,
-                method=method.label, time_limit_s=spec.time_limit_s, plugin_dirs=plugin_dirs,
+                method=method.label, time_limit_s=method.time_limit_s or spec.time_limit_s, plugin_dirs=plugin_dirs,
             )
             planned.append((case, tags))
 
@@ -262,7 +264,7 @@ def _methods(path: Path, spec: SuiteSpec, builder: _Builder) -> list[Method]:
                 else:
                     suffixes = [part.grid_suffix for part in parts.values() if part.grid_suffix]
                     label = f"{method.label}({'; '.join(suffixes)})" if suffixes else method.label
-                methods.append(Method(label, method.key, parts))
+                methods.append(Method(label, method.key, parts, method.time_limit_s))
     seen: dict[str, Method] = {}
     for method in methods:
         if method.label in seen:

@@ -36,7 +36,7 @@ TABLES = ("suite", "sweep", "exclude", "method", "tracking")
 SUITE_KEYS = ("name", "description", "output", "repetitions", "time_limit_s", "steps", "plugins", "problem_options")
 SWEEP_KEYS = ("experiments", "N", "transcriptions", "solvers", "strategies")
 ENTRY_KEYS = ("name", "options", "grid", "label")
-METHOD_KEYS = ("label", "transcription", "solver", "strategy", "objective")
+METHOD_KEYS = ("label", "transcription", "solver", "strategy", "objective", "time_limit_s")
 METHOD_PARTS = ("transcription", "solver", "strategy")
 EXCLUDE_KEYS = ("experiment", "N", "transcription", "solver", "strategy", "method")
 TRACKING_KEYS = ("controller", "observer", "disturbance", "options")
@@ -128,7 +128,8 @@ class _Parser:
                 parts[part] = self.entry(table[part], f"{key}.{part}")
             if "objective" in table:
                 parts["objective"] = self.entry(table["objective"], f"{key}.objective")
-            methods.append(MethodSpec(key, label, parts))
+            time_limit = self.number(table, "time_limit_s", key, default=0.0) if "time_limit_s" in table else None
+            methods.append(MethodSpec(key, label, parts, time_limit))
         return methods
 
     def exclusions(self, value: Any) -> list[Exclusion]:
