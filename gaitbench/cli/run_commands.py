@@ -37,7 +37,8 @@ from gaitbench.run.executors import EXECUTORS
               help="With --resume, run again the cases that errored, timed out or crashed.")
 @click.option("--retry-incomplete", is_flag=True,
               help="With --resume, run again the cases whose walks stopped before their last step: after a "
-                   "change to gaitbench that may take them further (the new row replaces the old).")
+                   "change to gaitbench that may take them further, or with a larger time limit (a walk stopped by "
+                   "its limit goes on from the steps it solved). The new row replaces the old.")
 @click.option("--retry-unverified", is_flag=True,
               help="With --resume, run again the complete walks that have no verified ACOT (a decrease-and-conquer "
                    "step whose polish failed): after a change to gaitbench that may verify them.")
