@@ -218,7 +218,8 @@ def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) ->
 
 
 def test_the_code_fingerprint_follows_the_source_that_solves_walks_not_the_commit(tmp_path, monkeypatch) -> None:
-    """A documentation commit keeps a walk in flight resumable; an edit to the core or a built-in plugin does not."""
+    """A documentation commit, or one to the command line or the reports, keeps a walk in flight resumable; an edit
+    to the code that solves walks (the core, a built-in solver or other plugin) does not."""
     import gaitbench
     import plugins as builtin
     from gaitbench.run import provenance
@@ -234,6 +235,9 @@ def test_the_code_fingerprint_follows_the_source_that_solves_walks_not_the_commi
     before = fingerprint()
     (core / "README.md").write_text("a note")
     (tmp_path / "docs.md").write_text("a decision")
+    for front_end in (core / "cli", core / "reports", plugins / "reporters"):  # they only show results
+        front_end.mkdir()
+        (front_end / "view.py").write_text("SHOWN = True\n")
     assert fingerprint() == before
     (plugins / "sub" / "module.py").write_text("X = 2\n")
     changed = fingerprint()

@@ -95,16 +95,24 @@ def code_fingerprint() -> str:
 
     The source, not the commit: a commit that changes only documentation, tests, benchmarks or results keeps the
     fingerprint, so a walk stopped in flight (a session's end, a crash) resumes across it, while any change to the
-    code that solves walks starts it again from step 1.
+    code that solves walks starts it again from step 1. The front ends that only show results (the command line,
+    the reports and the reporter plugins, :data:`FRONT_ENDS`) are left out: a walk's worker never runs them.
     """
     from gaitbench._version import __version__
 
     digest = hashlib.sha256()
     for root in _source_roots():
         for path in sorted(root.rglob("*.py")):
+            if path.relative_to(root).parts[0] in FRONT_ENDS:
+                continue
             digest.update(path.relative_to(root.parent).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     digest.update(repr(sorted(package_versions().items())).encode())
     return f"{__version__} {digest.hexdigest()[:16]}"
+
+
+FRONT_ENDS = frozenset({"cli", "reports", "reporters"})
+"""Sub-packages of ``gaitbench`` and ``plugins`` outside :func:`code_fingerprint`: they show what the walks gave (a
+change to a progress line or a report's table should not send hours of solved steps back to step 1)."""
 
 
 def _source_roots() -> list[Path]:
