@@ -295,6 +295,8 @@ def test_a_run_whose_output_is_no_terminal_logs_each_case_and_each_saved_step_wi
     assert watcher.new_steps(seen) == []  # nothing new; another suite's walk is never named
     progress.write_text('{"saved": 3, "of": 11, "elapsed_s": 750.0}')
     assert watcher.new_steps(seen) == [f"step 3 of 11 saved ({case.label.split(':')[0]}), 12.5 min"]
+    progress.write_text('{"saved": 1, "of": 11, "elapsed_s": 4.0}')  # started again from step 1 (other code)
+    assert watcher.new_steps(seen) == [f"step 1 of 11 saved ({case.label.split(':')[0]}), 4 s"]
 
 
 # --- 2. store errors: one line, the path, nothing changed -------------------------------------------------------

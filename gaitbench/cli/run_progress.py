@@ -35,14 +35,15 @@ class StepsInFlight(ProgressColumn):
         return self.text
 
     def new_steps(self, seen: dict[str, int]) -> list[str]:
-        """``step 3 of 11 saved (forward N=140 D&C-DM), 1.25 h`` for each walk of this suite that saved steps
-        since ``seen`` (case key → steps saved, updated here): a log's view of the walks in flight."""
+        """``step 3 of 11 saved (forward N=140 D&C-DM), 1.25 h`` for each walk of this suite whose saved steps
+        changed since ``seen`` (case key → steps saved, updated here; fewer is a walk started again from step 1,
+        its checkpoint from other code discarded): a log's view of the walks in flight."""
         from gaitbench.solve.checkpoint import saved_progress
 
         lines = []
         for key, saved in sorted(saved_progress(self.directory).items()):
             count = saved.get("saved")
-            if key in self.labels and isinstance(count, int) and count > seen.get(key, 0):
+            if key in self.labels and isinstance(count, int) and count != seen.get(key, 0):
                 seen[key] = count
                 lines.append(f"step {count} of {saved.get('of') or '?'} saved ({self.labels[key]}), "
                              f"{duration(saved.get('elapsed_s', 0.0))}")
