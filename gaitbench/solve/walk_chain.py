@@ -112,10 +112,10 @@ class LookAhead:
     """One Phase with a receding horizon: step i is solved together with the next ``horizon − 1`` steps, and only
     step i is committed (DECISIONS §7). Each window starts from the previous window's later steps; its last step
     from the blended guess. A window that fails after the solver's continuations (when it ran out of iterations),
-    remedies and last resorts falls back to step i
-    alone, with the retry ladder, and says so in the step's details (unless ``fallback`` is off: then the failure
-    is returned). Upward slope, HS, N = 150: the back-up window of steps 5–6 from step 5's trajectory reached
-    IPOPT's 3000 iterations with both μ strategies, and converges in 420 with μ₀ = 1e-3 (its last resort).
+    remedies and last resorts falls back to step i alone, with the retry ladder, and says so in the step's details
+    (unless ``fallback`` is off: then the failure is returned). Upward slope, HS, N = 150: the back-up window of
+    steps 5–6 from step 5's trajectory reached IPOPT's 3000 iterations with both μ strategies, and converges in
+    420 with μ₀ = 1e-3 (its last resort).
 
     Chains are built once per window length and first stance leg, and kept for the walk.
     """
@@ -142,12 +142,13 @@ class LookAhead:
             known[0] = (state, seed)
         guess = chain.guess(problem, index, known)
         started = time.perf_counter()
-        attempts = []
+        outcome = self._commit(problem, index, chain, problem.solver, p, guess)
+        attempts = [{"remedy": "none", **outcome.summary()}]
         seeded = any(seed is not None for _, seed in known)  # a step started from a trajectory, not blended
-        for remedy, attempt in self._rungs(problem, index, chain, p, guess, seeded):
-            if attempts and problem.out_of_time:
+        for remedy, solver, start in ([] if outcome.solved else self._rungs(problem.solver, outcome, guess, seeded)):
+            if problem.out_of_time:
                 break  # the step alone below then ends with the walk's time limit too
-            outcome = attempt()
+            outcome = self._commit(problem, index, chain, solver, p, start)
             attempts.append({"remedy": remedy, **outcome.summary()})
             if outcome.solved:
                 break
@@ -159,26 +160,18 @@ class LookAhead:
         outcome.details = {**outcome.details, "look_ahead": window}
         return outcome
 
-    def _rungs(self, problem: WalkProblem, index: int, chain: WalkChain, p: np.ndarray, guess: np.ndarray,
-               seeded: bool):
-        """The window's solves as (remedy, attempt) pairs, run lazily, as the step's retry ladder has them: the
-        solver from ``guess``; when that ran out of iterations, its continuations from the last iterate; its
+    @staticmethod
+    def _rungs(solver: Solver, failed: StepOutcome, guess: np.ndarray,
+               seeded: bool) -> list[tuple[str, Solver, np.ndarray]]:
+        """The window's retries after its ``failed`` first attempt, as (remedy, solver, start), in the step's
+        ladder's order: when it ran out of iterations, the solver's continuations from its last iterate; then its
         remedies (with the seed remedies when the window starts from a trajectory) and last resorts from ``guess``.
         """
-        first: list[StepOutcome] = []
-
-        def first_attempt() -> StepOutcome:
-            first.append(self._commit(problem, index, chain, problem.solver, p, guess))
-            return first[0]
-
-        yield "none", first_attempt
-        stopped = stopped_at(first[0])
-        if stopped is not None:
-            for name, variant in solver_variants(problem.solver, "continuations"):
-                yield name, lambda variant=variant: self._commit(problem, index, chain, variant, p, stopped)
-        for name, variant in [*solver_remedies(problem.solver, seeded),
-                              *solver_variants(problem.solver, "last_resorts")]:
-            yield name, lambda variant=variant: self._commit(problem, index, chain, variant, p, guess)
+        stopped = stopped_at(failed)
+        continued = [] if stopped is None else [(name, variant, stopped)
+                                                for name, variant in solver_variants(solver, "continuations")]
+        return continued + [(name, variant, guess) for name, variant in
+                            [*solver_remedies(solver, seeded), *solver_variants(solver, "last_resorts")]]
 
     def _commit(self, problem: WalkProblem, index: int, chain: WalkChain, solver: Solver, p: np.ndarray,
                 guess: np.ndarray) -> StepOutcome:
