@@ -267,6 +267,10 @@ def test_cases_reach_the_executor_largest_n_first(tmp_path: Path) -> None:
     assert handed == [cases[1].key, cases[3].key, cases[0].key, cases[2].key]  # equal N: suite order
     assert len(rows_by_key(tmp_path)) == 4
 
+    handed.clear()  # a sweep over several sessions fills its tables N by N instead
+    run_suite(suite_of(cases), tmp_path / "smallest", Recording(), smallest_first=True)
+    assert handed == [cases[0].key, cases[2].key, cases[3].key, cases[1].key]
+
 
 def test_runs_started_within_one_second_get_distinct_ids(tmp_path: Path, monkeypatch) -> None:
     import gaitbench.run.runner as runner

@@ -42,15 +42,20 @@ from gaitbench.run.executors import EXECUTORS
 @click.option("--retry-unverified", is_flag=True,
               help="With --resume, run again the complete walks that have no verified ACOT (a decrease-and-conquer "
                    "step whose polish failed): after a change to gaitbench that may verify them.")
+@click.option("--smallest-first", is_flag=True,
+              help="Start cases smallest N first instead of largest first. Largest first ends a run soonest; "
+                   "smallest first suits a sweep run over several sessions with --resume (the thesis suites' "
+                   "reference column: hours per case from N = 100 on), whose tables then fill N by N.")
 @click.option("--report/--no-report", "write_report", default=True, show_default=True,
               help="Write the HTML and CSV report (`gaitbench report`) to reports/<store name> at the end.")
 @click.pass_obj
 def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
         methods: tuple[str, ...], resume: bool, retry_failed: bool, retry_incomplete: bool,
-        retry_unverified: bool, write_report: bool) -> None:
+        retry_unverified: bool, smallest_first: bool, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
-    Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle.
+    Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle
+    (--smallest-first for the other order).
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
     the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
@@ -89,7 +94,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
-                                retry_unverified=retry_unverified,
+                                retry_unverified=retry_unverified, smallest_first=smallest_first,
                                 on_start=progress.start, on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
         except (RunRefused, StoreError, ExecutorError) as error:
             raise click.ClickException(str(error)) from None

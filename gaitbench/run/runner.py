@@ -273,7 +273,7 @@ class RunSummary:
 
 
 def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
-              retry_incomplete: bool = False, retry_unverified: bool = False,
+              retry_incomplete: bool = False, retry_unverified: bool = False, smallest_first: bool = False,
               on_start: Callable[[int, int], None] | None = None,
               on_outcome: Callable[[CaseOutcome], None] | None = None,
               on_elsewhere: Callable[[Case], None] | None = None) -> RunSummary:
@@ -284,7 +284,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
     executor starts it, so runs sharing a store split the cases between them; a case another live run has claimed
     or finished meanwhile is left to it (``on_elsewhere``). With ``resume``, finished cases are skipped (failed
     ones re-run with ``retry_failed``, stopped walks with ``retry_incomplete``, complete walks without a verified
-    ACOT with ``retry_unverified``), and a dead run's claims are taken over. ``on_start(to_run, skipped)`` and
+    ACOT with ``retry_unverified``), and a dead run's claims are taken over. Cases start largest N first
+    (:func:`largest_first`), or smallest N first with ``smallest_first``. ``on_start(to_run, skipped)`` and
     ``on_outcome(outcome)`` feed a progress display.
     """
     started = time.perf_counter()
@@ -298,7 +299,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                 f"{store.directory} already holds {len(present)} of the {len(suite.cases)} cases of this suite; "
                 "pass --resume to run only the missing ones, or --store to write somewhere else"
             )
-        pending = largest_first([case for case in suite.cases if case.key not in finished])
+        pending = [case for case in suite.cases if case.key not in finished]
+        pending = sorted(pending, key=lambda case: case.n_nodes) if smallest_first else largest_first(pending)
         if getattr(executor, "local_files", False):  # its workers can write in the store's directory
             pending = [replace(case, checkpoint=str(store.directory / checkpoint_file(case.key))) for case in pending]
         run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,
