@@ -18,7 +18,9 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import statistics
 import time
+from collections import Counter
 from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 
@@ -35,6 +37,11 @@ VARIANTS = {"uno filtersqp": ("uno", {"preset": "filtersqp"}), "fatrop dense": (
 §10 names for the reference column) and FATROP on the NLP as one dense stage (its default until 2026-12-03, when
 the stage-wise form became it: the run of that day labels them "fatrop" and "fatrop stagewise")."""
 OUT = Path(__file__).parent / "results"
+COMPARED_STEPS = (("forward", 2), ("upward-slope", 1))
+"""The steps whose optima the summary compares with IPOPT's: forward step 1 starts at rest, where the thesis cost's
+optimum is a continuum near zero and converged solvers end anywhere on it."""
+SAME_COT = 5e-4
+"""Relative difference of verified COTs counted as the same optimum in the summary."""
 
 
 def solve_one(label: str, solver_name: str, options: dict, experiment_name: str, step: int,
@@ -114,7 +121,8 @@ def markdown(results: dict) -> str:
              "`COT` is the optimizer's objective at the returned point, `verified COT` the COT recomputed from the "
              "decoded trajectory of a converged solve, with its largest dynamics residual; time is the wall-clock "
              "time of the solve call; `killed`: the solver ignored its time limit and its process was stopped. "
-             "Step 2 starts where IPOPT's step 1 ends.", "",
+             "Step 2 starts where IPOPT's step 1 ends.", "", *summary(results["rows"]), "",
+             f"Verified COTs within {100 * SAME_COT:g} % of each other count as the same optimum.", "",
              "| step | transcription | N | solver | status | time (s) | iterations | COT | verified COT | "
              "dynamics residual |",
              "|---|---|---|---|---|---|---|---|---|---|"]
@@ -127,6 +135,49 @@ def markdown(results: dict) -> str:
                      f"{_number(r['cot'], '.4g')} | {_number(r.get('verified_cot'), '.4g')} | "
                      f"{_number(r.get('max_defect'), '.1e')} |")
     return "\n".join(lines) + "\n"
+
+
+def summary(rows: list[dict], reference: str = "ipopt") -> list[str]:
+    """Per solver: how many steps it solved, its time against ``reference``'s where both converged, its verified
+    COT against ``reference``'s on :data:`COMPARED_STEPS`, and how the other solves ended; a Markdown table."""
+    by_solver: dict[str, list[dict]] = {}
+    for row in rows:
+        by_solver.setdefault(row["solver"], []).append(row)
+    theirs = {_step(row): row for row in by_solver.get(reference, []) if row["status"] == "converged"}
+    lines = [f"| solver | converged | time against `{reference}` where both converged (median, range) | verified COT "
+             f"against `{reference}` on forward step 2 and upward step 1 | how the others end |",
+             "|---|---|---|---|---|"]
+    ranked = sorted(by_solver.items(), key=lambda item: (item[0] != reference,
+                                                         -sum(r["status"] == "converged" for r in item[1]), item[0]))
+    for label, solved in ranked:
+        both = [(row, theirs[_step(row)]) for row in solved if row["status"] == "converged" and _step(row) in theirs]
+        ratios = [row["call_s"] / ref["call_s"] for row, ref in both]
+        time_text = "—" if not ratios else "1×" if label == reference else (
+            f"{statistics.median(ratios):.1f}× ({min(ratios):.1f}–{max(ratios):.1f}×)")
+        changes = [row["verified_cot"] / ref["verified_cot"] - 1 for row, ref in both
+                   if (row["experiment"], row["step"]) in COMPARED_STEPS and row.get("verified_cot")
+                   and ref.get("verified_cot")]
+        ends = Counter(row["status"] for row in solved if row["status"] != "converged")
+        lines.append(f"| `{label}` | {len(solved) - sum(ends.values())} of {len(solved)} | {time_text} | "
+                     f"{'—' if label == reference else _cot_changes(changes)} | "
+                     f"{', '.join(f'{status} {count}' for status, count in sorted(ends.items())) or '—'} |")
+    return lines
+
+
+def _step(row: dict) -> tuple:
+    """The step a row solved (its key without the solver)."""
+    return _key(row)[1:]
+
+
+def _cot_changes(changes: list[float]) -> str:
+    """Relative COT differences as "the same on k, a % to b % on m"."""
+    same = sum(abs(change) < SAME_COT for change in changes)
+    other = sorted(change for change in changes if abs(change) >= SAME_COT)
+    parts = [f"the same on {same}"] if same else []
+    if other:
+        span = f"{100 * other[0]:+.1f} %" + (f" to {100 * other[-1]:+.1f} %" if len(other) > 1 else "")
+        parts.append(f"{span} on {len(other)}")
+    return ", ".join(parts) or "none compared"
 
 
 def _number(value, spec: str) -> str:

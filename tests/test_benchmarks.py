@@ -284,3 +284,33 @@ def test_a_re_rendered_completion_record_keeps_its_notes():
     assert completion.keep_notes(existing, rendered) == \
         "# Completion: s (in progress)\n\nChanges:\n- a note\n\n4 of 4 walks complete (100 %).\n\nnew table\n"
     assert completion.keep_notes("no table yet\n", rendered) == rendered
+
+
+def _solvers_module():
+    spec = importlib.util.spec_from_file_location("solvers_benchmark", BENCHMARKS / "solvers.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _solve(solver, experiment, step, status, seconds, cot=None):
+    return {"solver": solver, "experiment": experiment, "step": step, "transcription": "dmoc", "N": 25,
+            "status": status, "call_s": seconds, "verified_cot": cot}
+
+
+def test_the_solver_summary_compares_time_and_optimum_with_ipopt_where_both_converged():
+    solvers = _solvers_module()
+    rows = [_solve("ipopt", "forward", 1, "converged", 1.0, 1e-4), _solve("ipopt", "forward", 2, "converged", 2.0, 1.0),
+            _solve("ipopt", "upward-slope", 1, "iteration_limit", 5.0),
+            _solve("sqp", "forward", 1, "converged", 3.0, 9e-4), _solve("sqp", "forward", 2, "converged", 8.0, 0.95),
+            _solve("sqp", "upward-slope", 1, "time_limit", 60.0)]
+    table = solvers.summary(rows)
+    assert table[2] == "| `ipopt` | 2 of 3 | 1× | — | iteration_limit 1 |"
+    # forward step 1's COTs (a continuum of optima near zero) are not compared; step 2 is 5 % lower
+    assert table[3] == "| `sqp` | 2 of 3 | 3.5× (3.0–4.0×) | -5.0 % on 1 | time_limit 1 |"
+
+
+def test_the_recorded_solver_table_is_the_rendering_of_the_recorded_results():
+    solvers = _solvers_module()
+    results = json.loads((BENCHMARKS / "results" / "solvers.json").read_text())
+    assert solvers.markdown(results) == (BENCHMARKS / "results" / "solvers.md").read_text()
