@@ -492,7 +492,10 @@ def test_remedies_are_other_paths_clarabel_from_any_start_the_filter_from_a_seed
     assert (clarabel.qp_solver, clarabel.fallback_qp_solver) == ("clarabel", "piqp")
     assert all(v.max_iterations == 77 and v.qp_tolerance == 1e-9 for v in (clarabel, filter_))
     assert clarabel.remedies() == [] and filter_.seed_remedies() == []
-    assert solver.continuations() == [("continue", solver)]  # the same solve, on from where its budget ran out
+    # on from where its budget ran out, with the crawl floor; the same solve if it has it already
+    (name, continuation), = solver.continuations()
+    assert (name, continuation.crawl_shift_floor, continuation.max_iterations) == ("continue-crawl-floor", 1e-12, 77)
+    assert continuation.continuations() == [("continue", continuation)]
 
 
 def test_a_failed_qp_is_solved_again_by_the_fallback_backend(monkeypatch):
