@@ -250,7 +250,7 @@ def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:
     assert row["status"] == "error" and "bogus_option" in row["message"]
 
 
-def test_cases_reach_the_executor_largest_n_first(tmp_path: Path) -> None:
+def test_cases_reach_the_executor_largest_n_first_or_smallest_when_asked(tmp_path: Path) -> None:
     """The pool gets its longest cases first and fills the end of the run with the short ones."""
     handed = []
 
