@@ -12,11 +12,18 @@ from gaitbench.run.suite import load_suite
 BENCHMARKS = Path(__file__).parents[1] / "benchmarks"
 
 
-def _regression_module():
-    spec = importlib.util.spec_from_file_location("acot_regression", BENCHMARKS / "acot_regression.py")
+def _benchmark(name: str):
+    """benchmarks/<name>.py, loaded as a module (the benchmarks are scripts, not a package); registered in
+    ``sys.modules``, under a name no installed module has, because a dataclass of theirs looks its module up there."""
+    spec = importlib.util.spec_from_file_location(f"benchmark_{name}", BENCHMARKS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def _regression_module():
+    return _benchmark("acot_regression")
 
 
 def _row(acot, status="solved", claimed=None):
@@ -68,10 +75,7 @@ def test_baseline_covers_the_regression_suite():
 def _performance_module(monkeypatch):
     """benchmarks/performance.py, which imports its sibling performance_summary as a script run from there would."""
     monkeypatch.syspath_prepend(str(BENCHMARKS))
-    spec = importlib.util.spec_from_file_location("performance", BENCHMARKS / "performance.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return _benchmark("performance")
 
 
 def test_suite_extrapolation_fits_each_experiment_and_method_on_its_own(monkeypatch):
@@ -136,11 +140,7 @@ def test_the_recorded_summary_is_the_rendering_of_the_recorded_results(monkeypat
 
 
 def _scaling_module():
-    spec = importlib.util.spec_from_file_location("scaling", BENCHMARKS / "scaling.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclass looks its module up there
-    spec.loader.exec_module(module)
-    return module
+    return _benchmark("scaling")
 
 
 def test_the_scaling_model_schedules_as_the_runner_hands_out_cases():
@@ -157,10 +157,7 @@ def test_the_scaling_model_schedules_as_the_runner_hands_out_cases():
 
 
 def _completion_module():
-    spec = importlib.util.spec_from_file_location("completion", BENCHMARKS / "completion.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return _benchmark("completion")
 
 
 def test_costly_steps_and_the_complete_candidate_are_counted_from_the_step_cots():
@@ -195,9 +192,7 @@ def test_a_store_snapshot_keeps_finished_cases_and_the_walks_in_flight(tmp_path)
     from gaitbench.run.runner import CaseOutcome, case_row
     from gaitbench.run.store import ResultStore
 
-    spec = importlib.util.spec_from_file_location("snapshot_store", BENCHMARKS / "snapshot_store.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _benchmark("snapshot_store")
 
     def case(n_nodes):
         return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice("ipopt"),
@@ -287,10 +282,7 @@ def test_a_re_rendered_completion_record_keeps_its_notes():
 
 
 def _solvers_module():
-    spec = importlib.util.spec_from_file_location("solvers_benchmark", BENCHMARKS / "solvers.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return _benchmark("solvers")
 
 
 def _solve(solver, experiment, step, status, seconds, cot=None):

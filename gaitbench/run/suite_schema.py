@@ -128,7 +128,7 @@ class _Parser:
                 parts[part] = self.entry(table[part], f"{key}.{part}")
             if "objective" in table:
                 parts["objective"] = self.entry(table["objective"], f"{key}.objective")
-            time_limit = self.number(table, "time_limit_s", key, default=0.0) if "time_limit_s" in table else None
+            time_limit = self.number(table, "time_limit_s", key, default=None)
             methods.append(MethodSpec(key, label, parts, time_limit))
         return methods
 
@@ -321,7 +321,7 @@ class _Parser:
             raise self.error(f"{where}.{name}", f"expected an integer ≥ {minimum}, found {value}")
         return value
 
-    def number(self, table: dict, name: str, where: str, *, default: float) -> float:
+    def number(self, table: dict, name: str, where: str, *, default: float | None) -> float | None:
         if name not in table:
             return default
         value = table[name]
