@@ -549,6 +549,24 @@ def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
     assert not without_floor.found  # the saved QP still shows the failure the floor avoids
 
 
+def test_piqp_solves_again_without_its_equilibration_a_gait_qp_it_fails_with_it():
+    """A QP of `sqp`'s forward step 2 at HS N = 50 (n = 695) that PIQP, equilibrated, ends at its iteration limit.
+    The backends try it again without the equilibration, before any fallback, and solve it to Clarabel's objective
+    (docs/solvers.md, "PIQP without its equilibration")."""
+    problem = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_preconditioner.npz")
+    evaluator = SimpleNamespace(evaluations={"qp": 0})
+    log = {"flags": "", "qp_time": 0.0}
+    solved = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator).solve(problem, None, log)
+    assert solved.solved, solved.status
+    assert (evaluator.evaluations["qp"], log["flags"]) == (2, "u")  # the equilibrated call failed; the retry solved
+    objective = 0.5 * solved.x @ problem.P @ solved.x + problem.q @ solved.x
+    reference = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10,
+                                        tol_feas=1e-10).x
+    assert objective == pytest.approx(0.5 * reference @ problem.P @ reference + problem.q @ reference, rel=1e-5)
+    assert np.max(problem.G @ solved.x - problem.h) <= 1e-9
+    assert np.max(np.abs(problem.A @ solved.x - problem.b)) <= 1e-9
+
+
 def test_registered_as_a_solver_plugin(tmp_path: Path):
     """Through a plugin directory holding only a file that registers this plugin (a package, which a plugin directory
     does not load itself), so the test does not depend on the installed entry points."""

@@ -33,6 +33,14 @@ gait QPs it solves at all in at most 95 iterations; on the others it ends at its
 iterations instead of 250 bound what such a failure costs before the fallback solves the QP (docs/solvers.md, the
 sqp section's "Speed")."""
 
+_RETRY_OPTIONS: dict[str, dict] = {"piqp": {"preconditioner_iter": 0}}
+"""Options under which a backend solves again, before the fallback, a QP it failed. PIQP without its Ruiz
+equilibration: on the late gait steps PIQP fails up to half the QPs (forward step 2, HS N = 100: 266 of 587),
+and Clarabel, solving them cold, ends most at its reduced accuracy (``AlmostSolved``, 124 of 255) in 85-110 ms
+each. Unequilibrated, PIQP solves 38 of 40 of those QPs in a median of 33 iterations, to objectives at or below
+Clarabel's; as the first try it fails others that the equilibrated PIQP solves, so it is the second
+(docs/solvers.md, "PIQP without its equilibration")."""
+
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
 solve's limit (PIQP, ProxQP and quadprog have none, and are only stopped between iterations)."""
@@ -71,23 +79,37 @@ class QPBackends:
 
     def solve(self, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """The QP by the chosen backend, and by the fallback backend (cold) when the first one fails (flag "f" in the
-        iteration's ``log``, which also gets the time)."""
-        outcome = self._call(self.solver, problem, warm, log)
+        iteration's ``log``, which also gets the time); each tries a QP it failed once more under its
+        ``_RETRY_OPTIONS`` (flag "u")."""
+        outcome = self._call_with_retry(self.solver, problem, warm, log)
         fallback = self.fallback
         if outcome.solved or fallback is None or fallback == self.solver:
             return outcome
         if fallback not in qpsolvers.sparse_solvers and sp.issparse(problem.P):
             problem = qpsolvers.Problem(*(part.toarray() if sp.issparse(part) else part for part in problem.unpack()))
-        second = self._call(fallback, problem, None, log)
+        second = self._call_with_retry(fallback, problem, None, log)
         if second.solved:
             log["flags"] += "f"
             return second
         return QPOutcome(False, f"{outcome.status}; {fallback}: {second.status}")
 
-    def _call(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
-        """One backend call, counted in ``evaluations["qp"]`` and timed; backend warnings and exceptions are
-        turned into an unsolved outcome with the backend's status."""
-        options = {**BACKEND_SETTINGS.get(solver, {}), **_BACKEND_OPTIONS.get(solver, {})}
+    def _call_with_retry(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None,
+                         log: dict) -> QPOutcome:
+        """One backend's answer: its call, and where that fails, its call under ``_RETRY_OPTIONS`` (cold)."""
+        outcome = self._call(solver, problem, warm, log)
+        if outcome.solved or solver not in _RETRY_OPTIONS:
+            return outcome
+        retried = self._call(solver, problem, None, log, _RETRY_OPTIONS[solver])
+        if retried.solved:
+            log["flags"] += "u"
+            return retried
+        return QPOutcome(False, f"{outcome.status}; retried: {retried.status}")
+
+    def _call(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict,
+              extra: dict | None = None) -> QPOutcome:
+        """One backend call, with ``extra`` options, counted in ``evaluations["qp"]`` and timed; backend warnings
+        and exceptions are turned into an unsolved outcome with the backend's status."""
+        options = {**BACKEND_SETTINGS.get(solver, {}), **_BACKEND_OPTIONS.get(solver, {}), **(extra or {})}
         options.update({key: self.tolerance for key in _TOLERANCE_KEYWORDS.get(solver, ())})
         if self.deadline.time_limit_s is not None and solver in _TIME_LIMITED:
             options["time_limit"] = max(self.deadline.time_limit_s - self.deadline.elapsed_s, 1e-3)
