@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from gait_steps import gait_step
 from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative_projection, undefined_at_start
+from saved_qps import clarabel_objective, saved_qp
 
 import plugins.solvers.fsqp as fsqp
 import plugins.solvers.fsqp.solver as fsqp_solver
@@ -21,6 +22,7 @@ from gaitbench.solve.solver import SolverStatus
 from plugins.solvers.fsqp import FSQP
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import qp_hessian
+from plugins.solvers.fsqp.qp import solve_qp
 from plugins.solvers.ipopt import Ipopt
 
 
@@ -323,3 +325,25 @@ def test_fsqp_walks_three_forward_steps_at_n20_within_5_percent_of_ipopt(transcr
     assert ours.complete and reference.complete, (ours.failure, reference.failure)
     assert all(step.verification.max_defect < 1e-6 for step in ours.steps)
     assert ours.acot <= 1.05 * reference.acot
+
+
+def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before_clarabel(monkeypatch):
+    """The saved forward-step QP that PIQP, equilibrated, ends at its iteration limit: the ``qp`` subproblem's
+    second turn, PIQP without the equilibration, solves it to Clarabel's objective, and Clarabel is not called
+    (docs/solvers.md, "PIQP without its equilibration")."""
+    import plugins.solvers.fsqp.qp as fsqp_qp
+
+    problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
+    calls = []
+    solve_problem = fsqp_qp.qpsolvers.solve_problem
+
+    def recorded(qp, solver, **settings):
+        solution = solve_problem(qp, solver=solver, **settings)
+        calls.append((solver, settings.get("preconditioner_iter"), solution.found))
+        return solution
+
+    monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
+    solution = solve_qp(problem)
+    assert calls == [("piqp", None, False), ("piqp", 0, True)]
+    objective = 0.5 * solution.x @ problem.P @ solution.x + problem.q @ solution.x
+    assert objective == pytest.approx(clarabel_objective(problem), rel=1e-5)

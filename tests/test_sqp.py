@@ -27,6 +27,7 @@ from nlp_problems import (
     rosenbrock,
     undefined_at_start,
 )
+from saved_qps import clarabel_objective, saved_qp
 
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP, NLPBuilder
@@ -520,30 +521,19 @@ def test_a_failed_qp_is_solved_again_by_the_fallback_backend(monkeypatch):
     assert _solve(problem, qp_solver="piqp", fallback_qp_solver="none").status is not SolverStatus.CONVERGED
 
 
-def _saved_qp(path: Path) -> qpsolvers.Problem:
-    """A QP saved by ``np.savez`` as its vectors and the CSC parts of P, G and A."""
-    saved = np.load(path)
-    matrices = {name: sp.csc_matrix((saved[f"{name}_data"], saved[f"{name}_indices"], saved[f"{name}_indptr"]),
-                                    shape=tuple(saved[f"{name}_shape"])) for name in ("P", "G", "A")}
-    return qpsolvers.Problem(matrices["P"], saved["q"], matrices["G"], saved["h"], matrices["A"], saved["b"],
-                             saved["lb"], saved["ub"])
-
-
 def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
     """A QP of `sqp`'s forward HS N = 50 walk (step 2; n = 695, a convexification shift of ~1e-10·max|H|). PIQP
     with its own settings reaches its solution by iteration ~20, lowers its regularisation to 1e-13 to meet the
     1e-10 tolerance, diverges and ends at its limit; with the backends' floor of 1e-10 it solves it, to the
     objective Clarabel finds to five digits (docs/solvers.md, "PIQP's regularisation floor")."""
-    problem = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_finetune.npz")
+    problem = saved_qp("sqp_gait_qp_piqp_finetune")
     evaluator = SimpleNamespace(evaluations={"qp": 0})  # the one part of an NLPEvaluator the backends use
     backends = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator)
     solved = backends.solve(problem, None, {"flags": "", "qp_time": 0.0})
     assert solved.solved, solved.status
     assert evaluator.evaluations["qp"] == 1  # PIQP alone: no fallback was given
     objective = 0.5 * solved.x @ problem.P @ solved.x + problem.q @ solved.x
-    reference = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10,
-                                        tol_feas=1e-10).x
-    assert objective == pytest.approx(0.5 * reference @ problem.P @ reference + problem.q @ reference, rel=1e-5)
+    assert objective == pytest.approx(clarabel_objective(problem), rel=1e-5)
     without_floor = qpsolvers.solve_problem(problem, solver="piqp", eps_abs=1e-10, eps_rel=1e-10,
                                             **_BACKEND_OPTIONS["piqp"])  # every setting of sqp's call but the floor
     assert not without_floor.found  # the saved QP still shows the failure the floor avoids
@@ -553,16 +543,14 @@ def test_piqp_solves_again_without_its_equilibration_a_gait_qp_it_fails_with_it(
     """A QP of `sqp`'s forward step 2 at HS N = 50 (n = 695) that PIQP, equilibrated, ends at its iteration limit.
     The backends try it again without the equilibration, before any fallback, and solve it to Clarabel's objective
     (docs/solvers.md, "PIQP without its equilibration")."""
-    problem = _saved_qp(Path(__file__).parent / "data" / "sqp_gait_qp_piqp_preconditioner.npz")
+    problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
     evaluator = SimpleNamespace(evaluations={"qp": 0})
     log = {"flags": "", "qp_time": 0.0}
     solved = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator).solve(problem, None, log)
     assert solved.solved, solved.status
     assert (evaluator.evaluations["qp"], log["flags"]) == (2, "u")  # the equilibrated call failed; the retry solved
     objective = 0.5 * solved.x @ problem.P @ solved.x + problem.q @ solved.x
-    reference = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10,
-                                        tol_feas=1e-10).x
-    assert objective == pytest.approx(0.5 * reference @ problem.P @ reference + problem.q @ reference, rel=1e-5)
+    assert objective == pytest.approx(clarabel_objective(problem), rel=1e-5)
     assert np.max(problem.G @ solved.x - problem.h) <= 1e-9
     assert np.max(np.abs(problem.A @ solved.x - problem.b)) <= 1e-9
 

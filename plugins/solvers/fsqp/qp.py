@@ -8,27 +8,39 @@ import warnings
 import numpy as np
 import qpsolvers
 
-from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, backend_status
+from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, RETRY_SETTINGS, backend_status
 from gaitbench.solve.silence import quiet_stdout
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.outcome import Breakdown
 
 _QP_SOLVERS = ("piqp", "clarabel")
 """Backends of the ``qp`` subproblem, in turn: PIQP, the fastest on the gait QPs (docs/solvers.md, ``sqp``), then
-Clarabel, which solves the convexified QPs PIQP stops on."""
+Clarabel, which solves the convexified QPs PIQP stops on. Each tries a QP it failed again under its
+``RETRY_SETTINGS`` before the next."""
+
+
+def _turns() -> list[tuple[str, str, dict]]:
+    """(label, backend, settings) in the order they are tried: each backend with the settings every gait QP gets
+    (``BACKEND_SETTINGS``), then with its ``RETRY_SETTINGS`` if it has any."""
+    turns = []
+    for solver in _QP_SOLVERS:
+        settings = BACKEND_SETTINGS.get(solver, {})
+        turns.append((solver, solver, settings))
+        if solver in RETRY_SETTINGS:
+            turns.append((f"{solver} retried", solver, {**settings, **RETRY_SETTINGS[solver]}))
+    return turns
 
 
 def solve_qp(problem: qpsolvers.Problem) -> qpsolvers.Solution:
-    """The QP by each of ``_QP_SOLVERS`` in turn, with the settings every gait QP gets (``BACKEND_SETTINGS``), until
-    one solves it (or returns a reduced-accuracy optimum)."""
+    """The QP by each of :func:`_turns` in turn until one solves it (or returns a reduced-accuracy optimum)."""
     statuses = []
-    for solver in _QP_SOLVERS:
+    for label, solver, settings in _turns():
         try:
             with warnings.catch_warnings(), quiet_stdout():
                 warnings.simplefilter("ignore")
-                solution = qpsolvers.solve_problem(problem, solver=solver, **BACKEND_SETTINGS.get(solver, {}))
+                solution = qpsolvers.solve_problem(problem, solver=solver, **settings)
         except Exception as error:  # a backend that rejects the problem counts as a failed QP
-            statuses.append(f"{solver}: {type(error).__name__}")
+            statuses.append(f"{label}: {type(error).__name__}")
             continue
         status = backend_status(solution)
         usable = solution.found or status in INACCURATE_STATUSES
@@ -36,7 +48,7 @@ def solve_qp(problem: qpsolvers.Problem) -> qpsolvers.Solution:
             if solution.z_box is None:
                 solution.z_box = np.zeros(problem.P.shape[0])
             return solution
-        statuses.append(f"{solver}: {status}")
+        statuses.append(f"{label}: {status}")
     raise Breakdown(f"the QP subproblem failed ({'; '.join(statuses)})")
 
 

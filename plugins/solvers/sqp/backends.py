@@ -12,7 +12,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
-from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, backend_status
+from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, RETRY_SETTINGS, backend_status
 from gaitbench.solve.silence import quiet_stdout
 
 _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
@@ -32,14 +32,6 @@ tight tolerances slowly; its polishing step solves the identified active set's e
 gait QPs it solves at all in at most 95 iterations; on the others it ends at its limit whatever the limit, so 100
 iterations instead of 250 bound what such a failure costs before the fallback solves the QP (docs/solvers.md, the
 sqp section's "Speed")."""
-
-_RETRY_OPTIONS: dict[str, dict] = {"piqp": {"preconditioner_iter": 0}}
-"""Options under which a backend solves again, before the fallback, a QP it failed. PIQP without its Ruiz
-equilibration: on the late gait steps PIQP fails up to half the QPs (forward step 2, HS N = 100: 266 of 587),
-and Clarabel, solving them cold, ends most at its reduced accuracy (``AlmostSolved``, 124 of 255) in 85-110 ms
-each. Unequilibrated, PIQP solves 38 of 40 of those QPs in a median of 33 iterations, to objectives at or below
-Clarabel's; as the first try it fails others that the equilibrated PIQP solves, so it is the second
-(docs/solvers.md, "PIQP without its equilibration")."""
 
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
@@ -80,7 +72,7 @@ class QPBackends:
     def solve(self, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """The QP by the chosen backend, and by the fallback backend (cold) when the first one fails (flag "f" in the
         iteration's ``log``, which also gets the time); each tries a QP it failed once more under its
-        ``_RETRY_OPTIONS`` (flag "u")."""
+        ``RETRY_SETTINGS`` (flag "u")."""
         outcome = self._call_with_retry(self.solver, problem, warm, log)
         fallback = self.fallback
         if outcome.solved or fallback is None or fallback == self.solver:
@@ -95,11 +87,11 @@ class QPBackends:
 
     def _call_with_retry(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None,
                          log: dict) -> QPOutcome:
-        """One backend's answer: its call, and where that fails, its call under ``_RETRY_OPTIONS`` (cold)."""
+        """One backend's answer: its call, and where that fails, its call under ``RETRY_SETTINGS`` (cold)."""
         outcome = self._call(solver, problem, warm, log)
-        if outcome.solved or solver not in _RETRY_OPTIONS:
+        if outcome.solved or solver not in RETRY_SETTINGS:
             return outcome
-        retried = self._call(solver, problem, None, log, _RETRY_OPTIONS[solver])
+        retried = self._call(solver, problem, None, log, RETRY_SETTINGS[solver])
         if retried.solved:
             log["flags"] += "u"
             return retried
