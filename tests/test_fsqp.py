@@ -14,6 +14,7 @@ from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative
 from saved_qps import clarabel_objective, saved_qp
 
 import plugins.solvers.fsqp as fsqp
+import plugins.solvers.fsqp.qp as fsqp_qp
 import plugins.solvers.fsqp.solver as fsqp_solver
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLPBuilder
@@ -22,7 +23,6 @@ from gaitbench.solve.solver import SolverStatus
 from plugins.solvers.fsqp import FSQP
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import qp_hessian
-from plugins.solvers.fsqp.qp import solve_qp
 from plugins.solvers.ipopt import Ipopt
 
 
@@ -331,8 +331,6 @@ def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before
     """The saved forward-step QP that PIQP, equilibrated, ends at its iteration limit: the ``qp`` subproblem's
     second turn, PIQP without the equilibration, solves it to Clarabel's objective, and Clarabel is not called
     (docs/solvers.md, "PIQP without its equilibration")."""
-    import plugins.solvers.fsqp.qp as fsqp_qp
-
     problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
     calls = []
     solve_problem = fsqp_qp.qpsolvers.solve_problem
@@ -343,7 +341,7 @@ def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before
         return solution
 
     monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
-    solution = solve_qp(problem)
+    solution = fsqp_qp.solve_qp(problem)
     assert calls == [("piqp", None, False), ("piqp", 0, True)]
     objective = 0.5 * solution.x @ problem.P @ solution.x + problem.q @ solution.x
     assert objective == pytest.approx(clarabel_objective(problem), rel=1e-5)

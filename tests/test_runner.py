@@ -251,7 +251,8 @@ def test_bad_options_are_an_error_row_not_a_crash(tmp_path) -> None:
 
 
 def test_cases_reach_the_executor_largest_n_first_or_smallest_when_asked(tmp_path: Path) -> None:
-    """The pool gets its longest cases first and fills the end of the run with the short ones."""
+    """The pool gets its longest cases first and fills the end of the run with the short ones; with
+    ``smallest_first`` the reverse. Either way cases of equal N keep their suite order."""
     handed = []
 
     class Recording:
