@@ -632,6 +632,33 @@ def test_the_crawl_floor_lowers_the_shift_floor_once_the_shift_sits_at_its_floor
     assert run._model().shift == pytest.approx(SHIFT_FLOOR * scale)  # no longer crawling: the usual floor
 
 
+def test_a_row_whose_gradient_vanishes_brings_a_capped_multiplier_into_the_hessian(monkeypatch):
+    """The crossing's clearance (docs/solvers.md, "The clearance's saddle where the legs cross"): the product
+    c = u₀u₁ ≥ 0 at u₀ = 0 is active with a gradient of norm |u₁|, here 1e-4. Its multiplier enters the Hessian
+    capped at DEGENERATE_MULTIPLIER_CAP, with its sign; a row with an O(1) gradient keeps its multiplier, and so
+    do the iterate's multipliers (the QP, the merit's weights and the KKT test use them)."""
+    from plugins.solvers.sqp.hessian import DEGENERATE_MULTIPLIER_CAP
+    from plugins.solvers.sqp.run import Run
+
+    b = NLPBuilder()
+    u = b.variable("u", (2, 1))
+    b.constrain("crossing", u[0] * u[1], 0.0, np.inf)
+    b.constrain("plain", u[0] ** 2 + u[1], 0.0, np.inf)
+    nlp = b.build(ca.SX.sym("p", 0), (u[0] - 1) ** 2 + (u[1] - 1) ** 2)
+    run = Run(SQP(), NLPEvaluator(nlp, np.zeros(0)), np.array([0.0, 1e-4]), Deadline(None))
+    run.lam = np.array([-5e4, -5e4])
+    seen = []
+    hessian = run.evaluator.hessian_lagrangian
+    monkeypatch.setattr(run.evaluator, "hessian_lagrangian",
+                        lambda x, sigma, lam: seen.append(np.array(lam)) or hessian(x, sigma, lam))
+    run._model()
+    assert seen[-1].tolist() == [-DEGENERATE_MULTIPLIER_CAP, -5e4]
+    assert run.lam.tolist() == [-5e4, -5e4] and "c" in run.log["flags"]
+    run.lam, run.log["flags"] = np.array([-0.9 * DEGENERATE_MULTIPLIER_CAP, -5e4]), ""
+    run._model()  # below the cap nothing changes
+    assert seen[-1].tolist() == [-0.9 * DEGENERATE_MULTIPLIER_CAP, -5e4] and "c" not in run.log["flags"]
+
+
 def _split_power() -> NLP:
     """A charged power P = u₀u₁ split as s⁺ − s⁻ (the gait steps' form), a second split that costs nothing to raise
     along its row, and a slack that enters two rows: only the first is a slack pair."""

@@ -13,6 +13,7 @@ from plugins.solvers.sqp.hessian import (
     SHIFT_FLOOR,
     Model,
     convexify,
+    hessian_multipliers,
     hessian_scale,
     release_linear_variables,
     working_set,
@@ -31,12 +32,15 @@ class Subproblems(Iterate):
         """This iteration's QP matrix; see the package docstring for the convexification."""
         if self.bfgs is not None:
             return Model(self.bfgs, self.bfgs, np.zeros(0, dtype=int), np.zeros(0), 0.0)
-        H = sp.csc_matrix(self.evaluator.hessian_lagrangian(self.x, 1.0, self.lam))
+        lam = hessian_multipliers(self.lam, self.jac)
+        if lam is not self.lam:
+            self.log["flags"] += "c"
+        H = sp.csc_matrix(self.evaluator.hessian_lagrangian(self.x, 1.0, lam))
         if not np.all(np.isfinite(H.data)):
             raise FloatingPointError("the Hessian of the Lagrangian is not finite")
         model, self.shift = convexify(H, self.shift, self.shift_growth, self.jac,
-                                      lambda: working_set(self.lin, self.x, self.g, self.lam,
-                                                          -(self.grad + self.jac.T @ self.lam)),
+                                      lambda: working_set(self.lin, self.x, self.g, lam,
+                                                          -(self.grad + self.jac.T @ lam)),
                                       self.o.crawl_shift_floor if self._crawling() else SHIFT_FLOOR)
         # at the floor by the usual one, so that the lower floor does not end the crawl it is for
         self.at_floor = self.at_floor + 1 if self.shift <= SHIFT_FLOOR * hessian_scale(H) else 0
