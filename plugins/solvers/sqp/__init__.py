@@ -33,6 +33,12 @@ CasADi's):
 3. failing that, the ρ = 100 augmentation plus a shift from max(δ, 1e-8·max(1, max|H|)) growing ×4 until the
    factorisation is positive definite, like IPOPT's inertia correction.
 
+H is the Hessian of the Lagrangian at the iterate's multipliers, but for rows whose gradient nearly vanishes (norm
+below 1e-2), whose multipliers it takes capped at 1e3 (:func:`.hessian.hessian_multipliers`): where a row's gradient
+vanishes at an active point its multiplier grows as 1/‖∇c_i‖, and its curvature came to dominate H and pin the
+iterate (the gait steps' clearance where the legs cross; docs/solvers.md, "The clearance's saddle where the legs
+cross"). The QP, the merit's weights and the KKT test keep the multipliers as they are.
+
 δ_LM, with the ℓ1 merit: the shift of the last iteration times ½ when the full step's actual decrease of φ was at
 least ¾ of its model's (−Dφ(d) − ½dᵀ(H + δI)d), times 1 down to ¼, times 4 below ¼ or when the full step was
 rejected (from at least 1e-8·max(1, max|H|)). On the gait steps the Lagrangian is indefinite along the flat valleys
