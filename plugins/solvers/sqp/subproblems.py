@@ -32,7 +32,7 @@ class Subproblems(Iterate):
         """This iteration's QP matrix; see the package docstring for the convexification."""
         if self.bfgs is not None:
             return Model(self.bfgs, self.bfgs, np.zeros(0, dtype=int), np.zeros(0), 0.0)
-        lam = hessian_multipliers(self.lam, self.jac)
+        lam = hessian_multipliers(self.lam, self.jac)  # H's multipliers, and so its convexification's working set
         if lam is not self.lam:
             self.log["flags"] += "c"
         H = sp.csc_matrix(self.evaluator.hessian_lagrangian(self.x, 1.0, lam))
