@@ -54,6 +54,8 @@ class QPOutcome:
     y: np.ndarray | None = None
     z: np.ndarray | None = None
     z_box: np.ndarray | None = None
+    scale: np.ndarray | None = None
+    """The rows' scale of the QP it solved (:meth:`.linearization.Linearization.row_scale`), None for none."""
 
 
 class QPBackends:

@@ -11,7 +11,7 @@ import scipy.linalg.lapack
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
-from plugins.solvers.sqp.linearization import Linearization
+from plugins.solvers.sqp.linearization import DEGENERATE_GRADIENT, Linearization, row_norms
 
 
 @dataclass
@@ -42,8 +42,6 @@ that step slid to the iteration limit, f falling ~2e-4 an iteration; with 1e-12 
 elastic steps."""
 
 
-DEGENERATE_GRADIENT = 1e-2
-"""A row whose gradient norm is below this is degenerate for :func:`hessian_multipliers`: the gait rows are O(1)."""
 DEGENERATE_MULTIPLIER_CAP = 1e3
 """The largest multiplier a degenerate row brings into the Hessian (:func:`hessian_multipliers`)."""
 
@@ -63,9 +61,7 @@ def hessian_multipliers(lam: np.ndarray, jacobian: sp.csr_matrix) -> np.ndarray:
     if not over.any():
         return lam
     rows = np.flatnonzero(over)
-    selected = jacobian[rows]
-    norms = np.sqrt(np.asarray(selected.multiply(selected).sum(axis=1)).ravel())
-    degenerate = rows[norms < DEGENERATE_GRADIENT]
+    degenerate = rows[row_norms(jacobian[rows]) < DEGENERATE_GRADIENT]
     if not degenerate.size:
         return lam
     capped = lam.copy()

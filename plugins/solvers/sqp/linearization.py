@@ -10,6 +10,15 @@ import scipy.sparse as sp
 from gaitbench.problem.nlp import NLP
 from plugins.solvers.sqp.backends import QPOutcome
 
+DEGENERATE_GRADIENT = 1e-2
+"""A row whose gradient norm is below this is degenerate: the gait rows are O(1), and the one that gets there is the
+clearance where the legs cross (docs/solvers.md, "The clearance's saddle where the legs cross")."""
+
+
+def row_norms(jacobian: sp.csr_matrix) -> np.ndarray:
+    """‖∇g_i‖₂ of every row."""
+    return np.sqrt(np.asarray(jacobian.multiply(jacobian).sum(axis=1)).ravel())
+
 
 class Linearization:
     """The NLP's rows sorted once into QP equalities and the finite sides of the other rows."""
@@ -47,14 +56,34 @@ class Linearization:
     def max_violation(self, g: np.ndarray) -> float:
         return float(max(np.max(self.lbg - g, initial=0.0), np.max(g - self.ubg, initial=0.0)))
 
+    @staticmethod
+    def row_scale(jacobian: sp.csr_matrix) -> np.ndarray | None:
+        """1/‖∇g_i‖ (at most 1e6) for the degenerate rows (gradient norm below :data:`DEGENERATE_GRADIENT`), 1 for the
+        others; None when no row is degenerate.
+
+        Why: the multiplier of an active row whose gradient vanishes grows as 1/‖∇g_i‖ while its force stays
+        bounded. Posed at unit norm, the row's QP dual is that force: with the crossing's clearance at ~1e-4, PIQP
+        and its retry failed nearly every QP of the stairs N = 140 step 3's slide (~400 ms an iteration, Clarabel's
+        fallback solving them), and scaled they solve (~50 ms) along the same path (docs/solvers.md)."""
+        norms = row_norms(jacobian)
+        degenerate = (norms < DEGENERATE_GRADIENT) & (norms > 0)
+        if not degenerate.any():
+            return None
+        return np.where(degenerate, 1.0 / np.maximum(norms, 1e-6), 1.0)
+
     def problem(self, P, q: np.ndarray, jacobian: sp.csr_matrix, g: np.ndarray, lb: np.ndarray | None,
-                ub: np.ndarray | None, dense: bool) -> qpsolvers.Problem:
-        """min ½dᵀPd + qᵀd s.t. lbg ≤ g + jacobian·d ≤ ubg, lb ≤ d ≤ ub, in ``qpsolvers`` form."""
+                ub: np.ndarray | None, dense: bool, scale: np.ndarray | None = None) -> qpsolvers.Problem:
+        """min ½dᵀPd + qᵀd s.t. lbg ≤ g + jacobian·d ≤ ubg, lb ≤ d ≤ ub, in ``qpsolvers`` form, each row multiplied by
+        its ``scale`` (:meth:`row_scale`; the outcome's :meth:`multipliers` undo it)."""
         eq, up, lo = self.equality, self.upper, self.lower
+        if scale is not None:
+            jacobian = (sp.diags(scale) @ jacobian).tocsr()
+        s = np.ones(self.m) if scale is None else scale
         A = (self.select_equality @ jacobian).tocsc() if eq.size else None
-        b = self.lbg[eq] - g[eq] if eq.size else None
+        b = (self.lbg[eq] - g[eq]) * s[eq] if eq.size else None
         G = (self.select_inequality @ jacobian).tocsc() if up.size + lo.size else None
-        h = np.concatenate([self.ubg[up] - g[up], g[lo] - self.lbg[lo]]) if G is not None else None
+        h = (np.concatenate([(self.ubg[up] - g[up]) * s[up], (g[lo] - self.lbg[lo]) * s[lo]]) if G is not None
+             else None)
         if dense:
             P = P.toarray() if sp.issparse(P) else P
             A = None if A is None else A.toarray()
@@ -70,12 +99,13 @@ class Linearization:
         return self.lbx - x, self.ubx - x
 
     def multipliers(self, outcome: QPOutcome) -> np.ndarray:
-        """λ_g from the QP duals: y for equalities, +z on upper sides, −z on lower sides."""
+        """λ_g from the QP duals: y for equalities, +z on upper sides, −z on lower sides, times the rows' scale of
+        the QP (``outcome.scale``)."""
         lam = np.zeros(self.m)
         if self.equality.size:
             lam[self.equality] = outcome.y
         if self.upper.size or self.lower.size:
             lam[self.upper] += outcome.z[:self.upper.size]
             lam[self.lower] -= outcome.z[self.upper.size:]
-        return lam
+        return lam if outcome.scale is None else lam * outcome.scale
 

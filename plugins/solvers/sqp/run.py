@@ -64,7 +64,9 @@ class Run(Restoration):
             self.log["flags"] += "a"
         outcome = self._qp(model, self.g, self.warm)
         lam = self._multipliers(outcome, model) if outcome.solved else None
-        if lam is None or np.max(np.abs(lam), initial=0.0) > _TRUSTED_MULTIPLIER:
+        # at the QP's own scale: a degenerate row's multiplier, which grows as 1/‖∇g_i‖, counts at its force
+        force = lam if lam is None or outcome.scale is None else lam / outcome.scale
+        if lam is None or np.max(np.abs(force), initial=0.0) > _TRUSTED_MULTIPLIER:
             reason = (f"the QP subproblem failed ({self.o.qp_solver}: {outcome.status})" if lam is None else
                       f"the QP multipliers exceed {_TRUSTED_MULTIPLIER:.0e} (a nearly inconsistent linearisation)")
             if self.o.merit == "filter":

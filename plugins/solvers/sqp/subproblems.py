@@ -62,8 +62,11 @@ class Subproblems(Iterate):
                     else scipy.linalg.cho_solve(scipy.linalg.cho_factor(P), -self.grad))
             return QPOutcome(True, "unconstrained", step, np.zeros(0), np.zeros(0), None)
         lb, ub = self._step_bounds(model)
-        problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense)
-        return self.backends.solve(problem, warm, self.log)
+        scale = self.lin.row_scale(self.jac)
+        problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense, scale)
+        outcome = self.backends.solve(problem, warm, self.log)
+        outcome.scale = scale
+        return outcome
 
     def _step_bounds(self, model: Model | None) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Bounds on d: lbx ≤ x + d ≤ ubx, and |d_i| ≤ LINEAR_STEP·(1 + |x_i|) on the variables ``model``
