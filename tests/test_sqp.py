@@ -659,6 +659,28 @@ def test_a_row_whose_gradient_vanishes_brings_a_capped_multiplier_into_the_hessi
     assert seen[-1].tolist() == [-0.9 * DEGENERATE_MULTIPLIER_CAP, -5e4] and "c" not in run.log["flags"]
 
 
+def test_a_row_whose_gradient_vanishes_is_posed_at_unit_norm_with_its_multiplier_scaled_back():
+    """The crossing's clearance again: c = u₀u₁ ≥ 0 at u = (0, 1e-7) has a gradient of norm 1e-7, and the cost
+    (u₀ + 1)² pushes against it with force 2, so its multiplier is −2/1e-7 = −2e7. The QP poses the row scaled by
+    1e6 (the scale's limit; its dual there is 20), the multiplier comes back as −2e7, and the trust test reads the
+    QP's own dual: the QP is not taken for a nearly inconsistent one (its multiplier is above 1e6)."""
+    from plugins.solvers.sqp.run import Run
+
+    b = NLPBuilder()
+    u = b.variable("u", (2, 1))
+    b.constrain("crossing", u[0] * u[1], 0.0, np.inf)
+    b.constrain("plain", u[1], 0.0, np.inf)
+    nlp = b.build(ca.SX.sym("p", 0), (u[0] + 1) ** 2 + (u[1] - 1) ** 2)
+    run = Run(SQP(), NLPEvaluator(nlp, np.zeros(0)), np.array([0.0, 1e-7]), Deadline(None))
+    model = run._model()
+    outcome = run._qp(model, run.g, None)
+    assert outcome.solved and outcome.scale.tolist() == pytest.approx([1e6, 1.0])
+    assert outcome.z[0] == pytest.approx(20.0, rel=1e-6)
+    assert run._multipliers(outcome, model)[0] == pytest.approx(-2e7, rel=1e-6)
+    run.lam = np.zeros(2)
+    assert run._optimality_step() is None and "e" not in run.log["flags"]  # a QP step, not an elastic one
+
+
 def _split_power() -> NLP:
     """A charged power P = u₀u₁ split as s⁺ − s⁻ (the gait steps' form), a second split that costs nothing to raise
     along its row, and a slack that enters two rows: only the first is a slack pair."""
