@@ -663,8 +663,10 @@ def test_a_row_whose_gradient_vanishes_is_posed_at_unit_norm_with_its_multiplier
     """The crossing's clearance again: c = u₀u₁ ≥ 0 at u = (0, 1e-7) has a gradient of norm 1e-7, and the cost
     (u₀ + 1)² pushes against it with force 2, so its multiplier is −2/1e-7 = −2e7. The QP poses the row scaled by
     1e6 (the scale's limit; its dual there is 20), the multiplier comes back as −2e7, and the trust test reads the
-    QP's own dual: the QP is not taken for a nearly inconsistent one (its multiplier is above 1e6)."""
+    QP's own dual: the QP is not taken for a nearly inconsistent one (its multiplier is above 1e6). Only once the
+    crawl shows: before it the QPs are posed as they are."""
     from plugins.solvers.sqp.run import Run
+    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
 
     b = NLPBuilder()
     u = b.variable("u", (2, 1))
@@ -672,6 +674,9 @@ def test_a_row_whose_gradient_vanishes_is_posed_at_unit_norm_with_its_multiplier
     b.constrain("plain", u[1], 0.0, np.inf)
     nlp = b.build(ca.SX.sym("p", 0), (u[0] + 1) ** 2 + (u[1] - 1) ** 2)
     run = Run(SQP(), NLPEvaluator(nlp, np.zeros(0)), np.array([0.0, 1e-7]), Deadline(None))
+    model = run._model()
+    assert run._qp(model, run.g, None).scale is None
+    run.at_floor = _FLOOR_ITERATIONS
     model = run._model()
     outcome = run._qp(model, run.g, None)
     assert outcome.solved and outcome.scale.tolist() == pytest.approx([1e6, 1.0])

@@ -64,7 +64,8 @@ class Linearization:
         Why: the multiplier of an active row whose gradient vanishes grows as 1/‖∇g_i‖ while its force stays
         bounded. Posed at unit norm, the row's QP dual is that force: with the crossing's clearance at ~1e-4, PIQP
         and its retry failed nearly every QP of the stairs N = 140 step 3's slide (~400 ms an iteration, Clarabel's
-        fallback solving them), and scaled they solve (~50 ms) along the same path (docs/solvers.md)."""
+        fallback solving them), and scaled they solve (~50 ms) along the same path (docs/solvers.md). ``sqp`` scales
+        once the late-step crawl shows (``Subproblems._qp``)."""
         norms = row_norms(jacobian)
         degenerate = (norms < DEGENERATE_GRADIENT) & (norms > 0)
         if not degenerate.any():
