@@ -37,7 +37,9 @@ H is the Hessian of the Lagrangian at the iterate's multipliers, but for rows wh
 below 1e-2), whose multipliers it takes capped at 1e3 (:func:`.hessian.hessian_multipliers`): where a row's gradient
 vanishes at an active point its multiplier grows as 1/‖∇c_i‖, and its curvature came to dominate H and pin the
 iterate (the gait steps' clearance where the legs cross; docs/solvers.md, "The clearance's saddle where the legs
-cross"). The QP, the merit's weights and the KKT test keep the multipliers as they are.
+cross"). The QP, the merit's weights and the KKT test keep the multipliers as they are. Once the late-step crawl
+shows (below), such rows are also posed in the QP at unit norm (:meth:`.linearization.Linearization.row_scale`), so
+that their QP duals are their forces rather than ~1/‖∇g_i‖: PIQP failed nearly every QP with them unscaled.
 
 δ_LM, with the ℓ1 merit: the shift of the last iteration times ½ when the full step's actual decrease of φ was at
 least ¾ of its model's (−Dφ(d) − ½dᵀ(H + δI)d), times 1 down to ¼, times 4 below ¼ or when the full step was
