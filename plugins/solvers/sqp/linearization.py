@@ -79,12 +79,13 @@ class Linearization:
         eq, up, lo = self.equality, self.upper, self.lower
         if scale is not None:
             jacobian = (sp.diags(scale) @ jacobian).tocsr()
-        s = np.ones(self.m) if scale is None else scale
         A = (self.select_equality @ jacobian).tocsc() if eq.size else None
-        b = (self.lbg[eq] - g[eq]) * s[eq] if eq.size else None
+        b = self.lbg[eq] - g[eq] if eq.size else None
         G = (self.select_inequality @ jacobian).tocsc() if up.size + lo.size else None
-        h = (np.concatenate([(self.ubg[up] - g[up]) * s[up], (g[lo] - self.lbg[lo]) * s[lo]]) if G is not None
-             else None)
+        h = np.concatenate([self.ubg[up] - g[up], g[lo] - self.lbg[lo]]) if G is not None else None
+        if scale is not None:  # the right-hand sides too; no work on the QPs without a degenerate row
+            b = None if b is None else b * scale[eq]
+            h = None if h is None else h * np.concatenate([scale[up], scale[lo]])
         if dense:
             P = P.toarray() if sp.issparse(P) else P
             A = None if A is None else A.toarray()
