@@ -686,6 +686,32 @@ def test_a_row_whose_gradient_vanishes_is_posed_at_unit_norm_with_its_multiplier
     assert run._optimality_step() is None and "e" not in run.log["flags"]  # a QP step, not an elastic one
 
 
+def test_a_warm_start_carries_its_duals_into_the_row_scale_of_the_qp_it_starts():
+    """ProxQP starts from the previous QP's duals. Where that QP posed the crossing's row unscaled and this one at
+    unit norm (the crawl has begun between them), the dual the backend gets is the multiplier over this QP's scale,
+    not the other QP's dual: a factor of 1e6 apart on that row."""
+    from plugins.solvers.sqp.run import Run
+    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+
+    b = NLPBuilder()
+    u = b.variable("u", (2, 1))
+    b.constrain("crossing", u[0] * u[1], 0.0, np.inf)
+    b.constrain("plain", u[1], 0.0, np.inf)
+    nlp = b.build(ca.SX.sym("p", 0), (u[0] + 1) ** 2 + (u[1] - 1) ** 2)
+    run = Run(SQP(qp_solver="proxqp"), NLPEvaluator(nlp, np.zeros(0)), np.array([0.0, 1e-7]), Deadline(None))
+    unscaled = run._qp(run._model(), run.g, None)
+    assert unscaled.solved and unscaled.scale is None and unscaled.z[0] == pytest.approx(2e7, rel=1e-4)
+    given = []
+    solve = run.backends.solve
+    run.backends.solve = lambda problem, warm, log: given.append(warm) or solve(problem, warm, log)
+    run.at_floor = _FLOOR_ITERATIONS
+    scaled = run._qp(run._model(), run.g, unscaled)
+    assert scaled.solved and scaled.scale.tolist() == pytest.approx([1e6, 1.0])
+    assert given[0].z[0] == pytest.approx(20.0, rel=1e-4) and given[0].z[1] == unscaled.z[1]
+    assert run.lin.multipliers(given[0]) == pytest.approx(run.lin.multipliers(unscaled))
+    assert run.lin.rescaled(scaled, None).z[0] == pytest.approx(scaled.z[0] * 1e6)
+
+
 def _split_power() -> NLP:
     """A charged power P = u₀u₁ split as s⁺ − s⁻ (the gait steps' form), a second split that costs nothing to raise
     along its row, and a slack that enters two rows: only the first is a slack pair."""

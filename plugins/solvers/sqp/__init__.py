@@ -117,7 +117,8 @@ QPs it solves take at most 95, and the ones it fails it fails whatever the limit
 ``gaitbench.solve.qp.BACKEND_SETTINGS``).
 
 Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
-interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords).
+interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords),
+converted to this QP's row scale (:meth:`.linearization.Linearization.rescaled`).
 Clarabel, PIQP, HiGHS and quadprog start cold (``qpsolvers`` ignores initial values for them, or warns), so they
 are never given any.
 

@@ -66,7 +66,7 @@ class Subproblems(Iterate):
         # step 2, HS N = 100, scaled from the first QP: stuck at iteration 16, where it converged in 363)
         scale = self.lin.row_scale(self.jac) if self._crawling() else None
         problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense, scale)
-        outcome = self.backends.solve(problem, warm, self.log)
+        outcome = self.backends.solve(problem, None if warm is None else self.lin.rescaled(warm, scale), self.log)
         outcome.scale = scale
         return outcome
 
