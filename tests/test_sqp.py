@@ -555,6 +555,53 @@ def test_piqp_solves_again_without_its_equilibration_a_gait_qp_it_fails_with_it(
     assert np.max(np.abs(problem.A @ solved.x - problem.b)) <= 1e-9
 
 
+def test_once_the_retry_settings_solve_a_qp_the_backend_failed_they_go_first_on_the_next_qps():
+    """PIQP fails the late steps' QPs in runs. After its unequilibrated retry solved the saved QP that the
+    equilibrated PIQP fails, the next QP (here the same one) goes to the unequilibrated PIQP first, once the crawl
+    has shown (``swap``): one call, not two."""
+    problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
+    evaluator = SimpleNamespace(evaluations={"qp": 0})
+    backends = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator)
+    backends.swap = True
+    first, second = {"flags": "", "qp_time": 0.0}, {"flags": "", "qp_time": 0.0}
+    assert backends.solve(problem, None, first).solved and evaluator.evaluations["qp"] == 2
+    again = backends.solve(problem, None, second)
+    assert again.solved and (evaluator.evaluations["qp"], second["flags"]) == (3, "u")
+    assert backends.retry_first == {"piqp"}
+
+
+def test_the_backend_settings_go_first_again_when_a_qp_fails_under_the_retry_settings_that_they_solve(monkeypatch):
+    """The order of the calls, scripted: which settings solve each QP. The swap back comes with the first QP that
+    the retry settings fail and the backend's own settings solve; a QP both fail leaves the order as it was. Before
+    the crawl (``swap`` off) the backend's own settings always go first."""
+    from gaitbench.solve.qp import RETRY_SETTINGS
+    from plugins.solvers.sqp.backends import QPOutcome
+
+    def solves():  # per QP, the settings that solve it
+        return iter([{"retry"}, {"retry"}, set(), {"own"}, {"own", "retry"}])
+    calls = []
+    current = {}
+
+    def call(self, solver, problem, warm, log, extra=None):
+        settings = "retry" if extra == RETRY_SETTINGS["piqp"] else "own"
+        calls.append(settings)
+        return QPOutcome(settings in current["solves"], "scripted")
+
+    monkeypatch.setattr(QPBackends, "_call", call)
+    def order(swap: bool) -> list[tuple[str, ...]]:
+        backends = QPBackends("piqp", None, 1e-10, Deadline(None), SimpleNamespace(evaluations={"qp": 0}))
+        backends.swap = swap
+        orders = []
+        for current["solves"] in solves():
+            calls.clear()
+            backends.solve(None, None, {"flags": "", "qp_time": 0.0})
+            orders.append(tuple(calls))
+        return orders
+
+    assert order(True) == [("own", "retry"), ("retry",), ("retry", "own"), ("retry", "own"), ("own",)]
+    assert order(False) == [("own", "retry"), ("own", "retry"), ("own", "retry"), ("own",), ("own",)]
+
+
 def test_registered_as_a_solver_plugin(tmp_path: Path):
     """Through a plugin directory holding only a file that registers this plugin (a package, which a plugin directory
     does not load itself), so the test does not depend on the installed entry points."""

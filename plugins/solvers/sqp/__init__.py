@@ -111,7 +111,8 @@ QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (C
 PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to 5e4 at DMOC,
 N = 50; many QPs of the later walk steps). It first tries such a QP again without its Ruiz equilibration, which
 solves most of them, more accurately than Clarabel, which often reaches only its reduced accuracy on them
-(``gaitbench.solve.qp.RETRY_SETTINGS``). Its proximal regularisation is kept at or above 1e-10 (its own fine-tuning
+(``gaitbench.solve.qp.RETRY_SETTINGS``); once the late-step crawl shows, where PIQP fails QPs in runs, the setting
+that solved the last such QP goes first. Its proximal regularisation is kept at or above 1e-10 (its own fine-tuning
 goes to 1e-13, from where its iterates diverge on these QPs), and its limit is 100 iterations, not its own 250: the
 QPs it solves take at most 95, and the ones it fails it fails whatever the limit (``backends._BACKEND_OPTIONS``,
 ``gaitbench.solve.qp.BACKEND_SETTINGS``).

@@ -70,6 +70,10 @@ class QPBackends:
         self.evaluator = evaluator
         self.time = 0.0
         """Seconds spent in backend calls so far."""
+        self.retry_first: set[str] = set()
+        """Backends whose ``RETRY_SETTINGS`` solved the last QP their own settings failed (``_call_with_retry``)."""
+        self.swap = False
+        """Whether those backends try their ``RETRY_SETTINGS`` first."""
 
     def solve(self, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """The QP by the chosen backend, and by the fallback backend (cold) when the first one fails (flag "f" in the
@@ -89,15 +93,25 @@ class QPBackends:
 
     def _call_with_retry(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None,
                          log: dict) -> QPOutcome:
-        """One backend's answer: its call, and where that fails, its call under ``RETRY_SETTINGS`` (cold)."""
-        outcome = self._call(solver, problem, warm, log)
-        if outcome.solved or solver not in RETRY_SETTINGS:
+        """One backend's answer: its call, and where that fails, its call under ``RETRY_SETTINGS`` (cold; flag "u"
+        when those solve it). While ``swap`` is on (``sqp`` turns it on once the late-step crawl shows), the two go
+        in the other order after the retry settings have solved a QP the backend's own failed, until the reverse:
+        PIQP fails the late gait steps' QPs in runs, each failure costing its 100-iteration limit (docs/solvers.md,
+        "PIQP's failures in runs")."""
+        if solver not in RETRY_SETTINGS:
+            return self._call(solver, problem, warm, log)
+        retry_first = self.swap and solver in self.retry_first
+        first, second = (RETRY_SETTINGS[solver], None) if retry_first else (None, RETRY_SETTINGS[solver])
+        outcome = self._call(solver, problem, None if first else warm, log, first)
+        if outcome.solved:
+            log["flags"] += "u" if first else ""
             return outcome
-        retried = self._call(solver, problem, None, log, RETRY_SETTINGS[solver])
-        if retried.solved:
-            log["flags"] += "u"
-            return retried
-        return QPOutcome(False, f"{outcome.status}; retried: {retried.status}")
+        retried = self._call(solver, problem, None if second else warm, log, second)
+        if not retried.solved:
+            return QPOutcome(False, f"{outcome.status}; retried: {retried.status}")
+        log["flags"] += "u" if second else ""
+        self.retry_first = self.retry_first - {solver} if retry_first else self.retry_first | {solver}
+        return retried
 
     def _call(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict,
               extra: dict | None = None) -> QPOutcome:

@@ -62,9 +62,11 @@ class Subproblems(Iterate):
                     else scipy.linalg.cho_solve(scipy.linalg.cho_factor(P), -self.grad))
             return QPOutcome(True, "unconstrained", step, np.zeros(0), np.zeros(0), None)
         lb, ub = self._step_bounds(model)
-        # once the crawl shows, as the release: the first steps' paths move with any change of their QPs (forward
-        # step 2, HS N = 100, scaled from the first QP: stuck at iteration 16, where it converged in 363)
+        # the rows' scale and the backends' swap once the crawl shows, as the release: the first steps' paths move
+        # with any change of their QPs (forward step 2, HS N = 100, scaled from the first QP: stuck at iteration 16,
+        # where it converged in 363; DMOC N = 50 with the swap from the first QP: an error at 134, where 385)
         scale = self.lin.row_scale(self.jac) if self._crawling() else None
+        self.backends.swap = self._crawling()
         problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense, scale)
         outcome = self.backends.solve(problem, None if warm is None else self.lin.rescaled(warm, scale), self.log)
         outcome.scale = scale
