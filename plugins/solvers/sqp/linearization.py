@@ -113,14 +113,13 @@ class Linearization:
             lam[self.lower] -= outcome.z[self.upper.size:]
         return lam if outcome.scale is None else lam * outcome.scale
 
-
     def rescaled(self, warm: QPOutcome, scale: np.ndarray | None) -> QPOutcome:
         """``warm`` with its duals in the rows' ``scale`` (None: unscaled), for a backend that starts from them: the
         QP it came from may have been posed at another scale (:meth:`row_scale`), and its duals are that QP's."""
         if warm.scale is None and scale is None:
             return warm
         factor = (np.ones(self.m) if warm.scale is None else warm.scale) / (1.0 if scale is None else scale)
-        y = None if warm.y is None or not warm.y.size else warm.y * factor[self.equality]
-        z = None if warm.z is None or not warm.z.size else warm.z * np.concatenate([factor[self.upper],
-                                                                                    factor[self.lower]])
-        return replace(warm, y=warm.y if y is None else y, z=warm.z if z is None else z, scale=scale)
+        y = warm.y if warm.y is None or not warm.y.size else warm.y * factor[self.equality]
+        z = warm.z if warm.z is None or not warm.z.size else warm.z * np.concatenate([factor[self.upper],
+                                                                                      factor[self.lower]])
+        return replace(warm, y=y, z=z, scale=scale)
