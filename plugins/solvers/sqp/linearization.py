@@ -86,8 +86,9 @@ class Linearization:
         G = (self.select_inequality @ jacobian).tocsc() if up.size + lo.size else None
         h = np.concatenate([self.ubg[up] - g[up], g[lo] - self.lbg[lo]]) if G is not None else None
         if scale is not None:  # the right-hand sides too; no work on the QPs without a degenerate row
-            b = None if b is None else b * scale[eq]
-            h = None if h is None else h * np.concatenate([scale[up], scale[lo]])
+            equality_scale, inequality_scale = self._by_qp_rows(scale)
+            b = None if b is None else b * equality_scale
+            h = None if h is None else h * inequality_scale
         if dense:
             P = P.toarray() if sp.issparse(P) else P
             A = None if A is None else A.toarray()
@@ -119,7 +120,12 @@ class Linearization:
         if warm.scale is None and scale is None:
             return warm
         factor = (np.ones(self.m) if warm.scale is None else warm.scale) / (1.0 if scale is None else scale)
-        y = warm.y if warm.y is None or not warm.y.size else warm.y * factor[self.equality]
-        z = warm.z if warm.z is None or not warm.z.size else warm.z * np.concatenate([factor[self.upper],
-                                                                                      factor[self.lower]])
+        equality_factor, inequality_factor = self._by_qp_rows(factor)
+        y = warm.y if warm.y is None or not warm.y.size else warm.y * equality_factor
+        z = warm.z if warm.z is None or not warm.z.size else warm.z * inequality_factor
         return replace(warm, y=y, z=z, scale=scale)
+
+    def _by_qp_rows(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A value per row of g laid out as the QP's rows: (its equalities A, its one-sided rows G: upper sides,
+        then lower sides)."""
+        return values[self.equality], np.concatenate([values[self.upper], values[self.lower]])

@@ -65,8 +65,9 @@ class Subproblems(Iterate):
         # the rows' scale and the backends' swap once the crawl shows, as the release: the first steps' paths move
         # with any change of their QPs (forward step 2, HS N = 100, scaled from the first QP: stuck at iteration 16,
         # where it converged in 363; DMOC N = 50 with the swap from the first QP: an error at 134, where 385)
-        scale = self.lin.row_scale(self.jac) if self._crawling() else None
-        self.backends.swap = self._crawling()
+        crawling = self._crawling()
+        scale = self.lin.row_scale(self.jac) if crawling else None
+        self.backends.swap = crawling
         problem = self.lin.problem(model.P, self.grad, self.jac, g, lb, ub, self.dense, scale)
         outcome = self.backends.solve(problem, None if warm is None else self.lin.rescaled(warm, scale), self.log)
         outcome.scale = scale
