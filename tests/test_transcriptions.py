@@ -271,3 +271,13 @@ def test_interval_lookup_matches_a_search_of_the_node_times():
                 k = int(np.clip(np.searchsorted(grid, t, side="right") - 1, 0, n_nodes - 2))
                 expected = (k, float(np.clip((t - grid[k]) / h, 0.0, 1.0)))
                 assert locate_interval(float(t), h, n_nodes) == expected, (n_nodes, h, t)
+
+
+@pytest.mark.parametrize(("name", "offered"), [("hermite-simpson", "simpson, boole"),
+                                               ("dmoc", "boole, simpson, midpoint"),
+                                               ("trapezoidal", "boole, simpson, trapezoid")])
+def test_a_transcription_refuses_a_quadrature_it_does_not_offer_when_created(name, offered):
+    registry = load_registry()
+    with pytest.raises(ValueError, match=f"quadrature = 'gauss': expected one of {offered}$"):
+        registry.create("transcription", name, quadrature="gauss")
+    assert registry.create("transcription", name, quadrature="simpson").quadrature == "simpson"

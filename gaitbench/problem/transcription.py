@@ -303,6 +303,14 @@ PHYSICAL_ANGLE_BOX = (-np.pi, np.pi)
 keeps angles on one branch."""
 
 
+def checked_quadrature(quadrature: str, offered: tuple[str, ...]) -> str:
+    """``quadrature`` when the transcription offers that rule for its running cost; otherwise a ValueError that
+    lists the ones it does, raised when the plugin is created, not at its first build."""
+    if quadrature not in offered:
+        raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(offered)}")
+    return quadrature
+
+
 def angle_box(structure: StepStructure) -> tuple[float, float]:
     """Bounds of the leg-angle variables: the thesis's printed box, or a wide one under physical limits."""
     options = structure.options

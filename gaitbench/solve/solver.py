@@ -3,9 +3,10 @@ members the core uses when present."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -66,6 +67,21 @@ def prepare(solver: Solver, nlp: NLP) -> None:
 def options_key(name: str, options: dict) -> tuple:
     """A hashable, order-independent key for ``nlp.solver_cache``: a solver built with these options is reusable."""
     return (name, _freeze(options))
+
+
+def set_typed_option(setter: Callable[[str, Any], None], option: str, value: Any, library: str) -> None:
+    """``setter(option, value)`` for a library binding (cyipopt, unopy) that picks the option's type from the
+    Python value's: an int given for a real option is set again as a float. A ValueError names the option the
+    library rejects."""
+    try:
+        setter(option, value)
+    except TypeError:
+        if type(value) is not int:
+            raise ValueError(f"{library} rejects option {option}={value!r}") from None
+        try:
+            setter(option, float(value))
+        except TypeError:
+            raise ValueError(f"{library} rejects option {option}={value!r}") from None
 
 
 def _freeze(options):

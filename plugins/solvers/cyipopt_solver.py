@@ -22,7 +22,7 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.ipopt import IPOPT_STATUSES, SMALL_MU_INIT, check_ipopt_options
 from gaitbench.solve.silence import quiet_stdout
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
+from gaitbench.solve.solver import SolverResult, SolverStatus, options_key, set_typed_option
 
 _RETURN_STATUSES = {
     0: "Solve_Succeeded",
@@ -192,7 +192,7 @@ return ERROR.
                                       ub=nlp.ubx, cl=nlp.lbg, cu=nlp.ubg)
             with quiet_stdout(self.options["print_level"] == 0):  # IPOPT prints why it rejects an option
                 for option, value in self.options.items():
-                    _add_option(problem, option, value)
+                    set_typed_option(problem.add_option, option, value, "IPOPT")
             nlp.solver_cache[key] = _Built(problem, callbacks)
         return nlp.solver_cache[key]
 
@@ -212,23 +212,10 @@ def _cyipopt_accepts(name: str, value: Any) -> bool:
     problem = cyipopt.Problem(n=1, m=0, problem_obj=_NoProblem(), lb=[-1.0], ub=[1.0])
     try:
         with quiet_stdout():  # IPOPT prints why it refuses
-            _add_option(problem, name, value)
+            set_typed_option(problem.add_option, name, value, "IPOPT")
     except ValueError:
         return False
     return True
-
-
-def _add_option(problem: cyipopt.Problem, option: str, value) -> None:
-    """Set one IPOPT option; cyipopt picks IPOPT's setter by the Python type, so an int for a number is retried."""
-    try:
-        problem.add_option(option, value)
-    except TypeError:
-        if type(value) is not int:
-            raise ValueError(f"IPOPT rejects option {option}={value!r}") from None
-        try:
-            problem.add_option(option, float(value))
-        except TypeError:
-            raise ValueError(f"IPOPT rejects option {option}={value!r}") from None
 
 
 @hookimpl

@@ -32,7 +32,7 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.problem.scaling import SCALINGS, nominal_factors
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.silence import quiet_stderr
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
+from gaitbench.solve.solver import SolverResult, SolverStatus, options_key, set_typed_option
 
 PRESETS = ("ipopt", "filtersqp", "funnelsqp", "auto")
 """Uno's presets for NLPs with an exact Hessian (``filterslp`` drops the Hessian and is not offered)."""
@@ -331,18 +331,12 @@ def _configured_solver(preset: str, options: dict) -> unopy.UnoSolver:
 
 
 def _set_option(solver: unopy.UnoSolver, option: str, value) -> None:
-    """Set one Uno option; unopy picks the setter by the Python type, so an int for a real option is retried."""
+    """Set one Uno option (an int for a real option is set again as a float); unopy raises KeyError for a name
+    Uno does not know."""
     try:
-        solver.set_option(option, value)
+        set_typed_option(solver.set_option, option, value, "Uno")
     except KeyError:
         raise ValueError(f"Uno has no option {option}") from None
-    except TypeError:
-        if type(value) is not int:
-            raise ValueError(f"Uno rejects option {option}={value!r}") from None
-        try:
-            solver.set_option(option, float(value))
-        except TypeError:
-            raise ValueError(f"Uno rejects option {option}={value!r}") from None
 
 
 @hookimpl

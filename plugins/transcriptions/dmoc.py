@@ -45,7 +45,13 @@ from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, 
 from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.problem.step_cost import QUADRATURE_RULES, interval_running_costs, running_cost
 from gaitbench.problem.trajectory import Interpolant, cubic_hermite, locate_interval, sample_seed
-from gaitbench.problem.transcription import Discretization, StepSymbols, Transcription, angle_box
+from gaitbench.problem.transcription import (
+    Discretization,
+    StepSymbols,
+    Transcription,
+    angle_box,
+    checked_quadrature,
+)
 
 TIME_STEP = PARAMETER_LAYOUT["time_step"]
 
@@ -58,9 +64,7 @@ class DiscreteMechanics(Transcription):
 
     def __init__(self, quadrature: str = "boole") -> None:
         super().__init__()
-        if quadrature not in QUADRATURES:
-            raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(QUADRATURES)}")
-        self.quadrature = quadrature
+        self.quadrature = checked_quadrature(quadrature, QUADRATURES)
 
     def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
                    model: BipedFunctions) -> Discretization:

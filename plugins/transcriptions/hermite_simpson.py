@@ -21,7 +21,13 @@ from gaitbench import Registration, hookimpl
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT
 from gaitbench.problem.step_cost import QUADRATURE_RULES, interval_running_costs, running_cost
 from gaitbench.problem.trajectory import Interpolant, cubic_hermite, locate_interval, sample_seed
-from gaitbench.problem.transcription import Discretization, Transcription, collocation_variables, state_derivative
+from gaitbench.problem.transcription import (
+    Discretization,
+    Transcription,
+    checked_quadrature,
+    collocation_variables,
+    state_derivative,
+)
 
 QUADRATURES = ("simpson", "boole")
 
@@ -31,9 +37,7 @@ class HermiteSimpson(Transcription):
 
     def __init__(self, quadrature: str = "boole") -> None:
         super().__init__()
-        if quadrature not in QUADRATURES:
-            raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(QUADRATURES)}")
-        self.quadrature = quadrature
+        self.quadrature = checked_quadrature(quadrature, QUADRATURES)
 
     def discretize(self, structure, builder, symbols, model):
         n = structure.n_nodes

@@ -33,6 +33,7 @@ from gaitbench.problem.transcription import (
     Discretization,
     StepSymbols,
     Transcription,
+    checked_quadrature,
     collocation_variables,
     state_derivative,
 )
@@ -48,9 +49,7 @@ class Trapezoidal(Transcription):
 
     def __init__(self, quadrature: str = "boole") -> None:
         super().__init__()
-        if quadrature not in QUADRATURES:
-            raise ValueError(f"quadrature = {quadrature!r}: expected one of {', '.join(QUADRATURES)}")
-        self.quadrature = quadrature
+        self.quadrature = checked_quadrature(quadrature, QUADRATURES)
 
     def discretize(self, structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols,
                    model: BipedFunctions) -> Discretization:
