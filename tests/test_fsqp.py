@@ -345,3 +345,29 @@ def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before
     assert calls == [("piqp", None, False), ("piqp", 0, True)]
     objective = 0.5 * solution.x @ problem.P @ solution.x + problem.q @ solution.x
     assert objective == pytest.approx(clarabel_objective(problem), rel=1e-5)
+
+
+def test_phase_one_takes_an_elastic_step_where_the_projection_leaves_the_bounds(monkeypatch: pytest.MonkeyPatch):
+    """x² = 1 within −2 ≤ x ≤ 2 from x = 0.01: the linearised row asks for d ≈ 50, beyond the bound, so the least-norm
+    projection has no solution, and phase 1 steps by the elastic QP, not by the Gauss–Newton step that ignores the
+    bounds."""
+    b = NLPBuilder()
+    x = b.variable("x", (1, 1), -2.0, 2.0)
+    b.constrain("circle", x ** 2 - 1)
+    nlp = b.build(ca.SX.sym("p", 0), (x - 2) ** 2)
+    calls = []
+    solve_problem = fsqp_qp.qpsolvers.solve_problem
+
+    def recorded(problem, solver, **settings):
+        calls.append((solver, problem.P.shape[0]))
+        return solve_problem(problem, solver=solver, **settings)
+
+    monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
+    solver = FSQP(subproblem="qp")
+    result = solver.solve(nlp, np.zeros(0), np.array([0.01]))
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.x == pytest.approx([1.0], abs=1e-6)
+    # the projection, which PIQP, PIQP retried and Clarabel fail; then the elastic QP, over d and the residual e
+    assert calls[:4] == [("piqp", 1), ("piqp", 1), ("clarabel", 1), ("piqp", 2)]
+    phase_one = [record for record in solver.log if record.phase == "feasibility"]
+    assert phase_one[0].step < 1  # the elastic step reaches the bound, and the line search takes part of it

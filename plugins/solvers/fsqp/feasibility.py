@@ -31,6 +31,13 @@ purpose: on a DMOC gait step, a margin of 1e-4 moved the positions enough to rai
 _EQUALITY_START = 1e-6
 """Phase 1 of the ``qp`` subproblem ends when the equality rows are within this of 0 (scaled units)."""
 
+_ELASTIC_WEIGHT = 1e6
+"""ρ of :func:`elastic_projection`: the weight of the linearised rows' residual against ½‖d‖² (scaled units), a
+Levenberg–Marquardt damping of 1/ρ. Taken as every phase-1 step on the upward-slope HS step at N = 100, at 1e10 it
+gave the inconsistent projection's step again (‖d‖ ~ 5e3, cut to t ~ 1e-3 by the line search every iteration), at
+1e6 steps of ‖d‖ ~ 80 taken with t = 1/16 to 1 (docs/solvers.md, the fsqp section's "Phase 1 where the projection is
+inconsistent")."""
+
 
 def push_inside(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """x projected onto the bounds and pushed inside by min(p max(1, |bound|), p (upper − lower)), p = ``_PUSH``."""
@@ -79,7 +86,11 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
         if np.linalg.norm(jacobian.T @ residual) <= 1e-10 * max(1.0, np.sqrt(2 * violation)):
             stalled = "the violation is stationary"
         else:
-            direction = projection(form, x, c_all) if with_equalities else None
+            direction = None
+            if with_equalities:
+                direction = projection(form, x, c_all)
+                if direction is None:
+                    direction = elastic_projection(form, x, c_all)
             if direction is None:
                 normal = (jacobian @ jacobian.T).tocsc()
                 normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
@@ -110,7 +121,7 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
 def projection(form: NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
     """The least-norm step onto every linearised row within the bounds (a QP: Newton's method for the
     feasibility problem, where the clipped Gauss–Newton step crept along the bounds for hundreds of iterations
-    on HS, N = 20); None when the linearisation is inconsistent."""
+    on HS, N = 20); None when the linearisation is inconsistent within the bounds."""
     jacobian = form.jacobian(x)
     general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
     try:
@@ -123,6 +134,27 @@ def projection(form: NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | 
     except Breakdown:
         return None
     return solution.x
+
+
+def elastic_projection(form: NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
+    """Where :func:`projection` is inconsistent: the step that minimises ½‖d‖² + ½ρ(‖e‖² + ‖v‖²) with the
+    equality rows' residual e (c_E + J_E d = e) and the general rows' excess v ≥ 0 (c_G + J_G d ≤ v − margin),
+    within the bounds: a Levenberg–Marquardt step on phase 1's violation that the bounds hold, always feasible
+    (d = 0 is). None when the QP fails all the same."""
+    jacobian = form.jacobian(x)
+    general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
+    n, n_e, n_g = form.n, equal.size, general.size
+    P = sp.diags(np.concatenate([np.ones(n), np.full(n_e + n_g, _ELASTIC_WEIGHT)]), format="csc")
+    A = sp.hstack([jacobian[equal], -sp.eye(n_e), sp.csr_matrix((n_e, n_g))], format="csc")
+    G = sp.hstack([jacobian[general], sp.csr_matrix((n_g, n_e)), -sp.eye(n_g)], format="csc")
+    lower = np.concatenate([np.where(form.free, form.lbx - x, 0.0), np.full(n_e, -np.inf), np.zeros(n_g)])
+    upper = np.concatenate([np.where(form.free, form.ubx - x, 0.0), np.full(n_e + n_g, np.inf)])
+    try:
+        solution = solve_qp(qpsolvers.Problem(P, np.zeros(n + n_e + n_g), G, -c_all[general] - _FEASIBILITY_MARGIN,
+                                              A, -c_all[equal], lower, upper))
+    except Breakdown:
+        return None
+    return solution.x[:n]
 
 
 def infeasible(form: NLPForm, x: np.ndarray, c: np.ndarray, iteration: int, reason: str) -> Outcome:

@@ -96,9 +96,9 @@ class FSQP:
       15 iterations (IPOPT's acceptable level). The QP's multipliers belong to x + d, so the error is also taken
       with them corrected by least squares over the rows the step holds (at x; signs and complementarity checked):
       on the flat valleys ‖∇²L d‖ stays ~1e-5 while f no longer moves, which the first test never passes.
-    - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; the
-      Gauss–Newton step when that QP is inconsistent), until the inequalities hold and the equalities are within
-      1e-6, so that the first QP is consistent.
+    - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; when
+      that QP is inconsistent, the bounded Levenberg–Marquardt step on the violation, an elastic QP), until the
+      inequalities hold and the equalities are within 1e-6, so that the first QP is consistent.
 
     The "qp" subproblem takes the exact Hessian only.
 
