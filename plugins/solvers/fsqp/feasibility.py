@@ -4,6 +4,7 @@ point")."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -78,7 +79,8 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
             rows = np.concatenate([rows, np.arange(n_ineq, form.m)])
             target = np.concatenate([target, c_all[n_ineq:]])
             residual = np.concatenate([residual, c_all[n_ineq:]])
-        jacobian = form.jacobian(x)[rows]
+        full_jacobian = form.jacobian(x)
+        jacobian = full_jacobian[rows]
         if not np.all(np.isfinite(jacobian.data)):
             return Outcome(SolverStatus.ERROR, f"NaN or infinite derivatives at iteration {iteration}", x,
                             iteration, None)
@@ -88,9 +90,10 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
         else:
             direction = None
             if with_equalities:
-                direction = projection(form, x, c_all)
+                linearised = _LinearisedRows.at(form, x, c_all, full_jacobian)
+                direction = projection(form, linearised)
                 if direction is None:
-                    direction = elastic_projection(form, x, c_all)
+                    direction = elastic_projection(form, linearised)
             if direction is None:
                 normal = (jacobian @ jacobian.T).tocsc()
                 normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
@@ -118,40 +121,53 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
     return Outcome(SolverStatus.CONVERGED, "feasible", x, iteration, None)
 
 
-def projection(form: NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
+@dataclass(frozen=True)
+class _LinearisedRows:
+    """Phase 1's rows linearised at x, as both of its step QPs take them: the general rows J_G d ≤ h (each aimed
+    ``_FEASIBILITY_MARGIN`` inside), the equalities J_E d = b, and the step's bounds (0 on fixed variables)."""
+
+    general: sp.csc_matrix
+    h: np.ndarray
+    equal: sp.csc_matrix
+    b: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def at(cls, form: NLPForm, x: np.ndarray, c_all: np.ndarray, jacobian: sp.csr_matrix) -> _LinearisedRows:
+        general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
+        return cls(jacobian[general].tocsc(), -c_all[general] - _FEASIBILITY_MARGIN, jacobian[equal].tocsc(),
+                   -c_all[equal], np.where(form.free, form.lbx - x, 0.0), np.where(form.free, form.ubx - x, 0.0))
+
+
+def projection(form: NLPForm, rows: _LinearisedRows) -> np.ndarray | None:
     """The least-norm step onto every linearised row within the bounds (a QP: Newton's method for the
     feasibility problem, where the clipped Gauss–Newton step crept along the bounds for hundreds of iterations
     on HS, N = 20); None when the linearisation is inconsistent within the bounds."""
-    jacobian = form.jacobian(x)
-    general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
+    general, equal = rows.h.size > 0, rows.b.size > 0
     try:
         solution = solve_qp(qpsolvers.Problem(
             sp.eye(form.n, format="csc"), np.zeros(form.n),
-            jacobian[general].tocsc() if general.size else None,
-            -c_all[general] - _FEASIBILITY_MARGIN if general.size else None,
-            jacobian[equal].tocsc() if equal.size else None, -c_all[equal] if equal.size else None,
-            np.where(form.free, form.lbx - x, 0.0), np.where(form.free, form.ubx - x, 0.0)))
+            rows.general if general else None, rows.h if general else None,
+            rows.equal if equal else None, rows.b if equal else None, rows.lower, rows.upper))
     except Breakdown:
         return None
     return solution.x
 
 
-def elastic_projection(form: NLPForm, x: np.ndarray, c_all: np.ndarray) -> np.ndarray | None:
+def elastic_projection(form: NLPForm, rows: _LinearisedRows) -> np.ndarray | None:
     """Where :func:`projection` is inconsistent: the step that minimises ½‖d‖² + ½ρ(‖e‖² + ‖v‖²) with the
     equality rows' residual e (c_E + J_E d = e) and the general rows' excess v ≥ 0 (c_G + J_G d ≤ v − margin),
     within the bounds: a Levenberg–Marquardt step on phase 1's violation that the bounds hold, always feasible
     (d = 0 is). None when the QP fails all the same."""
-    jacobian = form.jacobian(x)
-    general, equal = np.arange(form.n_general), form.n_inequalities + np.arange(form.n_equal_g)
-    n, n_e, n_g = form.n, equal.size, general.size
+    n, n_e, n_g = form.n, rows.b.size, rows.h.size
     P = sp.diags(np.concatenate([np.ones(n), np.full(n_e + n_g, _ELASTIC_WEIGHT)]), format="csc")
-    A = sp.hstack([jacobian[equal], -sp.eye(n_e), sp.csr_matrix((n_e, n_g))], format="csc")
-    G = sp.hstack([jacobian[general], sp.csr_matrix((n_g, n_e)), -sp.eye(n_g)], format="csc")
-    lower = np.concatenate([np.where(form.free, form.lbx - x, 0.0), np.full(n_e, -np.inf), np.zeros(n_g)])
-    upper = np.concatenate([np.where(form.free, form.ubx - x, 0.0), np.full(n_e + n_g, np.inf)])
+    A = sp.hstack([rows.equal, -sp.eye(n_e), sp.csr_matrix((n_e, n_g))], format="csc")
+    G = sp.hstack([rows.general, sp.csr_matrix((n_g, n_e)), -sp.eye(n_g)], format="csc")
+    lower = np.concatenate([rows.lower, np.full(n_e, -np.inf), np.zeros(n_g)])
+    upper = np.concatenate([rows.upper, np.full(n_e + n_g, np.inf)])
     try:
-        solution = solve_qp(qpsolvers.Problem(P, np.zeros(n + n_e + n_g), G, -c_all[general] - _FEASIBILITY_MARGIN,
-                                              A, -c_all[equal], lower, upper))
+        solution = solve_qp(qpsolvers.Problem(P, np.zeros(n + n_e + n_g), G, rows.h, A, rows.b, lower, upper))
     except Breakdown:
         return None
     return solution.x[:n]
