@@ -862,3 +862,22 @@ def test_a_slack_reset_that_would_raise_the_merit_or_comes_before_the_crawl_is_n
     filtered = Run(SQP(merit="filter"), NLPEvaluator(nlp, np.zeros(0)), x, Deadline(None))
     filtered.at_floor = _FLOOR_ITERATIONS
     assert filtered._reset_slacks(trial) is trial
+
+
+def test_a_row_the_qp_keeps_off_its_bound_leaves_the_working_set():
+    """Rows near their bound (docs/solvers.md): x₀ = ½ ties down the Hessian's negative curvature, so P needs the
+    augmentation, and the row x₁ ≤ 1 starts 9e-7 below its bound with the cost pushing it there at 1e-5. In the
+    working set by nearness alone, its term max|H|·d₁² = 1e4·d₁² held each step to 1e-9, and the solve ended after
+    14 iterations by the stall rule, the KKT residual at 1e-5; once five QP steps have left it inside, it leaves
+    the working set, the next step reaches its bound and gives it the cost's push as its multiplier."""
+    from plugins.solvers.sqp.subproblems import _INSIDE_STEPS
+
+    b = NLPBuilder()
+    x = b.variable("x", (3, 1))
+    b.constrain("tie", x[0], 0.5, 0.5)
+    b.constrain("row", x[1], -np.inf, 1.0)
+    nlp = b.build(ca.SX.sym("p", 0), -50 * x[0] ** 2 + 5e3 * x[2] ** 2 - 1e-5 * x[1])
+    result = SQP(max_iterations=100).solve(nlp, np.zeros(0), np.array([0.5, 1.0 - 9e-7, 0.0]))
+    assert result.status is SolverStatus.CONVERGED, result.message
+    assert result.iterations == _INSIDE_STEPS
+    assert result.multipliers[1] == pytest.approx(1e-5, rel=1e-6)

@@ -24,10 +24,12 @@ CasADi's):
 1. H + δI, δ = max(δ₀, δ_LM), δ₀ = 1e-10·max(1, max|H|) lifting only exactly singular directions, and δ_LM the
    Levenberg–Marquardt damping below;
 2. H + δI + ρ·max(1, max|H|)·Σ_W a_i a_iᵀ/‖a_i‖², ρ = 1, 10, …, 10⁴, the least that factorises, over a working
-   set W of constraint normals a_i: the equality rows, the inequality rows that are violated, within 1e-6 of a
-   bound or carry a multiplier, and the variables at a bound. For a row active in the QP, a_iᵀd is fixed, so the
-   added term is constant on the QP's feasible set: once W is the active set the step is the exact Newton step,
-   and by Debreu's lemma such a ρ exists when H is positive definite on the null space of the active constraints.
+   set W of constraint normals a_i: the equality rows, the inequality rows that are violated, carry a multiplier
+   or are within 1e-6 of a bound (nearness alone not once five QP steps in a row have left the row inside its
+   bounds: off its bound the term damps every step towards it), and the variables at a bound. For a row active
+   in the QP, a_iᵀd is fixed, so the added term is constant on the QP's feasible set: once W is the active set
+   the step is the exact Newton step, and by Debreu's lemma such a ρ exists when H is positive definite on the
+   null space of the active constraints.
    The multipliers of rows active in the QP are corrected by ρ·a_iᵀd/‖a_i‖², so they are those of H itself
    (a one-sided row whose corrected multiplier has the wrong sign is not active for H: its multiplier is zero);
 3. failing that, the ρ = 100 augmentation plus a shift from max(δ, 1e-8·max(1, max|H|)) growing ×4 until the

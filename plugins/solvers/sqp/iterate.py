@@ -91,6 +91,9 @@ class Iterate:
         self.bfgs: np.ndarray | None = np.eye(self.n) if options.hessian == "bfgs" else None
         self.bfgs_scaled = False
         self.warm: QPOutcome | None = None
+        self.inside = np.zeros(self.m, dtype=int)
+        """Per row of g, the consecutive QP steps that left it strictly inside its bounds
+        (``Subproblems._count_inside``)."""
         self.restoration: tuple[str, float] | None = None
         """(why restoration started, θ on entry) while restoring."""
         self.log = {"alpha": float("nan"), "regularization": 0.0, "qp_time": 0.0, "flags": ""}

@@ -91,6 +91,7 @@ class Run(Restoration):
                                                             f"{self.acceptable} iterations")
         self.warm = outcome
         d = outcome.x
+        self._count_inside(d)
         if self.o.merit == "l1":
             self._update_weights(model, d, lam)
             if self.acceptable > 0 and self._merit_slope(d) >= 0:

@@ -23,6 +23,16 @@ from plugins.solvers.sqp.iterate import Iterate
 _FLOOR_ITERATIONS = 20
 """Consecutive iterations with the shift at its floor after which the linear variables are released: how the
 late-step crawl shows (docs/solvers.md, "The step bound on the linear power parts")."""
+_INSIDE_STEPS = 5
+"""Consecutive QP steps that leave a row strictly inside its bounds after which nearness alone no longer puts it in
+the convexification's working set (:func:`.hessian.working_set`). Measured on the solver benchmark's 18 ``sqp``
+rows: after one step, 14 converged against 15 (the first steps' paths move with any change of their QPs); after
+five, the same 15, in 10 % fewer iterations (docs/solvers.md, "Rows near their bound")."""
+
+
+def _row_tolerance(value: np.ndarray) -> np.ndarray:
+    """How close to a bound a QP's row value counts as on it."""
+    return 1e-7 * (1.0 + np.abs(value))
 
 
 class Subproblems(Iterate):
@@ -40,7 +50,8 @@ class Subproblems(Iterate):
             raise FloatingPointError("the Hessian of the Lagrangian is not finite")
         model, self.shift = convexify(H, self.shift, self.shift_growth, self.jac,
                                       lambda: working_set(self.lin, self.x, self.g, lam,
-                                                          -(self.grad + self.jac.T @ lam)),
+                                                          -(self.grad + self.jac.T @ lam),
+                                                          self.inside >= _INSIDE_STEPS),
                                       self.o.crawl_shift_floor if self._crawling() else SHIFT_FLOOR)
         # at the floor by the usual one, so that the lower floor does not end the crawl it is for
         self.at_floor = self.at_floor + 1 if self.shift <= SHIFT_FLOOR * hessian_scale(H) else 0
@@ -106,6 +117,13 @@ class Subproblems(Iterate):
             outcome.z_box = None if outcome.z_box is None else outcome.z_box[:n]
         return outcome
 
+    def _count_inside(self, d: np.ndarray) -> None:
+        """Count, per row, the consecutive QP steps ``d`` that leave it strictly inside its bounds."""
+        value = self.g + self.jac @ d
+        tolerance = _row_tolerance(value)
+        inside = (value > self.lin.lbg + tolerance) & (value < self.lin.ubg - tolerance)
+        self.inside = np.where(inside, self.inside + 1, 0)
+
     def _multipliers(self, outcome: QPOutcome, model: Model) -> np.ndarray:
         """λ_g from the QP duals, with the augmented rows corrected (package docstring)."""
         if self.lin.unconstrained:
@@ -114,7 +132,7 @@ class Subproblems(Iterate):
         if model.rows.size:  # only rows active in this QP: the others keep their (zero) QP multiplier
             lin, rows = self.lin, model.rows
             value = self.g[rows] + self.jac[rows] @ outcome.x
-            tolerance = 1e-7 * (1.0 + np.abs(value))
+            tolerance = _row_tolerance(value)
             active = (np.abs(value - lin.ubg[rows]) <= tolerance) | (np.abs(value - lin.lbg[rows]) <= tolerance)
             lam[rows[active]] += model.weights[active] * (value - self.g[rows])[active]
             # A one-sided row the augmented QP holds active where H's own QP would not comes back with a multiplier
