@@ -19,6 +19,7 @@ import plugins.solvers.fsqp.solver as fsqp_solver
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
+from gaitbench.solve.qp import RetryOrder
 from gaitbench.solve.solver import SolverStatus
 from plugins.solvers.fsqp import FSQP
 from plugins.solvers.fsqp.form import NLPForm
@@ -341,10 +342,33 @@ def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before
         return solution
 
     monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
-    solution = fsqp_qp.solve_qp(problem)
+    solution = fsqp_qp.solve_qp(problem, RetryOrder())
     assert calls == [("piqp", None, False), ("piqp", 0, True)]
     objective = 0.5 * solution.x @ problem.P @ solution.x + problem.q @ solution.x
     assert objective == pytest.approx(clarabel_objective(problem), rel=1e-5)
+
+
+def test_after_the_retry_settings_solve_a_qp_piqp_failed_they_go_first_on_the_next_qps_of_the_solve(monkeypatch):
+    """PIQP fails the gait QPs in runs (docs/solvers.md, the ``fsqp`` section's "The retry settings first"): once
+    the unequilibrated PIQP has solved the saved QP the equilibrated one fails, the solve's next QP (here the same
+    one) goes to the unequilibrated PIQP first: one call, not two. A new solve starts from PIQP's own settings."""
+    problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
+    calls = []
+    solve_problem = fsqp_qp.qpsolvers.solve_problem
+
+    def recorded(qp, solver, **settings):
+        solution = solve_problem(qp, solver=solver, **settings)
+        calls.append((solver, settings.get("preconditioner_iter"), solution.found))
+        return solution
+
+    monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
+    order = RetryOrder()
+    fsqp_qp.solve_qp(problem, order)
+    fsqp_qp.solve_qp(problem, order)
+    assert calls == [("piqp", None, False), ("piqp", 0, True), ("piqp", 0, True)]
+    calls.clear()
+    fsqp_qp.solve_qp(problem, RetryOrder())
+    assert calls == [("piqp", None, False), ("piqp", 0, True)]
 
 
 def test_phase_one_takes_an_elastic_step_where_the_projection_leaves_the_bounds(monkeypatch: pytest.MonkeyPatch):

@@ -567,7 +567,7 @@ def test_once_the_retry_settings_solve_a_qp_the_backend_failed_they_go_first_on_
     assert backends.solve(problem, None, first).solved and evaluator.evaluations["qp"] == 2
     again = backends.solve(problem, None, second)
     assert again.solved and (evaluator.evaluations["qp"], second["flags"]) == (3, "u")
-    assert backends.retry_first == {"piqp"}
+    assert backends.order.retry_first("piqp")
 
 
 def test_the_backend_settings_go_first_again_when_a_qp_fails_under_the_retry_settings_that_they_solve(monkeypatch):

@@ -29,6 +29,40 @@ Clarabel's; as the first try it fails others that the equilibrated PIQP solves, 
 (docs/solvers.md, the sqp section's "PIQP without its equilibration"), but for ``sqp`` once its late-step crawl
 shows, where the two take turns going first ("PIQP's failures in runs")."""
 
+
+
+class RetryOrder:
+    """Which of its two settings each backend tries a QP with first, over one solve: its own, or its
+    ``RETRY_SETTINGS`` once those solved the last QP its own failed, until the reverse.
+
+    Why: PIQP fails the late gait steps' QPs in runs (a QP after a failed one failed 229 times in 266 on forward
+    step 2, HS N = 100), and each failure costs its iteration limit before the retry solves the QP; trying the
+    settings that solved the last failed QP first saves those calls (docs/solvers.md, "PIQP's failures in runs",
+    and for ``fsqp`` "The retry settings first")."""
+
+    def __init__(self) -> None:
+        self._retry_first: set[str] = set()
+
+    def settings(self, solver: str, swap: bool = True) -> list[dict]:
+        """The extra settings to try ``solver`` with, in order: its own ({}) and its ``RETRY_SETTINGS`` if it has
+        any, those first where they solved the last QP the other failed and ``swap`` is on."""
+        if solver not in RETRY_SETTINGS:
+            return [{}]
+        order = [{}, RETRY_SETTINGS[solver]]
+        return order[::-1] if swap and solver in self._retry_first else order
+
+    def solved_second(self, solver: str, settings: dict) -> None:
+        """``settings`` solved a QP that the other settings of ``solver`` failed: they go first from now on."""
+        if settings:
+            self._retry_first.add(solver)
+        else:
+            self._retry_first.discard(solver)
+
+    def retry_first(self, solver: str) -> bool:
+        """Whether ``solver``'s retry settings go first (where swapping is on)."""
+        return solver in self._retry_first
+
+
 INACCURATE_STATUSES = frozenset({"AlmostSolved", "solved inaccurate"})
 """Statuses ``qpsolvers`` reports as not found whose solutions are still used (Clarabel's and OSQP's reduced-accuracy
 optimum): the line search judges the step, and rejecting them would end a solve that is nearly done."""

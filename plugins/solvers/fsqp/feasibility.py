@@ -13,6 +13,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from gaitbench.solve.evaluation import Deadline
+from gaitbench.solve.qp import RetryOrder
 from gaitbench.solve.solver import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.outcome import Breakdown, Outcome
@@ -91,9 +92,9 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
             direction = None
             if with_equalities:
                 linearised = _LinearisedRows.at(form, x, c_all, full_jacobian)
-                direction = projection(form, linearised)
+                direction = projection(form, linearised, solver.qp_order)
                 if direction is None:
-                    direction = elastic_projection(form, linearised)
+                    direction = elastic_projection(form, linearised, solver.qp_order)
             if direction is None:
                 normal = (jacobian @ jacobian.T).tocsc()
                 normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
@@ -140,7 +141,7 @@ class _LinearisedRows:
                    -c_all[equal], np.where(form.free, form.lbx - x, 0.0), np.where(form.free, form.ubx - x, 0.0))
 
 
-def projection(form: NLPForm, rows: _LinearisedRows) -> np.ndarray | None:
+def projection(form: NLPForm, rows: _LinearisedRows, order: RetryOrder) -> np.ndarray | None:
     """The least-norm step onto every linearised row within the bounds (a QP: Newton's method for the
     feasibility problem, where the clipped Gauss–Newton step crept along the bounds for hundreds of iterations
     on HS, N = 20); None when the linearisation is inconsistent within the bounds."""
@@ -149,13 +150,13 @@ def projection(form: NLPForm, rows: _LinearisedRows) -> np.ndarray | None:
         solution = solve_qp(qpsolvers.Problem(
             sp.eye(form.n, format="csc"), np.zeros(form.n),
             rows.general if general else None, rows.h if general else None,
-            rows.equal if equal else None, rows.b if equal else None, rows.lower, rows.upper))
+            rows.equal if equal else None, rows.b if equal else None, rows.lower, rows.upper), order)
     except Breakdown:
         return None
     return solution.x
 
 
-def elastic_projection(form: NLPForm, rows: _LinearisedRows) -> np.ndarray | None:
+def elastic_projection(form: NLPForm, rows: _LinearisedRows, order: RetryOrder) -> np.ndarray | None:
     """Where :func:`projection` is inconsistent: the step that minimises ½‖d‖² + ½ρ(‖e‖² + ‖v‖²) with the
     equality rows' residual e (c_E + J_E d = e) and the general rows' excess v ≥ 0 (c_G + J_G d ≤ v − margin),
     within the bounds: a Levenberg–Marquardt step on phase 1's violation that the bounds hold, always feasible
@@ -167,7 +168,8 @@ def elastic_projection(form: NLPForm, rows: _LinearisedRows) -> np.ndarray | Non
     lower = np.concatenate([rows.lower, np.full(n_e, -np.inf), np.zeros(n_g)])
     upper = np.concatenate([rows.upper, np.full(n_e + n_g, np.inf)])
     try:
-        solution = solve_qp(qpsolvers.Problem(P, np.zeros(n + n_e + n_g), G, rows.h, A, rows.b, lower, upper))
+        solution = solve_qp(qpsolvers.Problem(P, np.zeros(n + n_e + n_g), G, rows.h, A, rows.b, lower, upper),
+                            order)
     except Breakdown:
         return None
     return solution.x[:n]

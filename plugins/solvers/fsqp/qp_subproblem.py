@@ -74,7 +74,7 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
                                        rows_e.tocsc() if equal.size else None, -c[equal] if equal.size else None,
                                        lower, upper)
                 try:
-                    solution = solve_qp(qp)
+                    solution = solve_qp(qp, solver.qp_order)
                 except Breakdown:
                     # A QP the backends cannot solve is ill-conditioned (augmentation/shift up to ~1e12 on the
                     # flat valleys): solve it again with H shifted 100× more, up to 1e-2·max|∇²L|.
@@ -137,7 +137,7 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
                                f"{streak} iterations")
 
             # Second-order correction against the Maratos effect (the equalities' curvature).
-            correction = bend(form, x, d, qp, general, equal, d_norm)
+            correction = bend(form, x, d, qp, general, equal, d_norm, solver.qp_order)
 
             # Arc search on x + t d + t² d̃: inequality rows stay ≤ tolerance, Armijo on the ℓ1 merit.
             current = merit(f, c)

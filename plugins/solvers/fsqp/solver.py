@@ -6,6 +6,7 @@ import numpy as np
 
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
+from gaitbench.solve.qp import RetryOrder
 from gaitbench.solve.solver import SolverResult, SolverStatus
 from plugins.solvers.fsqp.equality import minimize
 from plugins.solvers.fsqp.feasibility import feasibility, push_inside
@@ -160,12 +161,15 @@ class FSQP:
         self.subproblem = subproblem
         self.log: list[IterationRecord] = []
         """The iterates of the last solve, both phases, in order."""
+        self.qp_order = RetryOrder()
+        """Which settings each QP backend tries first, in the current solve (``qp.solve_qp``)."""
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Phase 1 if the start violates an inequality, then FSQP; every failure becomes a status."""
         deadline = Deadline(self.time_limit_s)
         x0 = np.asarray(initial_guess, dtype=float).ravel()
         self.log = []
+        self.qp_order = RetryOrder()
         try:
             evaluator = NLPEvaluator(nlp, parameters)
             if x0.size != nlp.n_variables:

@@ -12,7 +12,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
-from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, RETRY_SETTINGS, backend_status
+from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, RetryOrder, backend_status
 from gaitbench.solve.silence import quiet_stdout
 
 _TOLERANCE_KEYWORDS: dict[str, tuple[str, ...]] = {
@@ -70,10 +70,10 @@ class QPBackends:
         self.evaluator = evaluator
         self.time = 0.0
         """Seconds spent in backend calls so far."""
-        self.retry_first: set[str] = set()
-        """Backends whose ``RETRY_SETTINGS`` solved the last QP their own settings failed (``_call_with_retry``)."""
+        self.order = RetryOrder()
+        """Which settings each backend tries first (``_call_with_retry``)."""
         self.swap = False
-        """Whether those backends try their ``RETRY_SETTINGS`` first."""
+        """Whether ``order`` may put a backend's ``RETRY_SETTINGS`` first."""
 
     def solve(self, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict) -> QPOutcome:
         """The QP by the chosen backend, and by the fallback backend (cold) when the first one fails (flag "f" in the
@@ -98,19 +98,17 @@ class QPBackends:
         in the other order after the retry settings have solved a QP the backend's own failed, until the reverse:
         PIQP fails the late gait steps' QPs in runs, each failure costing its 100-iteration limit (docs/solvers.md,
         "PIQP's failures in runs")."""
-        if solver not in RETRY_SETTINGS:
-            return self._call(solver, problem, warm, log)
-        retry_first = self.swap and solver in self.retry_first
-        first, second = (RETRY_SETTINGS[solver], None) if retry_first else (None, RETRY_SETTINGS[solver])
+        first, *rest = self.order.settings(solver, self.swap)
         outcome = self._call(solver, problem, None if first else warm, log, first)
-        if outcome.solved:
-            log["flags"] += "u" if first else ""
+        if outcome.solved or not rest:
+            log["flags"] += "u" if outcome.solved and first else ""
             return outcome
+        second = rest[0]
         retried = self._call(solver, problem, None if second else warm, log, second)
         if not retried.solved:
             return QPOutcome(False, f"{outcome.status}; retried: {retried.status}")
         log["flags"] += "u" if second else ""
-        self.retry_first = self.retry_first - {solver} if retry_first else self.retry_first | {solver}
+        self.order.solved_second(solver, second)
         return retried
 
     def _call(self, solver: str, problem: qpsolvers.Problem, warm: QPOutcome | None, log: dict,
