@@ -328,11 +328,9 @@ def test_fsqp_walks_three_forward_steps_at_n20_within_5_percent_of_ipopt(transcr
     assert ours.acot <= 1.05 * reference.acot
 
 
-def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before_clarabel(monkeypatch):
-    """The saved forward-step QP that PIQP, equilibrated, ends at its iteration limit: the ``qp`` subproblem's
-    second turn, PIQP without the equilibration, solves it to Clarabel's objective, and Clarabel is not called
-    (docs/solvers.md, "PIQP without its equilibration")."""
-    problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
+def _recorded_qp_calls(monkeypatch) -> list[tuple[str, int | None, bool]]:
+    """The list that every ``qpsolvers`` call of ``fsqp``'s QPs is recorded in from now on: (backend, PIQP's
+    ``preconditioner_iter`` if set, solved)."""
     calls = []
     solve_problem = fsqp_qp.qpsolvers.solve_problem
 
@@ -342,6 +340,15 @@ def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before
         return solution
 
     monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
+    return calls
+
+
+def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before_clarabel(monkeypatch):
+    """The saved forward-step QP that PIQP, equilibrated, ends at its iteration limit: the ``qp`` subproblem's
+    second turn, PIQP without the equilibration, solves it to Clarabel's objective, and Clarabel is not called
+    (docs/solvers.md, "PIQP without its equilibration")."""
+    problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
+    calls = _recorded_qp_calls(monkeypatch)
     solution = fsqp_qp.solve_qp(problem, RetryOrder())
     assert calls == [("piqp", None, False), ("piqp", 0, True)]
     objective = 0.5 * solution.x @ problem.P @ solution.x + problem.q @ solution.x
@@ -353,15 +360,7 @@ def test_after_the_retry_settings_solve_a_qp_piqp_failed_they_go_first_on_the_ne
     the unequilibrated PIQP has solved the saved QP the equilibrated one fails, the solve's next QP (here the same
     one) goes to the unequilibrated PIQP first: one call, not two. A new solve starts from PIQP's own settings."""
     problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
-    calls = []
-    solve_problem = fsqp_qp.qpsolvers.solve_problem
-
-    def recorded(qp, solver, **settings):
-        solution = solve_problem(qp, solver=solver, **settings)
-        calls.append((solver, settings.get("preconditioner_iter"), solution.found))
-        return solution
-
-    monkeypatch.setattr(fsqp_qp.qpsolvers, "solve_problem", recorded)
+    calls = _recorded_qp_calls(monkeypatch)
     order = RetryOrder()
     fsqp_qp.solve_qp(problem, order)
     fsqp_qp.solve_qp(problem, order)
