@@ -26,9 +26,9 @@ equilibration: on the late gait steps PIQP fails up to half the QPs (forward ste
 Clarabel, solving them cold, ends most at its reduced accuracy (``AlmostSolved``, 124 of 255) in 85-110 ms each.
 Unequilibrated, PIQP solves 38 of 40 of those QPs in a median of 33 iterations, to objectives at or below
 Clarabel's; as the first try it fails others that the equilibrated PIQP solves, so it is the second
-(docs/solvers.md, the sqp section's "PIQP without its equilibration"), but for ``sqp`` once its late-step crawl
-shows, where the two take turns going first ("PIQP's failures in runs")."""
-
+(docs/solvers.md, the sqp section's "PIQP without its equilibration"), but where :class:`RetryOrder` lets the two
+take turns going first: for ``fsqp`` from a solve's first QP, for ``sqp`` once its late-step crawl shows ("PIQP's
+failures in runs")."""
 
 
 class RetryOrder:
