@@ -161,8 +161,9 @@ def _add_commands() -> None:
     from gaitbench.cli.run_commands import run, runs
     from gaitbench.cli.solve_command import solve
     from gaitbench.cli.track_command import track
+    from gaitbench.cli.verify_command import verify
 
-    for command in (solve, track, run, runs, report):
+    for command in (solve, verify, track, run, runs, report):
         main.add_command(command)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
+from rich import box
 from rich.console import Console
 from rich.table import Table
 
@@ -193,6 +194,7 @@ def solve(
     from gaitbench.solve.cores import IdleCores
     from gaitbench.solve.walk import WalkProblem
     from gaitbench.solve.walk_file import write_walk
+    from gaitbench.solve.walk_verification import solve_verified
 
     overrides = _problem_options(problem_options, absolute_value=absolute_value,
                                  torque_regularization=torque_regularization)
@@ -214,7 +216,7 @@ def solve(
     with console.status(f"solving step 1 of {total}") as status, cores.occupy():
         problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options,
                               objective=objective, cores=cores)
-        walk = strategy.solve(problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
+        walk = solve_verified(strategy, problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
     walk.experiment_options, walk.strategy_options = built_with["experiment"], built_with["strategy"]
     _print_walk(console, walk)
     if out is not None:
@@ -233,33 +235,37 @@ def step_status(outcome, total: int) -> str:
 
 
 def _print_walk(console: Console, walk) -> None:
+    """One row per step, of the motion the walk reports (for decrease and conquer: its polished or complete step,
+    with the patchwork's claimed COT beside it), then the verified ACOT and the verdict; the claim comes last.
+    Columns: stance leg, solve time, iterations, largest dynamics defect, re-simulation error at the step's end."""
+    claims = walk.claimed_acot is not None or any(step.verified is not step for step in walk.steps)
     table = Table(title=f"{walk.experiment}: {walk.strategy}, {walk.transcription} + {walk.solver}, N = {walk.N}, "
-                        f"objective {walk.objective}")
-    for column in ("step", "stance", "status", "COT", "time (s)", "iterations", "max defect", "resim error"):
-        table.add_column(column, justify="right" if column not in ("status",) else "left")
+                        f"objective {walk.objective}", box=box.SIMPLE_HEAD, pad_edge=False)
+    columns = ["step", "leg", "status", "COT", *(["claimed"] if claims else []), "time s", "iter", "defect", "resim"]
+    for column in columns:
+        table.add_column(column, justify="left" if column == "status" else "right", no_wrap=True)
     for step in walk.steps:
-        row = step.as_dict()
-        cells = [
-            fmt(row[key], spec)
-            for key, spec in (
-                ("cot", ".4f"),
-                ("solve_time_s", ".2f"),
-                ("iterations", "d"),
-                ("max_defect", ".1e"),
-                ("resim_error", ".1e"),
-            )
-        ]
-        table.add_row(str(step.index), f"Leg {step.stance}", step.status, *cells)
+        motion = step.verified
+        row = motion.as_dict()
+        own = step.as_dict()
+        cells = [fmt(row["cot"], ".4f"), *([fmt(own["cot"], ".4f")] if claims else []),
+                 fmt(row["solve_time_s"], ".2f"), fmt(row["iterations"], "d"), fmt(row["max_defect"], ".1e"),
+                 fmt(row["resim_error"], ".1e")]
+        table.add_row(str(step.index), str(step.stance), motion.status, *cells)
     console.print(table)
+    verification = walk.verification
     if walk.complete:
-        console.print(f"ACOT = {walk.acot:.4f} over {len(walk.steps)} steps ({walk.wall_time_s:.1f} s)")
+        verdict = "verified" if walk.verified else f"NOT verified: {verification.reason}" if verification else ""
+        console.print(f"verified ACOT = {walk.acot:.4f} over {len(walk.steps)} steps ({walk.wall_time_s:.1f} s); "
+                      f"{verdict}")
     else:
         print_plain(console, f"incomplete walk: {walk.failure}", "red")
-    details = walk.strategy_details
-    if "claimed_acot" in details:
-        verified = details["verified_acot"]
-        failing = len(walk.steps) - details["steps_satisfying_dynamics"]
-        console.print(f"claimed ACOT {fmt(details['claimed_acot'], '.4f')}: {failing} of {len(walk.steps)} "
-                      "chosen trajectories fail the dynamics (see max defect, resim error)")
-        console.print(f"verified ACOT {fmt(verified, '.4f')} (each step polished: re-solved from the chosen "
-                      "trajectory)")
+    if verification is not None and verification.steps:
+        console.print(f"largest join mismatch {verification.max_join_mismatch:.1e}, largest re-simulation error "
+                      f"{verification.max_resim_error:.1e}")
+    if claims and walk.claimed_acot is not None:
+        details = walk.strategy_details
+        failing = len(walk.steps) - details.get("steps_satisfying_dynamics", 0)
+        console.print(f"claimed ACOT {walk.claimed_acot:.4f}: the chosen patchworks, not motions ({failing} of "
+                      f"{len(walk.steps)} fail the dynamics); the table's COT is each step's polished or complete "
+                      "motion")

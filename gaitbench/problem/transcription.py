@@ -131,6 +131,15 @@ class TranscribedStep:
             guess[self.nlp.variable_blocks[name]] = values
         return guess
 
+    def variables(self, trajectory: StepTrajectory, data: StepData) -> np.ndarray:
+        """The NLP's variables read off a trajectory (a patchwork, a saved step): its interpolant sampled where the
+        transcription's variables live, and its push-off impulse, so that the NLP's functions value that
+        trajectory."""
+        x = self.initial_guess(data, trajectory.seed())
+        if "push_off" in self.nlp.variable_blocks:
+            x[self.nlp.variable_blocks["push_off"]] = trajectory.push_off
+        return x
+
     def blocks(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """The solution vector split into its named variable blocks."""
         return {name: np.asarray(x)[block] for name, block in self.nlp.variable_blocks.items()}

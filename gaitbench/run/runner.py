@@ -86,6 +86,7 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
 def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.walk import WalkProblem
+    from gaitbench.solve.walk_verification import solve_verified
 
     registry = _registry(case)
     experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
@@ -105,7 +106,7 @@ def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
                           objective=objective, builds=builds, deadline=deadline, checkpoint=checkpoint, cores=cores)
     with cores.occupy():  # this case's core; the walk may borrow the idle others
-        walk = strategy.solve(problem)
+        walk = solve_verified(strategy, problem)
     walk.experiment_options, walk.strategy_options = dict(case.experiment.options), dict(case.strategy.options)
     if checkpoint is not None and checkpoint.discarded:
         walk.resumed = {**walk.resumed, "discarded": checkpoint.discarded}
@@ -222,17 +223,20 @@ def walk_stop(walk) -> dict[str, Any]:
 
 
 def walk_metrics(walk) -> dict[str, Any]:
-    """ACOT, per-step COT and its bounds, effort, verification and why the walk stopped, as store columns."""
-    cots = [step.verification.cot if step.verification else None for step in walk.steps]
+    """ACOT, per-step COT and its bounds, effort, verification and why the walk stopped, as store columns.
+
+    The figures are those of the motions the walk reports (:attr:`StepOutcome.verified`; for decrease and conquer
+    its polished or complete steps), never a patchwork's claim, which goes to ``claimed_acot``; effort counts every
+    solve."""
+    motions = [step.verified for step in walk.steps]
+    cots = [motion.verification.cot if motion.verification else None for motion in motions]
     solved = [cot for cot in cots if cot is not None]
     results = [step.solver_result for step in walk.steps if step.solver_result is not None]
-    checks = [step.verification for step in walk.steps if step.verification is not None]
-    details = walk.strategy_details
+    checks = [motion.verification for motion in motions if motion.verification is not None]
+    verification = walk.verification
     return {
-        # The ACOT of trajectories that satisfy the dynamics: for decrease-and-conquer the polished one (None
-        # without polish), never the patchwork's claim, which goes to claimed_acot.
-        "acot": details["verified_acot"] if "verified_acot" in details else walk.acot,
-        "claimed_acot": details.get("claimed_acot"),
+        "acot": walk.acot,
+        "claimed_acot": walk.claimed_acot,
         "cot_steps": cots,
         "cot_min": min(solved) if solved else None,
         "cot_max": max(solved) if solved else None,
@@ -242,7 +246,11 @@ def walk_metrics(walk) -> dict[str, Any]:
         "iterations": sum(result.iterations for result in results),
         "max_defect": max((check.max_defect for check in checks), default=None),
         "max_resim_error": max((check.resim_error for check in checks), default=None),
-        "strategy_details": details or None,
+        "verified": None if verification is None else verification.verified,
+        "verification_failure": None if verification is None else verification.reason,
+        "max_join_mismatch": None if verification is None else verification.max_join_mismatch,
+        "join_energy": None if verification is None else verification.join_energy,
+        "strategy_details": walk.strategy_details or None,
         **walk_stop(walk),
     }
 

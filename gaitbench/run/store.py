@@ -325,6 +325,21 @@ class ResultStore:
         except (OSError, sqlite3.Error) as error:
             raise StoreError(f"{self.directory}: cannot record case {row['case_key']} ({_reason(error)})") from None
 
+    def update_cases(self, updates: Mapping[str, Mapping[str, Any]]) -> None:
+        """Set some columns of stored cases, ``{case_key: {column: value}}``, in one transaction: what a later
+        check of stored walks adds to their rows (``gaitbench verify --store``)."""
+        try:
+            with self._write():
+                for case_key, values in updates.items():
+                    unknown = set(values) - set(CASE_COLUMNS)
+                    if unknown:
+                        raise ValueError(f"unknown case columns {sorted(unknown)}")
+                    assignments = ", ".join(f"{column} = ?" for column in values)
+                    self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?",
+                                     (*(_encode(column, value) for column, value in values.items()), case_key))
+        except (OSError, sqlite3.Error) as error:
+            raise StoreError(f"{self.directory}: cannot update cases ({_reason(error)})") from None
+
     def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
         """Stored case rows (JSON columns decoded, every column of :data:`CASE_COLUMNS` present, null where a
         store predates it), optionally only those a given run computed."""

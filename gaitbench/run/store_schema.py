@@ -71,6 +71,10 @@ CASE_COLUMNS: dict[str, str] = {
     "iterations": "INTEGER",
     "max_defect": "REAL",
     "max_resim_error": "REAL",
+    "verified": "INTEGER",
+    "verification_failure": "TEXT",
+    "max_join_mismatch": "REAL",
+    "join_energy": "REAL",
     "strategy_details": "TEXT",
     "max_position_error": "REAL",
     "max_velocity_error": "REAL",
@@ -162,6 +166,10 @@ MIGRATIONS: tuple[Migration, ...] = (
     Migration(5, "objectives other than net power",
               columns={"cases": {"objective": "TEXT"}},
               fill=("UPDATE cases SET objective = 'net-power' WHERE objective IS NULL",)),  # the only one before
+    # left null in older rows: `gaitbench verify --store` checks their walk files and fills them
+    Migration(6, "whole-walk verification: the verified flag, its reason, the joins",
+              columns={"cases": {"verified": "INTEGER", "verification_failure": "TEXT", "max_join_mismatch": "REAL",
+                                 "join_energy": "REAL"}}),
 )
 """Every schema change, oldest first; the last one's version is :data:`SCHEMA_VERSION`."""
 

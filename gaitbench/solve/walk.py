@@ -31,6 +31,7 @@ from gaitbench.solve.verify import StepVerification, verify_step
 
 if TYPE_CHECKING:
     from gaitbench.solve.checkpoint import WalkCheckpoint
+    from gaitbench.solve.walk_verification import WalkVerification
 
 
 @dataclass
@@ -117,6 +118,11 @@ class WalkResult:
     whoever built the plugins (``gaitbench solve``, the suite runner)."""
     strategy_options: dict = field(default_factory=dict)
     """The options the strategy was built with (set like :attr:`experiment_options`)."""
+    objective_options: dict = field(default_factory=dict)
+    """The objective's options (its dataclass fields), so that a saved walk is verified under the same objective."""
+    verification: WalkVerification | None = field(default=None, repr=False)
+    """The walk checked as one motion (:func:`gaitbench.solve.walk_verification.verify_walk`), set by whoever
+    solved it (``gaitbench solve``, the suite runner) or re-checked it (``gaitbench verify``)."""
     resumed: dict = field(default_factory=dict)
     """For a walk resumed from a checkpoint (:mod:`gaitbench.solve.checkpoint`): how many of its steps were
     restored (``steps``) and the time it had run before it was stopped (``elapsed_s``); empty otherwise."""
@@ -132,8 +138,22 @@ class WalkResult:
 
     @property
     def acot(self) -> float | None:
-        """Average verified COT over the walk; ``None`` unless every requested step was solved."""
-        return average_cot([step.verification.cot for step in self.steps]) if self.complete else None
+        """Average verified COT over the motions the walk reports (:attr:`StepOutcome.verified`: decrease and
+        conquer's polished or complete step, never its patchwork); ``None`` unless every requested step was solved."""
+        return average_cot([step.verified.verification.cot for step in self.steps]) if self.complete else None
+
+    @property
+    def claimed_acot(self) -> float | None:
+        """Average COT of the steps' own trajectories where a strategy reports another motion for them (decrease and
+        conquer's patchworks, a claim and not a motion); ``None`` for walks without such steps or incomplete ones."""
+        if not self.complete or all(step.verified is step for step in self.steps):
+            return None
+        return average_cot([step.verification.cot for step in self.steps])
+
+    @property
+    def verified(self) -> bool:
+        """Whether the walk passed its whole-walk verification (:mod:`gaitbench.solve.walk_verification`)."""
+        return self.verification is not None and self.verification.verified
 
     def as_dict(self) -> dict:
         return {
@@ -144,11 +164,15 @@ class WalkResult:
             "strategy": self.strategy,
             "strategy_options": self.strategy_options,
             "objective": self.objective,
+            "objective_options": self.objective_options,
             "N": self.N,
             "phase": self.phase,
             "requested_steps": self.requested_steps,
             "complete": self.complete,
             "acot": self.acot,
+            "claimed_acot": self.claimed_acot,
+            "verified": self.verified,
+            **({"verification": self.verification.as_dict()} if self.verification is not None else {}),
             "failure": self.failure,
             "wall_time_s": self.wall_time_s,
             **({"resumed": self.resumed} if self.resumed else {}),
@@ -230,7 +254,7 @@ class WalkProblem:
         return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
                           solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
                           requested_steps=self.n_steps, problem_options=asdict(self.options),
-                          objective=self.objective.describe())
+                          objective=self.objective.describe(), objective_options=asdict(self.objective))
 
 
 StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]

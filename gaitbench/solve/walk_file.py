@@ -9,6 +9,9 @@ Versions (``format_version`` in the header):
 
 - 1: the header names everything the walk was solved under, so a reader rebuilds the same problem: the experiment
   and its options, the problem options, the strategy and its options.
+- 2: decrease and conquer's patchworks are stored as their transcription's interpolant and read back through it
+  (version 1 stored them as nodes with linear rates, and is read that way); the header also holds the objective's
+  options (``objective_options``), the claimed ACOT, the verified flag and the whole-walk verification.
 - none: files written before the format was versioned. They hold no experiment or strategy options, and are read
   with the defaults, as they always were.
 
@@ -17,6 +20,7 @@ A file with a version this gaitbench does not know is refused, naming the file a
 
 from __future__ import annotations
 
+import ast
 import json
 import math
 from dataclasses import asdict, dataclass, fields, replace
@@ -29,12 +33,13 @@ from gaitbench.model.experiment import Experiment, Limits
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, legs_to_roles
+from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.verify import StepVerification
 from gaitbench.solve.walk import StepOutcome, WalkResult, next_step_state
 
-WALK_FORMAT_VERSION = 1
+WALK_FORMAT_VERSION = 2
 """The version :func:`write_walk` writes; :func:`read_walk` reads it and every older one."""
 
 POLISHED = "polished"
@@ -125,6 +130,21 @@ class WalkFile:
         registry = registry or load_registry()
         return registry.create("experiment", self.header["experiment"], **self.experiment_options)
 
+    def objective(self, registry: PluginRegistry | None = None) -> Objective:
+        """The objective the walk's COTs are measured in: from its name and options, or, in a file written before
+        the options were recorded, from its description (``name(option=value, ...)``)."""
+        registry = registry or load_registry()
+        described = str(self.header.get("objective") or NET_POWER.name)
+        name, _, listed = described.partition("(")
+        options = self.header.get("objective_options")
+        if options is None:
+            options = {key.strip(): _literal(value.strip()) for key, _, value in
+                       (item.partition("=") for item in listed.rstrip(")").split(",") if item.strip())}
+        try:
+            return registry.create("objective", name, **options)
+        except (LookupError, TypeError, ValueError) as exc:
+            raise WalkFileError(f"{self.path}: objective {described!r} cannot be rebuilt ({exc})") from None
+
     def problem_options(self, experiment: Experiment) -> ProblemOptions:
         """The problem options the walk was solved under; an unversioned file's are taken as the defaults, as they
         always were."""
@@ -162,6 +182,7 @@ class WalkFile:
                           strategy_details=data.get("strategy_details", {}),
                           problem_options=asdict(options),
                           objective=data.get("objective", WalkResult.objective),
+                          objective_options=dict(data.get("objective_options") or {}),
                           experiment_options=self.experiment_options, strategy_options=self.strategy_options)
         npz = self.path.parent / data["trajectories"]
         for step in data["steps"]:
@@ -169,7 +190,7 @@ class WalkFile:
             if "q" not in arrays or step.get("cot") is None:
                 break
             try:
-                if "chosen" in (step.get("details") or {}):  # decrease and conquer's patchwork: no own interpolant
+                if "chosen" in (step.get("details") or {}) and (self.version or 0) < 2:  # a patchwork as nodes
                     nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
                     trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
                                                   int(step["stance"]))
@@ -240,15 +261,25 @@ def load_walk(path: str | Path, registry: PluginRegistry | None = None) -> tuple
     return read_walk(path).result(registry)
 
 
+def _literal(text: str) -> Any:
+    """An option value as an objective's description prints it (``True``, ``0.25``, ``name``)."""
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
 def _rerun(path: Path) -> str:
     return f"write it with `gaitbench solve ... --out {path}`"
 
 
 def _verification(step: dict) -> StepVerification:
     """A step's stored verification (a step record, or its ``details["polished"]``); figures a file written before
-    they were recorded lacks are NaN."""
-    return StepVerification(**{key: float(step[key]) if step.get(key) is not None else math.nan for key in (
-        "max_defect", "resim_error", "resim_max_error", "hip_energy", "push_off_energy", "cot")})
+    they were recorded lacks are NaN (None for the objective's comparison)."""
+    figures = {key: float(step[key]) if step.get(key) is not None else math.nan for key in (
+        "max_defect", "resim_error", "resim_max_error", "hip_energy", "push_off_energy", "cot")}
+    compared = {key: step.get(key) for key in ("objective_cot", "objective_gap", "objective_agrees")}
+    return StepVerification(**figures, **compared)
 
 
 def _rebuild_trajectory(built: TranscribedStep, transcription: str, experiment: Experiment, step: dict,

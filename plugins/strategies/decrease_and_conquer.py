@@ -11,31 +11,27 @@ Per step:
    relation", with backtracking (:mod:`gaitbench.solve.synthesis`);
 5. the sectional trajectories completed with the earlier nodes, and the final choice by the thesis's candidate COT
    among the synthesized and completed trajectories;
-6. the next step from the heel-strike map of the chosen trajectory.
-
-A patchwork's end state is not where the robot would be, and it can leave the next step no solution (upward slope,
-HS, N = 60: from step 3's chosen trajectory step 4's First Phase reaches IPOPT's iteration limit with both μ
-strategies; from the polished trajectory it converges in 489 iterations). With ``back_up`` (the default) such a
-dead end makes the walk go on from the polished trajectory of the step before instead, as a walk of the robot
-would; a walk that never meets one is the thesis's walk unchanged. With ``rescue`` (the default), a First Phase that
-still fails is solved on coarser grids from the same state, and the N-node First Phase started from that solution
-(:func:`~gaitbench.solve.rescue.coarse_grid_rescue`; stairs, HS, N = 130, step 5: infeasible after every rung, from
-98 nodes it converges); again a walk that completes without it is the same walk with it.
+6. the chosen trajectory verified, and the complete problem re-solved from it (the polish);
+7. the next step from the post-impact state of the step's motion: the polish, or the complete solution where that
+   is cheaper or the polish fails (:func:`reported_motion`), never the chosen trajectory itself.
 
 The synthesized (and completed) trajectories are node-wise patchworks of different NLP solutions, so in general
-they are not motions of the robot. Every chosen trajectory is therefore verified like any other step — the
-transcription's dynamics residual at its nodes and its re-simulation under its own torques — and, with ``polish``,
-the complete 4-DOF problem is re-solved from it: the polished COT is the figure of a trajectory that satisfies the
-dynamics, reported beside the claimed one. Where the polish fails after its remedies (stairs, HS, N = 120, step 5:
-IPOPT's iteration limit), the complete Second Phase solution stands in for it (``details["polished"]["stand_in"]``):
-the same problem from the same state, solved from the First-Phase seed.
+they are not motions of the robot: a patchwork's end state is not where the robot would be. The thesis chains its
+steps through the patchworks; this strategy keeps each patchwork as the step's claim (its COT is the claimed COT,
+reported beside the verified one, labelled "patchwork, not a motion") and walks on from the motion it reports, so
+that the walk's steps join into one motion of the robot (:mod:`gaitbench.solve.walk_verification`). Where the
+polish fails after its remedies, the complete Second Phase solution, the same problem from the same state solved
+from the First-Phase seed, stands in for it (``details["polished"]["stand_in"]``). With ``rescue`` (the default), a
+First Phase that still fails is solved on coarser grids from the same state, and the N-node First Phase started from
+that solution (:func:`~gaitbench.solve.rescue.coarse_grid_rescue`); a walk that completes without it is the same
+walk with it.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -46,6 +42,7 @@ from gaitbench.problem.gait_problem import StepData, role_robot_vector, sectiona
 from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.solve.acceptance import Thresholds, step_failures
 from gaitbench.solve.parallel import WorkerPool
 from gaitbench.solve.rescue import coarse_grid_rescue
 from gaitbench.solve.solver import SolverResult, prepare
@@ -55,7 +52,6 @@ from gaitbench.solve.walk import (
     StepOutcome,
     WalkProblem,
     WalkResult,
-    next_step_state,
     solve_with_retries,
     walk_step_by_step,
 )
@@ -73,14 +69,13 @@ class DecreaseAndConquer:
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
     to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
     (processes for the sectional solves of a step, or "auto": the cores no other walk is using, asked for as each
-    section ends; see :class:`SectionalSolves`), ``back_up`` (True: a step that cannot be solved from the chosen
-    trajectory's end is solved from the polished one's; needs ``polish``), ``rescue`` (True: a First Phase that
-    every rung and the back-up leave unsolved is seeded from coarser grids)."""
+    section ends; see :class:`SectionalSolves`), ``rescue`` (True: a First Phase that every rung leaves unsolved
+    is seeded from coarser grids)."""
 
     name = "decrease-and-conquer"
 
     def __init__(self, polish: bool = True, sectional_guess: str = "first-phase", max_checks: int = 1_000_000,
-                 workers: int | Literal["auto"] = "auto", back_up: bool = True, rescue: bool = True):
+                 workers: int | Literal["auto"] = "auto", rescue: bool = True):
         if sectional_guess not in ("first-phase", "complete"):
             raise ValueError(f"sectional_guess = {sectional_guess!r}: expected 'first-phase' or 'complete'")
         if workers != "auto" and (isinstance(workers, str) or int(workers) < 1):
@@ -91,15 +86,11 @@ class DecreaseAndConquer:
         self.sectional_guess = sectional_guess
         self.max_checks = int(max_checks)
         self.workers = workers if workers == "auto" else int(workers)
-        self.back_up = bool(back_up) and self.polish
         self.rescue = bool(rescue)
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
             return self._solve_step(problem, index, state, sections)
-
-        def back_up(problem: WalkProblem, index: int, state: np.ndarray, replaced: StepOutcome) -> StepOutcome:
-            return continue_from_polished(problem, replaced)
 
         def rescue(problem: WalkProblem, index: int, state: np.ndarray, failed: StepOutcome) -> StepOutcome:
             if failed.details.get("failed_in") != FIRST_PHASE:
@@ -110,7 +101,6 @@ class DecreaseAndConquer:
 
         with SectionalSolves(problem, self.workers) as sections:
             walk = walk_step_by_step(problem, self.name, solve_step, on_step,
-                                     back_up=back_up if self.back_up else None,
                                      rescue=rescue if self.rescue else None)
         walk.strategy_details = walk_summary(walk)
         return walk
@@ -165,9 +155,11 @@ class DecreaseAndConquer:
                 for label, patch in options.items()}
         chosen_label = min(cots, key=cots.get)
         chosen = options[chosen_label]
-        trajectory = chosen.trajectory(data.stance, h)
+        # the patchwork read through the transcription's own interpolant, as its NLP variables: the claim is what the
+        # transcription would make of these nodes, not a reading of its own (linear rates understate the claim)
+        x_patch = complete_built.variables(chosen.trajectory(data.stance, h), data)
+        trajectory = complete_built.trajectory(x_patch, data)
         model = problem.model("second")
-        x_patch = complete_built.initial_guess(data, trajectory.seed())
         verification = verify_step(complete_built, x_patch, data, trajectory, model)
         details |= {
             "candidates": len(candidates), "failed_sections": failed,
@@ -182,33 +174,41 @@ class DecreaseAndConquer:
             # IPOPT calls some of these feasible problems infeasible from a good start (stairs, N = 30, step 6): the
             # solver's own remedies from the same seed, never another seed, which would polish another trajectory
             polished = solve_with_retries(problem, index, complete_built, data, seed=trajectory.seed(), reseed=False)
-            polish_retries = [{**retry, "remedy": f"polish:{retry['remedy']}"}
-                              for retry in polished.details.get("retries", [])]
-            stand_in = {}
-            if not polished.solved:
-                # the step's verified motion is then the complete problem's other solution, from the First-Phase
-                # seed: a step whose polish fails would otherwise leave its whole walk without a verified ACOT
-                stand_in = {"stand_in": "complete", "polish": {"message": polished.message, **polished.summary()}}
-                polished = complete
-            details["polished"] = polished.summary() | (
-                {key: value for key, value in polished.verification.as_dict().items() if key != "cot"}
-                if polished.verification else {}) | stand_in
-            details["retries"] = details["retries"] + polish_retries  # counted with the walk's other retries
-        message = "chosen trajectory " + ("satisfies the dynamics" if details["verified"] else
-                                          f"fails verification: dynamics residual {verification.max_defect:.2e}")
-        return StepOutcome(index, data.stance, complete.status, message, complete.solver_result, trajectory,
-                           verification, next_state=next_step_state(model, trajectory), details=details,
-                           polished=polished)
+            details["retries"] = details["retries"] + [{**retry, "remedy": f"polish:{retry['remedy']}"}
+                                                       for retry in polished.details.get("retries", [])]
+        motion, source = reported_motion(complete, polished, n)
+        details["polished"] = motion.summary() | (
+            {key: value for key, value in motion.verification.as_dict().items() if key != "cot"}) | source
+        message = (f"patchwork, not a motion (claimed COT {verification.cot:.4f}, dynamics residual "
+                   f"{verification.max_defect:.1e}); the walk goes on from its {source['motion']} motion")
+        return StepOutcome(index, data.stance, motion.status, message, complete.solver_result, trajectory,
+                           verification, next_state=motion.next_state, details=details, polished=motion)
 
 
-def continue_from_polished(problem: WalkProblem, step: StepOutcome) -> StepOutcome:
-    """``step`` going on from its polished trajectory's heel strike instead of its chosen one's: a dead end's
-    back-up. Unsolved when the step has no polished trajectory that solved."""
-    if step.polished is None or not step.polished.solved:
-        status = step.polished.status if step.polished is not None else "not_polished"
-        return StepOutcome(step.index, step.stance, status, "no polished trajectory to go on from")
-    return replace(step, next_state=next_step_state(problem.model("second"), step.polished.trajectory),
-                   details={**step.details, "continued_from": "polished"})
+def reported_motion(complete: StepOutcome, polished: StepOutcome | None, n_nodes: int
+                    ) -> tuple[StepOutcome, dict]:
+    """The motion a step reports and the walk goes on from: the cheaper of the polish and the complete solution
+    among those that pass verification's thresholds (:mod:`gaitbench.solve.acceptance`), else the cheaper of
+    those solved; and why, as ``details["polished"]`` records it (``motion``, ``why``, and the polish's own summary
+    when the complete solution stands in for it)."""
+    limits = Thresholds.for_nodes(n_nodes)
+    solved = [(name, outcome) for name, outcome in (("polished", polished), ("complete", complete))
+              if outcome is not None and outcome.solved]
+    passing = [(name, outcome) for name, outcome in solved if not step_failures(outcome.verification, limits)]
+    name, motion = min(passing or solved, key=lambda pair: pair[1].verification.cot)
+    if polished is None:
+        why = "not polished"
+    elif not polished.solved:
+        why = f"the polish failed ({polished.message})"
+    elif len(passing) == 1:
+        why = f"the {'polish' if name == 'complete' else 'complete solution'} fails verification"
+    else:
+        cots = f"{complete.verification.cot:.4f} against {polished.verification.cot:.4f}"
+        why = f"the cheaper ({cots})" + ("" if passing else "; neither passes verification")
+    source = {"motion": name, "why": why}
+    if name == "complete" and polished is not None:
+        source |= {"stand_in": "complete", "polish": {"message": polished.message, **polished.summary()}}
+    return motion, source
 
 
 class SectionalSolves:
@@ -366,15 +366,14 @@ class Patch:
 
 
 def walk_summary(walk: WalkResult) -> dict:
-    """Claimed against verified: the thesis's figure and the figure of trajectories that satisfy the dynamics."""
+    """Claimed against verified: the thesis's figure (the patchworks') and that of the motions the walk reports."""
     steps = [step for step in walk.steps if step.details.get("chosen")]
-    polished = [step.details.get("polished", {}).get("cot") for step in steps]
-    complete = walk.complete
     return {
-        "claimed_acot": walk.acot,
-        "verified_acot": float(np.mean(polished)) if complete and polished and None not in polished else None,
+        "claimed_acot": walk.claimed_acot,
+        "verified_acot": walk.acot,
         "steps_satisfying_dynamics": sum(step.details["verified"] for step in steps),
         "chosen": [step.details["chosen"] for step in steps],
+        "motions": [step.details["polished"]["motion"] for step in steps],
         "candidates": sum(step.details["candidates"] for step in steps),
         "failed_sections": sum(len(step.details["failed_sections"]) for step in steps),
         "backtracks": sum(step.details["backtracks"] for step in steps),

@@ -1,0 +1,126 @@
+"""``gaitbench verify``: walk files, or every walk of a results store, verified again as motions from their stored
+trajectories (:func:`gaitbench.solve.walk_verification.reverify`), with the verdict and, for a store, the verified
+flags written into its rows."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+
+from gaitbench.cli.common import print_plain
+from gaitbench.solve.acceptance import ACOT_RTOL
+
+
+@click.command("verify")
+@click.argument("walks", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--store", type=click.Path(path_type=Path), default=None,
+              help="Verify every stored walk of this results store and record the verdicts in its rows "
+                   "(columns verified, verification_failure, max_join_mismatch, join_energy, max_defect, "
+                   "max_resim_error).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object per walk instead of text.")
+@click.pass_context
+def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_json: bool) -> None:
+    """Verify the walks in WALKS (walk files from `solve --out` or a store's cases/*/walk.json) as motions.
+
+    Each step the walk reports (for decrease and conquer: its polished or complete motion, not the patchwork) is
+    checked again from the saved trajectory: its dynamics defect, its re-simulation from its own start state under
+    its own torques, and its COT recomputed on a fine grid. Then the joins: each step must start from the
+    post-impact state (push-off and heel strike applied to the end) of the step before. The thresholds scale with
+    N (docs/results.md, "Verified walks"). Prints the verified ACOT beside the stored one, the largest join mismatch
+    and re-simulation error, and the verdict.
+
+    Exit status 0 when every walk is verified, 1 when one is not (or its stored ACOT is off by more than 1 %),
+    2 when a file cannot be read.
+    """
+    from gaitbench.solve.walk_file import WalkFileError, read_walk
+    from gaitbench.solve.walk_verification import reverify
+
+    if not walks and store is None:
+        raise click.UsageError("name walk files, or a store with --store")
+    targets: list[tuple[Path, str | None, float | None]] = [(path, None, None) for path in walks]
+    results_store = None
+    if store is not None:
+        results_store, stored = _stored_walks(store)
+        targets += stored
+    console, failed, updates = Console(), 0, {}
+    for path, case_key, stored_acot in targets:
+        try:
+            walk_file = read_walk(path)
+            walk = reverify(walk_file, ctx.obj.registry)
+        except WalkFileError as exc:
+            raise click.BadParameter(str(exc), param_hint="WALKS") from None
+        stored_acot = walk_file.header.get("acot") if stored_acot is None else stored_acot
+        report = _report(path, walk, stored_acot)
+        failed += not report["verified"]
+        if case_key is not None:
+            updates[case_key] = _columns(walk)
+        if as_json:
+            click.echo(json.dumps(report))
+        else:
+            _print(console, report)
+    if results_store is not None:
+        from gaitbench.run.store import StoreError
+
+        try:
+            results_store.update_cases(updates)
+        except StoreError as exc:
+            raise click.ClickException(str(exc)) from None
+        if not as_json:
+            console.print(f"recorded the verdicts of {len(updates)} walks in {store}")
+    if failed:
+        ctx.exit(1)
+
+
+def _stored_walks(store: Path):
+    """The store, opened for writing, and its walks as (walk file, case key, stored ACOT)."""
+    from gaitbench.run.store import ResultStore, StoreError
+
+    try:
+        results = ResultStore.open(store)
+    except StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    rows = [row for row in results.cases() if row.get("walk_path")]
+    return results, [(store / row["walk_path"], row["case_key"], row.get("acot")) for row in rows]
+
+
+def _report(path: Path, walk, stored_acot: Any) -> dict[str, Any]:
+    """The verdict on one walk as JSON-ready data; a stored ACOT more than :data:`ACOT_RTOL` from the recomputed
+    one fails it."""
+    verification = walk.verification
+    reasons = list(verification.reasons)
+    stored = float(stored_acot) if isinstance(stored_acot, (int, float)) else None
+    if stored is not None and verification.acot is not None and \
+            abs(stored - verification.acot) > ACOT_RTOL * abs(verification.acot):
+        reasons.append(f"stored ACOT {stored:.4f} is not the recomputed {verification.acot:.4f}")
+    return {"walk": str(path), "experiment": walk.experiment, "strategy": walk.strategy,
+            "transcription": walk.transcription, "N": walk.N, "verified": not reasons, "reasons": reasons,
+            "acot": verification.acot, "stored_acot": stored, "claimed_acot": walk.claimed_acot,
+            **{key: value for key, value in verification.as_dict().items()
+               if key not in ("verified", "reason", "acot")}}
+
+
+def _columns(walk) -> dict[str, Any]:
+    """The store columns a walk's verdict fills: the flag, its reason, and the maxima of the steps it reports."""
+    verification = walk.verification
+    return {"verified": verification.verified, "verification_failure": verification.reason,
+            "max_join_mismatch": verification.max_join_mismatch, "join_energy": verification.join_energy,
+            "max_defect": verification.max_defect, "max_resim_error": verification.max_resim_error}
+
+
+def _print(console: Console, report: dict[str, Any]) -> None:
+    def figure(value: Any, spec: str) -> str:
+        return "-" if value is None else format(value, spec)
+
+    verdict = "verified" if report["verified"] else "NOT verified: " + "; ".join(report["reasons"])
+    console.print(f"{report['walk']}: {report['experiment']}, {report['strategy']}, {report['transcription']}, "
+                  f"N = {report['N']}")
+    console.print(f"  verified ACOT {figure(report['acot'], '.4f')} (stored {figure(report['stored_acot'], '.4f')}"
+                  + (f", claimed {report['claimed_acot']:.4f}" if report["claimed_acot"] is not None else "") + ")")
+    console.print(f"  largest join mismatch {figure(report['max_join_mismatch'], '.1e')}, energy appearing at the "
+                  f"joins {report['join_energy']:.1f} J, largest re-simulation error "
+                  f"{figure(report['max_resim_error'], '.1e')}")
+    print_plain(console, f"  {verdict}", "" if report["verified"] else "red")

@@ -1,0 +1,79 @@
+"""When a solved walk counts as verified: every threshold in one place.
+
+A walk is verified when each step it reports is a motion of the robot (its dynamics defect and re-simulation error
+are small), each step starts where the step before left the robot (the join), and each step's optimizer measured
+what the report quotes (the objective gap). Reports rank verified walks only; the others are listed with the
+reasons :func:`step_failures` and :func:`join_failure` give.
+
+The re-simulation error and the objective gap are discretization errors, so their limits shrink with the grid:
+every built-in transcription is at least first-order accurate, so a step whose error exceeds a limit proportional
+to h = 1/N is off for another reason than the grid's coarseness (an under-resolved impact, an optimizer exploiting
+its quadrature). The defect and the join are the solver's and the chain's own accuracy, independent of N.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gaitbench.solve.verify import StepVerification
+
+MAX_DEFECT = 1e-6
+"""Largest violation of the transcription's dynamics constraints: the solvers' constraint tolerance."""
+
+RESIM_ERROR_AT_N = 5.0
+"""The re-simulation's end-state error (rad, rad/s) may be at most ``RESIM_ERROR_AT_N / N``: 0.5 at N = 10,
+0.05 at N = 100, 0.025 at N = 200."""
+
+MAX_JOIN_MISMATCH = 1e-6
+"""Largest difference (rad, rad/s) between a step's start state and the post-impact state of the step before (for
+step 1, the walk's start state): a walk's steps are solved from that state, so anything larger is a broken chain."""
+
+ACOT_RTOL = 0.01
+"""A stored ACOT that its walk's trajectories, verified again, do not reproduce within 1 % is not trusted."""
+
+OBJECTIVE_GAP = 0.05
+OBJECTIVE_GAP_AT_N = 2.0
+"""|objective gap| (:func:`gaitbench.solve.verify.objective_gap`) may be at most ``max(OBJECTIVE_GAP,
+OBJECTIVE_GAP_AT_N / N)``: 5 % from N = 40, 10 % at N = 20, 20 % at N = 10."""
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The limits a walk of N nodes per step is held to."""
+
+    max_defect: float
+    max_resim_error: float
+    max_join_mismatch: float
+    max_objective_gap: float
+
+    @classmethod
+    def for_nodes(cls, n_nodes: int) -> Thresholds:
+        return cls(max_defect=MAX_DEFECT, max_resim_error=RESIM_ERROR_AT_N / n_nodes,
+                   max_join_mismatch=MAX_JOIN_MISMATCH,
+                   max_objective_gap=max(OBJECTIVE_GAP, OBJECTIVE_GAP_AT_N / n_nodes))
+
+    def as_dict(self) -> dict[str, float]:
+        return {"max_defect": self.max_defect, "max_resim_error": self.max_resim_error,
+                "max_join_mismatch": self.max_join_mismatch, "max_objective_gap": self.max_objective_gap}
+
+
+def step_failures(check: StepVerification, limits: Thresholds) -> list[str]:
+    """Why a step's verification does not pass ``limits``, one short reason each; empty when it passes. A figure
+    that is missing or not finite fails (a step with no verification is no motion)."""
+    reasons = []
+    if not check.max_defect <= limits.max_defect:
+        reasons.append(f"dynamics defect {check.max_defect:.1e} > {limits.max_defect:.0e}")
+    if not check.resim_error <= limits.max_resim_error:
+        reasons.append(f"re-simulation error {check.resim_error:.2g} > {limits.max_resim_error:.2g}")
+    gap = check.objective_gap
+    if gap is not None and not abs(gap) <= limits.max_objective_gap:
+        reasons.append(f"objective gap {gap:+.1%} beyond ±{limits.max_objective_gap:.0%}")
+    return reasons
+
+
+def join_failure(mismatch: float, limits: Thresholds) -> str | None:
+    """Why a step's start does not join the step before, or None."""
+    if mismatch <= limits.max_join_mismatch:
+        return None
+    return f"join mismatch {mismatch:.1e} > {limits.max_join_mismatch:.0e}"
+

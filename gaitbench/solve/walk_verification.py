@@ -1,0 +1,152 @@
+"""A walk verified as one motion: each step it reports is a motion of the robot, and each starts where the step
+before left the robot.
+
+Each step is re-simulated from its own start state (:func:`gaitbench.solve.verify.verify_step`), not the walk as a
+whole from step 1: an open-loop run across eleven steps measures the gait's instability, not the solution's
+accuracy. What ties the steps together is the join check: step i must start from the post-impact state of step
+i − 1 (push-off, then heel strike, applied to its end; for step 1, the walk's start state). The mismatch there, and
+the mechanical energy that appears at the join (energy the robot never paid for), are recorded per step and per
+walk. :func:`verify_walk` is what ``gaitbench solve``, the suite runner and ``gaitbench verify`` all call; the
+thresholds are in :mod:`gaitbench.solve.acceptance`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gaitbench.contracts import Strategy
+from gaitbench.model.energetics import average_cot
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.robot import RobotParameters
+from gaitbench.plugins import PluginRegistry, load_registry
+from gaitbench.problem.gait_problem import StepData, StepStructure
+from gaitbench.solve.acceptance import Thresholds, join_failure, step_failures
+from gaitbench.solve.verify import verify_step
+from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult
+from gaitbench.solve.walk_file import WalkFile
+
+
+@dataclass(frozen=True)
+class StepCheck:
+    """One reported step of a walk, as the walk's verification saw it."""
+
+    index: int
+    cot: float
+    max_defect: float
+    resim_error: float
+    objective_gap: float | None
+    join_mismatch: float
+    """Largest |start state − post-impact state of the step before| (rad, rad/s)."""
+    join_energy: float
+    """Mechanical energy (J) at the step's start minus that of the post-impact state it should start from: > 0 is
+    energy that appeared from nowhere."""
+    failures: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class WalkVerification:
+    verified: bool
+    reasons: tuple[str, ...]
+    """Why the walk is not verified (empty when it is), each naming its step."""
+    acot: float | None
+    """The ACOT of the steps the walk reports; None unless the walk is complete."""
+    thresholds: Thresholds
+    steps: tuple[StepCheck, ...] = field(default=())
+
+    @property
+    def reason(self) -> str | None:
+        return "; ".join(self.reasons) if self.reasons else None
+
+    @property
+    def max_join_mismatch(self) -> float | None:
+        return max((step.join_mismatch for step in self.steps), default=None)
+
+    @property
+    def max_resim_error(self) -> float | None:
+        return max((step.resim_error for step in self.steps), default=None)
+
+    @property
+    def max_defect(self) -> float | None:
+        return max((step.max_defect for step in self.steps), default=None)
+
+    @property
+    def join_energy(self) -> float:
+        """Energy (J) that appeared at the walk's joins, summed where it is positive."""
+        return float(sum(max(step.join_energy, 0.0) for step in self.steps))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"verified": self.verified, "reason": self.reason, "acot": self.acot,
+                "max_join_mismatch": self.max_join_mismatch, "join_energy": self.join_energy,
+                "max_resim_error": self.max_resim_error, "max_defect": self.max_defect,
+                "thresholds": self.thresholds.as_dict(),
+                "steps": [{"index": step.index, "cot": step.cot, "max_defect": step.max_defect,
+                           "resim_error": step.resim_error, "objective_gap": step.objective_gap,
+                           "join_mismatch": step.join_mismatch, "join_energy": step.join_energy,
+                           "failures": list(step.failures)} for step in self.steps]}
+
+
+def verify_walk(walk: WalkResult, start_state: np.ndarray, robot: RobotParameters) -> WalkVerification:
+    """Check the steps ``walk`` reports (:attr:`StepOutcome.verified`: decrease and conquer's polished or complete
+    motion, not its patchwork) against :class:`Thresholds` for its N, and each step's start against the post-impact
+    state of the one before (``start_state``, leg order (q1, q2, q̇1, q̇2), for step 1)."""
+    limits = Thresholds.for_nodes(walk.N)
+    energy = BipedModel(robot, 2)  # both feet on the ground at a join: the 2-DOF model's energies
+    expected = np.asarray(start_state, dtype=float)
+    checks, reasons = [], []
+    for step in walk.steps:
+        motion = step.verified
+        if not motion.solved:
+            break
+        trajectory, check = motion.trajectory, motion.verification
+        start = np.r_[trajectory.q[0], trajectory.dq[0]]
+        mismatch = float(np.max(np.abs(start - expected)))
+        appeared = (energy.total_energy(start[:2], start[2:], step.stance)
+                    - energy.total_energy(expected[:2], expected[2:], step.stance))
+        failures = step_failures(check, limits)
+        joined = join_failure(mismatch, limits)
+        failures += [joined] if joined else []
+        checks.append(StepCheck(step.index, check.cot, check.max_defect, check.resim_error, check.objective_gap,
+                                mismatch, float(appeared), tuple(failures)))
+        reasons += [f"step {step.index}: {failure}" for failure in failures]
+        expected = motion.next_state
+    if not walk.complete:
+        reasons.insert(0, f"incomplete walk ({walk.failure or 'fewer steps than requested'})")
+    acot = average_cot([check.cot for check in checks]) if walk.complete else None
+    return WalkVerification(not reasons, tuple(reasons), acot, limits, tuple(checks))
+
+
+def solve_verified(strategy: Strategy, problem: WalkProblem,
+                   on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
+    """``strategy``'s walk of ``problem``, verified as one motion (its ``verification``): what ``gaitbench solve``
+    and the suite runner both run."""
+    walk = strategy.solve(problem, on_step=on_step)
+    walk.verification = verify_walk(walk, problem.start_state(), problem.experiment.robot)
+    return walk
+
+
+def reverify(walk_file: WalkFile, registry: PluginRegistry | None = None) -> WalkResult:
+    """The walk of a walk file verified again from its stored trajectories alone: each reported step's defect,
+    re-simulation and COT recomputed under the walk's own transcription, problem options and objective, then the
+    whole walk checked (:func:`verify_walk`, in the returned walk's ``verification``). Nothing the file says about
+    its own verification is trusted."""
+    registry = registry or load_registry()
+    walk, experiment = walk_file.result(registry)
+    options = walk_file.problem_options(experiment)
+    transcription = registry.create("transcription", walk.transcription)
+    built = transcription.build(StepStructure(walk.phase, walk.N, options, walk_file.objective(registry)))
+    model = BipedModel(experiment.robot, 4 if walk.phase == "second" else 2)
+    terrain = experiment.terrain
+    for step in walk.steps:
+        motion = step.verified
+        trajectory = motion.trajectory
+        geometry = terrain.steps[step.index - 1]
+        data = StepData(experiment.robot, step.stance, np.r_[trajectory.q[0], trajectory.dq[0]], geometry.D,
+                        geometry.theta, float(trajectory.times[1] - trajectory.times[0]),
+                        previous_slope=terrain.ground_behind(step.index))
+        motion.verification = verify_step(built, built.variables(trajectory, data), data, trajectory, model)
+    walk.verification = verify_walk(walk, experiment.start_state(options.start_pose), experiment.robot)
+    return walk
