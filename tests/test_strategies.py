@@ -261,36 +261,42 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
         assert details["polished"]["status"] == "converged"
         assert details["first_phase"]["status"] == "converged"
     summary = walk.strategy_details
-    assert summary["claimed_acot"] == pytest.approx(walk.acot)
-    assert summary["verified_acot"] == pytest.approx(np.mean([s.details["polished"]["cot"] for s in walk.steps]))
+    assert summary["claimed_acot"] == pytest.approx(np.mean([s.verification.cot for s in walk.steps]))
+    assert summary["claimed_acot"] == walk.claimed_acot
+    assert summary["verified_acot"] == walk.acot == pytest.approx(np.mean([s.details["polished"]["cot"]
+                                                                            for s in walk.steps]))
+    assert walk.acot == pytest.approx(np.mean([s.verified.verification.cot for s in walk.steps]))
     assert summary["candidates"] == sum(s.details["candidates"] for s in walk.steps)
+    assert all(s.message.startswith("patchwork, not a motion") for s in walk.steps)
     _the_polished_trajectory_is_kept_and_stored(walk, tmp_path)
-    _a_back_up_goes_on_from_the_polished_trajectory(problem, walk.steps[0])
+    _the_walk_goes_on_from_each_steps_motion(problem, walk)
 
 
-def _a_back_up_goes_on_from_the_polished_trajectory(problem, step):
-    from plugins.strategies.decrease_and_conquer import continue_from_polished
+def _the_walk_goes_on_from_each_steps_motion(problem, walk):
+    """Step 2 starts from the post-impact state of step 1's reported motion (its polish or complete solution),
+    never from the patchwork's: the walk's motions join, and the whole-walk verification finds the join exact."""
+    from gaitbench.solve.walk_verification import verify_walk
 
-    backed = continue_from_polished(problem, step)
-    assert backed.solved and backed.details["continued_from"] == "polished"
-    np.testing.assert_array_equal(backed.next_state, next_step_state(problem.model("second"),
-                                                                     step.polished.trajectory))
-    assert backed.trajectory is step.trajectory and backed.verification is step.verification
-    assert not continue_from_polished(problem, dataclasses.replace(step, polished=None)).solved
+    first, second = walk.steps
+    expected = next_step_state(problem.model("second"), first.verified.trajectory)
+    np.testing.assert_allclose(first.next_state, expected)
+    start = np.r_[second.verified.trajectory.q[0], second.verified.trajectory.dq[0]]
+    np.testing.assert_allclose(start, expected, atol=1e-8)
+    patchwork_end = next_step_state(problem.model("second"), first.trajectory)
+    assert np.max(np.abs(patchwork_end - expected)) > 1e-6  # the patchwork would have started elsewhere
+    check = verify_walk(walk, problem.start_state(), problem.experiment.robot)
+    assert check.max_join_mismatch < 1e-6 and abs(check.join_energy) < 1e-6
 
 
 @pytest.mark.slow
-def test_decrease_and_conquer_backs_up_a_patchwork_dead_end_onto_the_polished_trajectory():
+def test_decrease_and_conquer_walks_on_from_motions_past_the_patchwork_dead_end():
     """Upward slope, HS, N = 60 (a thesis-all case): from step 3's chosen patchwork, step 4's First Phase reaches
-    IPOPT's iteration limit with both μ strategies; the walk goes on from step 3's polished trajectory."""
+    IPOPT's iteration limit with both μ strategies; walking on from each step's motion, the walk completes."""
     upward = REGISTRY.create("experiment", "upward-slope")
     problem = WalkProblem(upward, REGISTRY.create("transcription", "hermite-simpson"),
                           REGISTRY.create("solver", "ipopt"), 60, steps=4)
     walk = DecreaseAndConquer().solve(problem)
     assert walk.complete, walk.failure
-    assert walk.steps[2].details["continued_from"] == "polished"
-    assert walk.steps[2].details["backed_up_from"]["dead_end"]["step"] == 4
-    assert not DecreaseAndConquer(back_up=False).solve(problem).complete
 
 
 def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):

@@ -267,7 +267,7 @@ def _solver(entry: str) -> str:
         (BASE.replace('"one-phase", "decrease', '{ name = "decrease-and-conquer", options = { worker = 2 } }, '
                                                '"decrease'),
          ["[sweep].strategies[0].options.worker: strategy 'decrease-and-conquer': unknown option 'worker' (did you "
-          "mean 'workers'?); allowed: polish, sectional_guess, max_checks, workers, back_up"]),
+          "mean 'workers'?); allowed: polish, sectional_guess, max_checks, workers, rescue"]),
         (BASE + "[tracking]\noptions = { gainz = 3 }\n",
          ["[tracking].options.gainz: unknown option 'gainz'; allowed: controller, observer, disturbance, "
           "sample_rate, steps, fall, rtol, atol"]),

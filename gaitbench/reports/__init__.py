@@ -135,7 +135,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "savings": savings,
         "published_acot": tb.published_comparison(minima), "published_savings": tb.published_savings(savings, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
-        "stop_causes": tb.stop_causes(df), "failed_cases": tb.failed_cases(df),
+        "stop_causes": tb.stop_causes(df), "unverified_cases": tb.unverified_cases(df),
+        "failed_cases": tb.failed_cases(df),
         "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
     }
     suites = sorted({run.get("suite") or "?" for run in runs})

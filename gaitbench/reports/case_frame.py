@@ -11,10 +11,13 @@ polished one in ``strategy_details.verified_acot`` (plugins/strategies/decrease_
 that as the verified ACOT of D&C and keep the claim beside it; with ``polish = false`` there is no verified D&C
 figure (NaN).
 
-Complete walks only: a case is complete when its status is ``solved`` (every requested step solved and verified).
-Every ACOT, claim and per-step COT bound in the tables and figures is of complete walks; a walk that stopped early
-contributes to the completion rate and the stop-cause table, and its own figure appears only as ``partial_acot``
-in the per-case tables, under that name, never inside an ACOT average.
+Verified walks only: a case is complete when its status is ``solved`` (every requested step solved), and ranked
+when it is complete and its walk passed the whole-walk verification (the store's ``verified`` flag:
+:mod:`gaitbench.solve.walk_verification`; null in rows stored before the flag existed until ``gaitbench verify
+--store`` checks them). Every ACOT, claim and per-step COT bound in the tables and figures is of ranked walks; a
+complete walk that is not verified is listed in the unverified-walks table with its reason, and a walk that stopped
+early contributes to the completion rate and the stop-cause table, its own figure appearing only as
+``partial_acot`` in the per-case tables, under that name, never inside an ACOT average.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ ONE_PHASE = "one-phase"
 REFERENCE_LABEL = "reference"
 ENERGETICS = "energetics"
 THESIS_TRANSCRIPTION = {"hermite-simpson": "DC", "dmoc": "DM"}
+NOT_CHECKED = "not checked: stored before walks were verified as one motion; run `gaitbench verify --store STORE`"
+"""The reason a complete walk whose row has no verified flag is not ranked."""
 STATUS_CAUSES = {"solved": "complete", "timeout": "time_limit", "crashed": "crashed", "error": "error"}
 """Stop causes of stores that predate the ``stop_cause`` column, from the case's status."""
 
@@ -52,11 +57,12 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     """
     df = cases.copy()
     for column in ("stop_cause", "stop_step", "stop_status", "retries", "back_ups", "cot_steps", "steps_solved",
-                   "objective"):
+                   "objective", "verified", "verification_failure", "max_join_mismatch", "join_energy"):
         if column not in df.columns:
             df[column] = None
     if df.empty:
-        for column in ("store_acot", "verified_acot", "is_dc", "experiment_name", "complete", "partial_acot"):
+        for column in ("store_acot", "verified_acot", "is_dc", "experiment_name", "complete", "ranked",
+                       "partial_acot"):
             df[column] = pd.Series(dtype=object)
         return df
     df["experiment_name"] = df["experiment"]
@@ -77,13 +83,19 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     df["verified_acot"] = pd.to_numeric(pd.Series(verified, index=df.index, dtype=object), errors="coerce")
     complete = df["status"] == "solved"
     df["complete"] = complete
-    df["acot"] = df["verified_acot"].where(complete)
-    df["claimed_acot"] = df["claimed_acot"].where(complete & df["is_dc"])
+    flags = pd.to_numeric(df["verified"], errors="coerce")
+    ranked = complete & (flags == 1)
+    df["ranked"] = ranked
+    df["verification_failure"] = [
+        None if not done or flag == 1 else reason if isinstance(reason, str) and reason else NOT_CHECKED
+        for done, flag, reason in zip(complete, flags, df["verification_failure"], strict=True)]
+    df["acot"] = df["verified_acot"].where(ranked)
+    df["claimed_acot"] = df["claimed_acot"].where(ranked & df["is_dc"])
     for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N",
-                   "retries", "back_ups", "steps_solved"):
+                   "retries", "back_ups", "steps_solved", "max_join_mismatch", "join_energy"):
         df[column] = pd.to_numeric(df[column], errors="coerce")
-    for column in ("cot_min", "cot_max"):  # a partial walk's bounds would pass for the walk's
-        df[column] = df[column].where(complete)
+    for column in ("cot_min", "cot_max"):  # a partial or unverified walk's bounds would pass for a verified one's
+        df[column] = df[column].where(ranked)
     df["stop_step"] = pd.to_numeric(df["stop_step"], errors="coerce").astype("Int64")
     df["stop_cause"] = [cause if isinstance(cause, str) and cause else STATUS_CAUSES.get(status, "unrecorded")
                         for cause, status in zip(df["stop_cause"], df["status"], strict=True)]

@@ -26,7 +26,8 @@ from gaitbench.reports.case_frame import (
 
 ENERGETICS_OPTIONS = ("mass_ratio", "length_ratio", "speed", "step_length", "slope")
 
-ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "completion_rate", "acot", "claimed_acot", "cot_min",
+ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "verified", "completion_rate", "acot", "claimed_acot",
+                "cot_min",
                 "cot_max", "wall_time_s", "iterations", "retries", "max_defect", "max_resim_error", "is_minimum"]
 MINIMA_COLUMNS = ["experiment", "method", "thesis_method", "min_acot", "N_at_min", "claimed_acot_at_min",
                   "N_values", "N_solved"]
@@ -48,6 +49,8 @@ TRACKING_COLUMNS = ["experiment", "method", "N", "case_key", "max_position_error
                     "published_position_error", "published_velocity_error"]
 STOP_CAUSE_COLUMNS = ["experiment", "method", "stop_cause", "cases", "N", "stop_steps", "stop_statuses", "retries",
                       "back_ups"]
+UNVERIFIED_COLUMNS = ["case_key", "experiment", "method", "N", "unranked_acot", "verification_failure",
+                      "max_join_mismatch", "join_energy", "max_resim_error", "max_defect"]
 FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "stop_cause", "stop_step", "stop_status",
                   "message", "steps_solved", "partial_acot", "retries", "wall_time_s"]
 PROVENANCE_COLUMNS = ["run_id", "item", "value"]
@@ -64,23 +67,26 @@ walk stored before the store had a ``stop_cause`` column."""
 # --- ACOT, minima, COT bounds ------------------------------------------------------------------------------------
 
 def acot_table(df: pd.DataFrame) -> pd.DataFrame:
-    """ACOT per experiment × method × N (mean over the complete walks among the repetitions), the completion rate,
-    per-step COT bounds and verification of the complete walks, effort over every case, and whether this N gives
-    the method's minimum ACOT (the first N reaching it, as the thesis quotes)."""
+    """ACOT per experiment × method × N (mean over the verified walks among the repetitions), the completion rate,
+    how many complete walks passed verification, per-step COT bounds and verification figures of the verified
+    walks, effort over every case, and whether this N gives the method's minimum ACOT (the first N reaching it, as
+    the thesis quotes)."""
     sweep = sweep_cases(df)
     if sweep.empty:
         return pd.DataFrame(columns=ACOT_COLUMNS)
-    complete = sweep["complete"].astype(bool)
-    solved = sweep.assign(is_solved=complete, complete_defect=sweep["max_defect"].where(complete),
-                          complete_resim=sweep["max_resim_error"].where(complete))
+    complete, ranked = sweep["complete"].astype(bool), sweep["ranked"].astype(bool)
+    solved = sweep.assign(is_solved=complete, is_ranked=ranked, complete_defect=sweep["max_defect"].where(ranked),
+                          complete_resim=sweep["max_resim_error"].where(ranked))
     grouped = solved.groupby(["experiment", "method", "N"], sort=False)
-    table = grouped.agg(cases=("case_key", "size"), solved=("is_solved", "sum"), acot=("acot", "mean"),
+    table = grouped.agg(cases=("case_key", "size"), solved=("is_solved", "sum"), verified=("is_ranked", "sum"),
+                        acot=("acot", "mean"),
                         claimed_acot=("claimed_acot", "mean"), cot_min=("cot_min", "min"),
                         cot_max=("cot_max", "max"), wall_time_s=("wall_time_s", "mean"),
                         iterations=("iterations", "mean"), retries=("retries", "sum"),
                         max_defect=("complete_defect", "max"), max_resim_error=("complete_resim", "max")).reset_index()
     table["completion_rate"] = table["solved"] / table["cases"]
     table["retries"] = table["retries"].astype(int)
+    table["verified"] = table["verified"].astype(int)
     table = table.sort_values(["experiment", "method", "N"], kind="stable",
                               key=lambda column: column.map(_order(sweep, column.name)))
     table["N"] = table["N"].astype(int)
@@ -318,6 +324,15 @@ def stop_causes(df: pd.DataFrame) -> pd.DataFrame:
 def _listed(values: pd.Series) -> str:
     """Distinct values, sorted, as text (``"8, 10"``); empty when there are none."""
     return ", ".join(str(value) for value in sorted(set(values)))
+
+
+def unverified_cases(df: pd.DataFrame) -> pd.DataFrame:
+    """Every complete walk that is not ranked, with why it failed verification (or that it was never checked) and
+    the figure it would have had (``unranked_acot``), so that no walk leaves the ranking unseen."""
+    if df.empty:
+        return pd.DataFrame(columns=UNVERIFIED_COLUMNS)
+    unranked = df[df["complete"].astype(bool) & ~df["ranked"].astype(bool)]
+    return unranked.assign(unranked_acot=unranked["verified_acot"])[UNVERIFIED_COLUMNS].reset_index(drop=True)
 
 
 def failed_cases(df: pd.DataFrame) -> pd.DataFrame:

@@ -1,0 +1,165 @@
+"""A walk verified as one motion: thresholds, the join check, the verified flag through the store and reports, and
+`gaitbench verify` on walk files."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from gaitbench.cli.main import main
+from gaitbench.model.mechanics import BipedModel
+from gaitbench.plugins import load_registry
+from gaitbench.problem.trajectory import nodal_trajectory
+from gaitbench.reports.case_frame import NOT_CHECKED, prepare
+from gaitbench.reports.tables import acot_table, unverified_cases
+from gaitbench.run.runner import walk_metrics
+from gaitbench.solve.acceptance import Thresholds, step_failures
+from gaitbench.solve.verify import StepVerification
+from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, next_step_state
+from gaitbench.solve.walk_verification import solve_verified, verify_walk
+
+REGISTRY = load_registry()
+
+
+@pytest.fixture(scope="module")
+def forward():
+    return REGISTRY.create("experiment", "forward")
+
+
+def _check(cot=0.3, defect=1e-9, resim=1e-3, gap=0.0) -> StepVerification:
+    return StepVerification(max_defect=defect, resim_error=resim, resim_max_error=resim, hip_energy=1.0,
+                            push_off_energy=0.0, cot=cot, objective_cot=cot, objective_gap=gap,
+                            objective_agrees=True)
+
+
+def _step(index: int, stance: int, start: np.ndarray, check: StepVerification) -> StepOutcome:
+    """A step whose trajectory starts at ``start`` and rests there (no solve: only its ends matter to the joins)."""
+    times = np.linspace(0.0, 0.3, 5)
+    q, dq = np.tile(start[:2], (5, 1)), np.tile(start[2:], (5, 1))
+    trajectory = nodal_trajectory(times, q, dq, np.zeros((5, 2)), 0.0, stance)
+    model = BipedModel(REGISTRY.create("experiment", "forward").robot, 2)
+    return StepOutcome(index, stance, "converged", "", None, trajectory, check,
+                       next_state=next_step_state(model, trajectory))
+
+
+def _walk(steps, n_nodes=20, requested=None) -> WalkResult:
+    return WalkResult("forward", "hermite-simpson", "ipopt", "one-phase", n_nodes, "first",
+                      requested or len(steps), list(steps))
+
+
+def test_a_walk_whose_steps_join_is_verified_and_its_acot_is_the_mean(forward):
+    start = forward.start_state("on-ground")
+    first = _step(1, 1, start, _check(cot=0.2))
+    second = _step(2, 2, first.next_state, _check(cot=0.4))
+    verification = verify_walk(_walk([first, second]), start, forward.robot)
+    assert verification.verified and verification.reasons == ()
+    assert verification.acot == pytest.approx(0.3)
+    assert verification.max_join_mismatch == 0.0 and verification.join_energy == 0.0
+
+
+def test_a_walk_with_a_broken_join_fails_and_the_energy_that_appears_is_counted(forward):
+    start = forward.start_state("on-ground")
+    first = _step(1, 1, start, _check())
+    kicked = first.next_state + np.array([0.0, 0.0, 0.05, -0.02])  # faster than the impact left the robot
+    second = _step(2, 2, kicked, _check())
+    verification = verify_walk(_walk([first, second]), start, forward.robot)
+    assert not verification.verified
+    assert verification.reasons == ("step 2: join mismatch 5.0e-02 > 1e-06",)
+    model = BipedModel(forward.robot, 2)
+    appeared = model.total_energy(kicked[:2], kicked[2:], 2) - model.total_energy(first.next_state[:2],
+                                                                                  first.next_state[2:], 2)
+    assert verification.steps[1].join_energy == pytest.approx(appeared)
+    assert verification.max_join_mismatch == pytest.approx(0.05)
+
+
+def test_step_one_must_start_from_the_walks_start_state(forward):
+    start = forward.start_state("on-ground")
+    moved = _step(1, 1, start + np.array([0.01, 0.0, 0.0, 0.0]), _check())
+    assert "step 1: join mismatch" in verify_walk(_walk([moved]), start, forward.robot).reason
+
+
+@pytest.mark.parametrize(("figures", "reason"), [
+    ({"defect": 2e-6}, "dynamics defect"),
+    ({"resim": 0.3}, "re-simulation error 0.3 > 0.25"),  # 5 / N at N = 20
+    ({"gap": 0.11}, "objective gap +11.0% beyond ±10%"),  # max(5 %, 2 / N) at N = 20
+])
+def test_each_threshold_fails_a_step_beyond_it(figures, reason):
+    failures = step_failures(_check(**figures), Thresholds.for_nodes(20))
+    assert len(failures) == 1 and reason in failures[0]
+
+
+def test_the_thresholds_scale_with_the_grid():
+    coarse, fine = Thresholds.for_nodes(10), Thresholds.for_nodes(200)
+    assert coarse.max_resim_error == pytest.approx(0.5) and fine.max_resim_error == pytest.approx(0.025)
+    assert coarse.max_objective_gap == pytest.approx(0.2) and fine.max_objective_gap == pytest.approx(0.05)
+    assert coarse.max_defect == fine.max_defect and coarse.max_join_mismatch == fine.max_join_mismatch
+    assert step_failures(_check(resim=0.3), coarse) == [] and step_failures(_check(resim=0.03), fine)
+
+
+def test_an_incomplete_walk_is_not_verified(forward):
+    start = forward.start_state("on-ground")
+    verification = verify_walk(_walk([_step(1, 1, start, _check())], requested=3), start, forward.robot)
+    assert not verification.verified and verification.acot is None
+    assert verification.reasons[0].startswith("incomplete walk")
+
+
+def test_the_verified_flag_goes_to_the_store_and_only_verified_walks_are_ranked(forward):
+    start = forward.start_state("on-ground")
+    good = _walk([_step(1, 1, start, _check(cot=0.3))])
+    bad = _walk([_step(1, 1, start, _check(cot=0.1, resim=0.4))])
+    good.verification = verify_walk(good, start, forward.robot)
+    bad.verification = verify_walk(bad, start, forward.robot)
+    rows = []
+    for key, walk in (("a", good), ("b", bad), ("c", good)):
+        metrics = walk_metrics(walk)
+        rows.append({"case_key": key, "method": "OP-DC", "experiment": "forward", "experiment_options": {},
+                     "N": 20, "strategy": "one-phase", "transcription": "hermite-simpson", "solver": "ipopt",
+                     "status": "solved", "message": "", "wall_time_s": 1.0, **metrics})
+    rows[2]["verified"] = None  # a row stored before the flag existed
+    assert rows[0]["verified"] is True and rows[1]["verified"] is False
+    assert "re-simulation error 0.4" in rows[1]["verification_failure"]
+    df = prepare(pd.DataFrame(rows))
+    table = acot_table(df)
+    assert table.loc[0, "solved"] == 3 and table.loc[0, "verified"] == 1
+    assert table.loc[0, "acot"] == pytest.approx(0.3)  # not (0.3 + 0.1 + 0.3) / 3
+    listed = unverified_cases(df)
+    assert list(listed["case_key"]) == ["b", "c"]
+    assert listed.loc[1, "verification_failure"] == NOT_CHECKED
+
+
+def _solved_walk(tmp_path, forward):
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 10, steps=2)
+    walk = solve_verified(REGISTRY.create("strategy", "one-phase"), problem)
+    from gaitbench.solve.walk_file import write_walk
+
+    return walk, write_walk(walk, tmp_path / "walk.json")
+
+
+def test_gaitbench_verify_rechecks_a_walk_file_and_fails_one_whose_join_was_broken(tmp_path, forward):
+    walk, path = _solved_walk(tmp_path, forward)
+    assert walk.verified, walk.verification.reason
+    header = json.loads(path.read_text())
+    assert header["acot"] == pytest.approx(walk.acot) and header["verified"] is True
+    result = CliRunner().invoke(main, ["verify", str(path), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["verified"] and report["acot"] == pytest.approx(walk.acot, rel=1e-6)
+    assert report["max_join_mismatch"] < 1e-9
+
+    npz = path.parent / header["trajectories"]
+    with np.load(npz) as stored:
+        arrays = {key: stored[key] for key in stored.files}
+    arrays["step02_q"] = arrays["step02_q"] + 0.01  # step 2 no longer starts where step 1 left the robot
+    np.savez(npz, **arrays)
+    result = CliRunner().invoke(main, ["verify", str(path), "--json"])
+    assert result.exit_code == 1
+    assert any(reason.startswith("step 2: join mismatch 1.0e-02") for reason in json.loads(result.output)["reasons"])
+
+
+def test_gaitbench_verify_refuses_what_is_not_a_walk_file(tmp_path):
+    (tmp_path / "x.json").write_text("{}")
+    result = CliRunner().invoke(main, ["verify", str(tmp_path / "x.json")])
+    assert result.exit_code == 2 and "not a walk result" in result.output
