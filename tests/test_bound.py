@@ -161,3 +161,11 @@ def test_the_published_comparison_flags_figures_below_the_bound(registry):
     assert table.loc[("stairs", "D&C-DC"), "published_below_bound"]
     unknown = tables.published_comparison(minima).set_index(["experiment", "thesis_method"])
     assert unknown["published_below_bound"].isna().all()  # no bounds given: no flag, rather than "not below"
+
+
+def test_the_command_offers_the_choices_the_bound_and_the_problem_take():
+    from gaitbench.cli import bound_command
+    from gaitbench.problem.gait_problem import START_POSES
+    from gaitbench.solve.bound import PUSH_OFF_COSTS
+
+    assert bound_command.PUSH_OFF_COSTS == PUSH_OFF_COSTS and bound_command.START_POSES == START_POSES
