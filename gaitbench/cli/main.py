@@ -157,13 +157,14 @@ def experiments_show(ctx: click.Context, name: str) -> None:
 
 def _add_commands() -> None:
     """The commands that live in their own modules; registered here so `gaitbench --help` lists them."""
+    from gaitbench.cli.bound_command import bound
     from gaitbench.cli.report_command import report
     from gaitbench.cli.run_commands import run, runs
     from gaitbench.cli.solve_command import solve
     from gaitbench.cli.track_command import track
     from gaitbench.cli.verify_command import verify
 
-    for command in (solve, verify, track, run, runs, report):
+    for command in (solve, verify, bound, track, run, runs, report):
         main.add_command(command)
 
 

@@ -133,7 +133,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     summaries = _track_summaries(store_dir, df)
     tables = {
         "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "savings": savings,
-        "published_acot": tb.published_comparison(minima), "published_savings": tb.published_savings(savings, info),
+        "published_acot": tb.published_comparison(minima, _thesis_bounds(minima, registry)),
+        "published_savings": tb.published_savings(savings, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
         "stop_causes": tb.stop_causes(df), "unverified_cases": tb.unverified_cases(df),
         "failed_cases": tb.failed_cases(df),
@@ -199,6 +200,17 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     if own:
         steps.finish()
     return report
+
+
+def _thesis_bounds(minima, registry: PluginRegistry | None) -> dict:
+    """The physical ACOT bounds of the thesis experiments this store holds, computed once each for the thesis
+    comparison (:mod:`gaitbench.reports.bounds`)."""
+    from gaitbench.reports import thesis_values
+    from gaitbench.reports.bounds import experiment_bounds
+
+    held = set(minima["experiment"]) if not minima.empty else set()
+    names = [name for name in thesis_values.EXPERIMENTS if name in held]
+    return experiment_bounds(names, registry) if names else {}
 
 
 def _partial_note(case) -> str:

@@ -8,8 +8,8 @@ docs/reports.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-from typing import Any
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
@@ -24,6 +24,9 @@ from gaitbench.reports.case_frame import (
     sweep_cases,
 )
 
+if TYPE_CHECKING:
+    from gaitbench.reports.bounds import ExperimentBounds
+
 ENERGETICS_OPTIONS = ("mass_ratio", "length_ratio", "speed", "step_length", "slope")
 
 ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "verified", "completion_rate", "acot", "claimed_acot",
@@ -35,7 +38,9 @@ COT_BOUNDS_COLUMNS = ["experiment", "method", "N", "cot_min", "cot_max", "acot"]
 SAVINGS_COLUMNS = ["experiment", "method", "baseline", "baseline_kind", "N", "acot", "baseline_acot",
                    "savings_percent", "claimed_acot", "claimed_savings_percent"]
 PUBLISHED_COLUMNS = ["experiment", "thesis_method", "method", "published_acot", "published_N", "acot", "N_at_min",
-                     "difference", "difference_percent", "claimed_acot", "claimed_difference", "source"]
+                     "difference", "difference_percent", "claimed_acot", "claimed_difference", "bound_acot",
+                     "published_below_bound", "thesis_push_off_bound_acot", "published_below_thesis_push_off_bound",
+                     "source"]
 PUBLISHED_SAVINGS_COLUMNS = ["experiment", "comparison", "published_min_percent", "published_min_N",
                              "published_max_percent", "published_max_N", "min_percent", "min_N", "max_percent",
                              "max_N", "claimed_max_percent", "claimed_max_N", "source"]
@@ -173,8 +178,11 @@ def savings_table(acot: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
 
 # --- the thesis's published values -------------------------------------------------------------------------------
 
-def published_comparison(minima: pd.DataFrame) -> pd.DataFrame:
-    """Each thesis method's published minimum ACOT (and its N) beside ours, with the differences."""
+def published_comparison(minima: pd.DataFrame, bounds: Mapping[str, ExperimentBounds] | None = None) -> pd.DataFrame:
+    """Each thesis method's published minimum ACOT (and its N) beside ours, with the differences, and the
+    experiment's physical lower bounds (:mod:`gaitbench.reports.bounds`) with a flag where the published figure lies
+    below one. An experiment absent from ``bounds`` gets no bound and no flag."""
+    bounds = bounds or {}
     rows = []
     for experiment, published in thesis_values.MINIMUM_ACOT.items():
         ours = minima[minima["experiment"] == experiment]
@@ -185,7 +193,7 @@ def published_comparison(minima: pd.DataFrame) -> pd.DataFrame:
             row = {"experiment": experiment, "thesis_method": thesis_method, "method": None,
                    "published_acot": value, "published_N": n_published, "acot": math.nan, "N_at_min": None,
                    "difference": math.nan, "difference_percent": math.nan, "claimed_acot": math.nan,
-                   "claimed_difference": math.nan,
+                   "claimed_difference": math.nan, **_bound_cells(value, bounds.get(experiment)),
                    "source": f"ch5 §2.3, {thesis_values.MINIMUM_ACOT_LINES[experiment]}"}
             if not match.empty:
                 m = match.iloc[0]
@@ -195,6 +203,17 @@ def published_comparison(minima: pd.DataFrame) -> pd.DataFrame:
                         "claimed_acot": claimed, "claimed_difference": claimed - value}
             rows.append(row)
     return _integers(pd.DataFrame(rows, columns=PUBLISHED_COLUMNS), "N_at_min")
+
+
+def _bound_cells(published: float, bounds: ExperimentBounds | None) -> dict[str, Any]:
+    """The bounds and whether ``published`` lies below each (never below a bound of no use, NaN; unknown, None,
+    without bounds)."""
+    if bounds is None:
+        return {"bound_acot": math.nan, "published_below_bound": None, "thesis_push_off_bound_acot": math.nan,
+                "published_below_thesis_push_off_bound": None}
+    return {"bound_acot": bounds.impulse, "published_below_bound": bool(published < bounds.impulse),
+            "thesis_push_off_bound_acot": bounds.thesis_push_off,
+            "published_below_thesis_push_off_bound": bool(published < bounds.thesis_push_off)}
 
 
 def published_savings(savings: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
