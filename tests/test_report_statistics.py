@@ -65,7 +65,8 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     info = case_frame.method_info(df)
     acot = tables.acot_table(df)
     minima = tables.method_minima(acot, info)
-    paired = statistics.paired_savings(tables.savings_table(acot, info), minima)
+    savings = tables.savings_table(acot, info)
+    paired = statistics.paired_savings(savings, minima)
     assert list(paired.columns) == statistics.PAIRED_SAVINGS_COLUMNS
     row = paired.set_index("baseline").loc["OP-DC"]
     assert row["pairs"] == 3
@@ -77,6 +78,12 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     assert row["min_vs_min_percent"] == pytest.approx(100 * (0.30 - 0.36) / 0.30)
     # The thesis's forward minima: D&C-DC 0.0695 against OP-DC 0.3615 (ch5 §2.3).
     assert row["published_min_vs_min_percent"] == pytest.approx(100 * (0.3615 - 0.0695) / 0.3615)
+    # Beside the thesis's quoted range: its forward D&C-DC vs OP-DC row gets the same figures.
+    published = statistics.with_paired_savings(tables.published_savings(savings, info), paired, info)
+    quoted = published.set_index("comparison").loc["D&C-DC vs OP-DC"]
+    assert (quoted["published_max_percent"], quoted["pairs"]) == (85.41, 3)
+    assert quoted[["median_percent", "median_ci_low", "median_ci_high"]].tolist() == pytest.approx([10.0] * 3)
+    assert quoted["min_vs_min_percent"] == pytest.approx(row["min_vs_min_percent"])
 
 
 def test_the_spread_is_over_every_complete_walk_at_neighbouring_n():

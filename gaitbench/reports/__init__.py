@@ -133,11 +133,12 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     spread = st.acot_spread(df, acot)
     energetics = tb.energetics_table(df)
     summaries = _track_summaries(store_dir, df)
+    paired = st.paired_savings(savings, minima)
     tables = {
         "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "acot_spread": spread,
-        "savings": savings, "savings_paired": st.paired_savings(savings, minima),
-        "consistency": st.consistency_exceptions(acot, df),
-        "published_acot": tb.published_comparison(minima), "published_savings": tb.published_savings(savings, info),
+        "savings": savings, "savings_paired": paired, "consistency": st.consistency_exceptions(acot, df),
+        "published_acot": tb.published_comparison(minima),
+        "published_savings": st.with_paired_savings(tb.published_savings(savings, info), paired, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
         "stop_causes": tb.stop_causes(df), "failed_cases": tb.failed_cases(df),
         "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
@@ -150,7 +151,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         steps.start(f"figures of {experiment}")
         made = [fig.acot_figure(acot, experiment, spread), fig.completion_figure(acot, experiment),
                 fig.cot_bounds_figure(acot, experiment),
-                fig.savings_figure(savings, experiment, tables["savings_paired"])]
+                fig.savings_figure(savings, experiment, paired)]
         report.experiment_figures[experiment] = [figure for figure in made if figure is not None]
     steps.start("energetics figures")
     report.energetics_figures = fig.energetics_figures(energetics)

@@ -222,3 +222,21 @@ def inconsistent_keys(df: pd.DataFrame, acot: pd.DataFrame, band: tuple[int, int
     """The case keys of every exception of :func:`consistency_exceptions`: the cases to solve again."""
     exceptions = consistency_exceptions(acot, df, band=band, tolerance=tolerance)
     return {key for keys in exceptions["case_keys"] for key in keys.split()}
+
+
+PUBLISHED_SAVINGS_CI_COLUMNS = ["median_percent", "median_ci_low", "median_ci_high", "pairs", "min_vs_min_percent",
+                                "published_min_vs_min_percent"]
+
+
+def with_paired_savings(published: pd.DataFrame, paired: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
+    """The published savings table (:func:`gaitbench.reports.tables.published_savings`) with our paired median
+    saving, its bootstrap interval and the two minimum-against-minimum savings beside the thesis's quoted range."""
+    thesis = {(r.experiment, r.method): r.thesis_method for r in info.itertuples()}
+    by_comparison = {(r.experiment, f"{thesis.get((r.experiment, r.method))} vs "
+                      f"{thesis.get((r.experiment, r.baseline))}"): r for r in paired.itertuples()}
+    table = published.copy()
+    for column in PUBLISHED_SAVINGS_CI_COLUMNS:
+        table[column] = [getattr(by_comparison.get((experiment, comparison)), column, math.nan)
+                         for experiment, comparison in zip(table["experiment"], table["comparison"], strict=True)]
+    table["pairs"] = pd.to_numeric(table["pairs"], errors="coerce").astype("Int64")
+    return table
