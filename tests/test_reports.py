@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gaitbench.reports import build_report, case_frame, tables, write_report
+from gaitbench.reports import build_report, case_frame, statistics, tables, write_report
 
 CHROMIUM_MISSING = "chromium is not installed (Debian package chromium; .ci/run installs it)"
 
@@ -124,8 +124,11 @@ def test_energetics_table_and_figures():
 
 DOCUMENTED_CSV = {
     "acot": tables.ACOT_COLUMNS, "acot_minima": tables.MINIMA_COLUMNS, "cot_bounds": tables.COT_BOUNDS_COLUMNS,
-    "savings": tables.SAVINGS_COLUMNS, "published_acot": tables.PUBLISHED_COLUMNS,
-    "published_savings": tables.PUBLISHED_SAVINGS_COLUMNS, "dc_claims": tables.DC_CLAIMS_COLUMNS,
+    "acot_spread": statistics.SPREAD_COLUMNS, "savings": tables.SAVINGS_COLUMNS,
+    "savings_paired": statistics.PAIRED_SAVINGS_COLUMNS, "consistency": statistics.CONSISTENCY_COLUMNS,
+    "published_acot": tables.PUBLISHED_COLUMNS,
+    "published_savings": tables.PUBLISHED_SAVINGS_COLUMNS + statistics.PUBLISHED_SAVINGS_CI_COLUMNS,
+    "dc_claims": tables.DC_CLAIMS_COLUMNS,
     "energetics": tables.ENERGETICS_COLUMNS, "tracking": tables.TRACKING_COLUMNS,
     "stop_causes": tables.STOP_CAUSE_COLUMNS, "failed_cases": tables.FAILED_COLUMNS,
     "provenance": tables.PROVENANCE_COLUMNS, "cases": tables.CASES_COLUMNS,
@@ -148,6 +151,15 @@ def test_csv_files_have_their_documented_columns(report_dir):
     assert sorted(vs_op["N"]) == [8, 10]
     expected = 100 * (vs_op["baseline_acot"] - vs_op["acot"]) / vs_op["baseline_acot"]
     assert np.allclose(vs_op["savings_percent"], expected)
+    paired = pd.read_csv(report_dir / "savings_paired.csv").set_index(["method", "baseline"])
+    pair = paired.loc[("D&C-DC", "OP-DC")]
+    assert pair["pairs"] == 2 and pair["median_percent"] == pytest.approx(vs_op["savings_percent"].median())
+    assert pair["median_ci_low"] <= pair["median_percent"] <= pair["median_ci_high"]
+    assert paired.loc[("D&C-DC", "reference"), "pairs"] == 0  # the reference never completed a walk
+    spread = pd.read_csv(report_dir / "acot_spread.csv")
+    walked = spread.dropna(subset=["acot"])  # the reference's failed walk has no ACOT and no spread
+    assert (walked["spread_low"] <= walked["acot"]).all() and (walked["acot"] <= walked["spread_high"]).all()
+    assert spread["spread_low"].isna().sum() == 1
     failed = pd.read_csv(report_dir / "failed_cases.csv")
     assert list(failed["method"]) == ["reference"] and list(failed["status"]) != ["solved"]
     assert isinstance(failed["message"].iloc[0], str) and failed["message"].iloc[0].strip()
@@ -163,6 +175,7 @@ def test_html_contains_every_figure_and_table(report_dir, store):
     html = (report_dir / "index.html").read_text()
     for element in ("fig-acot-forward", "fig-completion-forward", "fig-cot-bounds-forward", "fig-savings-forward",
                     "tbl-minima-forward", "tbl-acot-forward", "tbl-savings-forward", "tbl-stop-causes-forward",
+                    "tbl-savings-paired-forward", 'id="consistency"', "tbl-consistency",
                     "tbl-stop-causes", "tbl-published-acot", "tbl-published-savings",
                     "tbl-dc-claims", "tbl-failed", "tbl-provenance", 'id="gaits"', "fig-gait-angles-",
                     "fig-gait-velocities-", "fig-gait-torques-", "fig-gait-grf-", "fig-gait-push-off-",

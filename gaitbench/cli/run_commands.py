@@ -18,6 +18,44 @@ from gaitbench.plugins import PLUGINS_DIR_ENV
 from gaitbench.run.executors import EXECUTORS
 
 
+def _band(ctx, param, value: str | None) -> tuple[int, int] | None:
+    """``--band LOW-HIGH`` as (LOW, HIGH); None for the report's default."""
+    if value is None:
+        return None
+    low, sep, high = value.partition("-")
+    try:
+        band = (int(low), int(high))
+    except ValueError:
+        band = None
+    if not sep or band is None or band[0] > band[1]:
+        raise click.BadParameter(f"{value!r} is not LOW-HIGH with LOW <= HIGH, e.g. 40-90")
+    return band
+
+
+def consistency_options(command):
+    """``--band`` and ``--tolerance``: the consistency check's parameters (gaitbench.reports.statistics), whose
+    defaults are the report's; resolved there, so that this module does not import pandas for ``--help``."""
+    command = click.option("--tolerance", type=click.FloatRange(min=0, min_open=True), default=None,
+                           show_default="0.15",
+                           help="Consistency check: the largest relative distance of a finer N's ACOT from the "
+                                "reference median.")(command)
+    return click.option("--band", metavar="LOW-HIGH", callback=_band, default=None,
+                        show_default="40-90",
+                        help="Consistency check: the coarser N whose median ACOT is each experiment and method's "
+                             "reference; every N above HIGH is checked.")(command)
+
+
+def inconsistent_keys(store_dir: Path, band: tuple[int, int] | None, tolerance: float | None) -> set[str]:
+    """The keys of the complete walks that fail the report's consistency check (``consistency.csv``)."""
+    from gaitbench.reports import case_frame, statistics, tables
+    from gaitbench.run.store import load_results
+
+    band = band or statistics.CONSISTENCY_BAND
+    tolerance = statistics.CONSISTENCY_TOLERANCE if tolerance is None else tolerance
+    df = case_frame.prepare(load_results(store_dir))
+    return statistics.inconsistent_keys(df, tables.acot_table(df), band=band, tolerance=tolerance)
+
+
 @click.command("run")
 @click.argument("suite_file", metavar="SUITE.toml", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
@@ -42,6 +80,12 @@ from gaitbench.run.executors import EXECUTORS
 @click.option("--retry-unverified", is_flag=True,
               help="With --resume, run again the complete walks that have no verified ACOT (a decrease-and-conquer "
                    "step whose polish failed): after a change to gaitbench that may verify them.")
+@click.option("--retry-inconsistent", is_flag=True,
+              help="With --resume, run again the complete walks whose ACOT fails the report's consistency check: "
+                   "a finer N more than --tolerance from the method's median over --band (`gaitbench runs show "
+                   "STORE --inconsistent` lists them): after a change to gaitbench that may take them to a better "
+                   "optimum.")
+@consistency_options
 @click.option("--smallest-first", is_flag=True,
               help="Start cases smallest N first instead of largest first. Largest first ends a run soonest; "
                    "smallest first suits a sweep run over several sessions with --resume (the thesis suites' "
@@ -51,7 +95,8 @@ from gaitbench.run.executors import EXECUTORS
 @click.pass_obj
 def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
         methods: tuple[str, ...], resume: bool, retry_failed: bool, retry_incomplete: bool,
-        retry_unverified: bool, smallest_first: bool, write_report: bool) -> None:
+        retry_unverified: bool, retry_inconsistent: bool, band: tuple[int, int] | None, tolerance: float | None,
+        smallest_first: bool, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
     Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle
@@ -90,11 +135,17 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         if problem is not None:
             raise click.BadParameter(problem, param_hint="--jobs")
     store_dir = store_dir or suite.output
+    rerun: set[str] = set()
+    if retry_inconsistent and Path(store_dir).exists():
+        try:
+            rerun = inconsistent_keys(Path(store_dir), band, tolerance)
+        except StoreError as error:
+            raise click.ClickException(str(error)) from None
     with CaseProgress(console, StepsInFlight(Path(store_dir), suite.cases)) as progress:
         try:
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
-                                retry_unverified=retry_unverified, smallest_first=smallest_first,
+                                retry_unverified=retry_unverified, rerun=rerun, smallest_first=smallest_first,
                                 on_start=progress.start, on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
         except (RunRefused, StoreError, ExecutorError) as error:
             raise click.ClickException(str(error)) from None
@@ -270,8 +321,14 @@ def _show_cells(row: dict) -> dict[str, str]:
               help="Only this method's cases: its suite label, or its strategy where it has none (repeatable).")
 @click.option("--status", "statuses", multiple=True, metavar="STATUS",
               help="Only cases with this status: solved, incomplete, error, timeout, crashed (repeatable).")
+@click.option("--inconsistent", is_flag=True,
+              help="Only the complete walks that fail the report's consistency check (consistency.csv): a finer N "
+                   "whose ACOT lies more than --tolerance from the method's median over --band. `gaitbench run "
+                   "SUITE --resume --retry-inconsistent` solves them again.")
+@consistency_options
 def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tuple[str, ...],
-              methods: tuple[str, ...], statuses: tuple[str, ...]) -> None:
+              methods: tuple[str, ...], statuses: tuple[str, ...], inconsistent: bool, band: tuple[int, int] | None,
+              tolerance: float | None) -> None:
     """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed, narrowed
     by --experiment, --method and --status.
 
@@ -285,9 +342,11 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
     try:
         with ResultStore.open(store_dir) as store:
             rows = store.cases(store.resolve_run(run_id) if run_id else None)
+        flagged = inconsistent_keys(store_dir, band, tolerance) if inconsistent else None
     except StoreError as error:
         raise click.ClickException(str(error)) from None
-    rows = [row for row in rows if (not experiments or row["experiment"] in experiments)
+    rows = [row for row in rows if (flagged is None or row["case_key"] in flagged)
+            and (not experiments or row["experiment"] in experiments)
             and (not methods or (row["method"] or row["strategy"]) in methods)
             and (not statuses or row["status"] in statuses)]
     columns = WIDE_COLUMNS if wide else SHOW_COLUMNS

@@ -107,6 +107,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
 
     from gaitbench.reports import case_frame
     from gaitbench.reports import figures as fig
+    from gaitbench.reports import statistics as st
     from gaitbench.reports import tables as tb
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
     from gaitbench.run.store import ResultStore, load_results
@@ -129,12 +130,15 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     acot = tb.acot_table(df)
     minima = tb.method_minima(acot, info)
     savings = tb.savings_table(acot, info)
+    spread = st.acot_spread(df, acot)
     energetics = tb.energetics_table(df)
     summaries = _track_summaries(store_dir, df)
+    paired = st.paired_savings(savings, minima)
     tables = {
-        "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "savings": savings,
+        "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "acot_spread": spread,
+        "savings": savings, "savings_paired": paired, "consistency": st.consistency_exceptions(acot, df),
         "published_acot": tb.published_comparison(minima, _thesis_bounds(minima, registry)),
-        "published_savings": tb.published_savings(savings, info),
+        "published_savings": st.with_paired_savings(tb.published_savings(savings, info), paired, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
         "stop_causes": tb.stop_causes(df), "unverified_cases": tb.unverified_cases(df),
         "failed_cases": tb.failed_cases(df),
@@ -146,8 +150,9 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     steps.add(len(report.experiments) + 1)
     for experiment in report.experiments:
         steps.start(f"figures of {experiment}")
-        made = [fig.acot_figure(acot, experiment), fig.completion_figure(acot, experiment),
-                fig.cot_bounds_figure(acot, experiment), fig.savings_figure(savings, experiment)]
+        made = [fig.acot_figure(acot, experiment, spread), fig.completion_figure(acot, experiment),
+                fig.cot_bounds_figure(acot, experiment),
+                fig.savings_figure(savings, experiment, paired)]
         report.experiment_figures[experiment] = [figure for figure in made if figure is not None]
     steps.start("energetics figures")
     report.energetics_figures = fig.energetics_figures(energetics)

@@ -18,6 +18,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from gaitbench.reports import thesis_values  # noqa: E402
+from gaitbench.reports.statistics import SPREAD_HALF_WIDTH  # noqa: E402
 
 plt.rcParams.update({"svg.fonttype": "none", "font.size": 9, "axes.grid": True, "grid.alpha": 0.3,
                      "figure.dpi": 100, "svg.hashsalt": "gaitbench"})
@@ -98,16 +99,23 @@ def _colors(methods: list) -> dict:
     return {method: cycle[i % len(cycle)] for i, method in enumerate(methods)}
 
 
-def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
-    """ACOT against N for every method, each method's minimum marked in red; D&C claims dashed."""
+def acot_figure(acot: pd.DataFrame, experiment: str, spread: pd.DataFrame | None = None,
+                half_width: int = SPREAD_HALF_WIDTH) -> Figure | None:
+    """ACOT against N for every method, each method's minimum marked in red; D&C claims dashed. With ``spread``
+    (:func:`gaitbench.reports.statistics.acot_spread`, computed with ``half_width``), a band per method from the
+    lowest to the highest verified ACOT of its complete walks at N − half_width … N + half_width."""
     data = acot[acot["experiment"] == experiment]
     if data["acot"].notna().sum() == 0 and data["claimed_acot"].notna().sum() == 0:
         return None
+    bands = None if spread is None else spread[spread["experiment"] == experiment]
     fig, ax = subplots(figsize=(7, 4))
     for method, rows, color in _by_method(data):
         best = rows[rows["is_minimum"]]
         lowest = "" if best.empty else f"; min {best['acot'].iloc[0]:.4f} at N = {int(best['N'].iloc[0])}"
         ax.plot(rows["N"], rows["acot"], "o-", color=color, label=f"{method} (verified{lowest})", ms=4)
+        if bands is not None:
+            band = bands[bands["method"] == method]
+            ax.fill_between(band["N"], band["spread_low"], band["spread_high"], color=color, alpha=0.15, lw=0)
         if rows["claimed_acot"].notna().any():
             ax.plot(rows["N"], rows["claimed_acot"], "s--", color=color, alpha=0.7, ms=3,
                     label=f"{method} (claimed, patchwork)")
@@ -119,10 +127,14 @@ def acot_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     ax.set_ylabel("ACOT")
     ax.set_title(f"{experiment}: ACOT against N")
     legend_below(fig)
+    band_text = "" if bands is None else (
+        " Shaded: each method's spread, from the lowest to the highest verified ACOT of its complete walks at "
+        f"N − {half_width} … N + {half_width} (repetitions included; acot_spread.csv): how far a figure moves between "
+        "neighbouring grids of the same problem, i.e. with the optimizer's path rather than the method.")
     return Figure(f"fig-acot-{slug(experiment)}", f"ACOT against N: {experiment}",
                   "Average cost of transport of each method at each N, over its complete walks only (verified; "
                   "dashed: the claimed ACOT of Decrease & Conquer's synthesized trajectory). A gap: no complete walk "
-                  "at that N. Red circles: each method's minimum."
+                  "at that N. Red circles: each method's minimum." + band_text
                   + _thesis(experiment, "acot"), render(fig))
 
 
@@ -167,8 +179,10 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
                   + _thesis(experiment, "cot_bounds"), render(fig))
 
 
-def savings_figure(savings: pd.DataFrame, experiment: str) -> Figure | None:
-    """Energy savings of D&C against One Phase (same transcription) and against the reference solver."""
+def savings_figure(savings: pd.DataFrame, experiment: str, paired: pd.DataFrame | None = None) -> Figure | None:
+    """Energy savings of D&C against One Phase (same transcription) and against the reference solver. With
+    ``paired`` (:func:`gaitbench.reports.statistics.paired_savings`), each pair's median saving over N as a dotted
+    line and its bootstrap 95 % interval as a band."""
     data = savings[savings["experiment"] == experiment]
     if data.empty:
         return None
@@ -186,6 +200,15 @@ def savings_figure(savings: pd.DataFrame, experiment: str) -> Figure | None:
             ax.plot(pair["N"], pair["savings_percent"], "o-", color=color, ms=4, label=f"{label} (verified)")
             ax.plot(pair["N"], pair["claimed_savings_percent"], "s--", color=color, ms=3, alpha=0.7,
                     label=f"{label} (claimed)")
+            summary = None if paired is None else paired[(paired["experiment"] == experiment)
+                                                         & (paired["method"] == method)
+                                                         & (paired["baseline"] == baseline)]
+            if summary is not None and not summary.empty and summary["pairs"].iloc[0] > 0:
+                median = summary.iloc[0]
+                ax.axhspan(median["median_ci_low"], median["median_ci_high"], color=color, alpha=0.12, lw=0)
+                ax.axhline(median["median_percent"], color=color, ls=":", lw=1.2,
+                           label=f"{label}: median {median['median_percent']:.1f} % "
+                                 f"[{median['median_ci_low']:.1f}, {median['median_ci_high']:.1f}]")
         ax.axhline(0, color="black", lw=0.8)
         ax.set_xlabel("N (nodes per step)")
         _integer_n(ax)
@@ -196,6 +219,8 @@ def savings_figure(savings: pd.DataFrame, experiment: str) -> Figure | None:
     return Figure(f"fig-savings-{slug(experiment)}", f"Energy savings of Decrease & Conquer: {experiment}",
                   "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N both methods solved "
                   "(ch5 §1.3). Solid: D&C's verified ACOT; dashed: its claim, as the thesis computes it."
+                  + ("" if paired is None else " Dotted: the median verified saving over N, shaded: its bootstrap 95 % "
+                     "interval (savings_paired.csv).")
                   + (f" Thesis counterparts: {roles}." if roles.strip(" and") else ""), render(fig))
 
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from gaitbench.reports import thesis_values
+from gaitbench.reports import statistics, thesis_values
 from gaitbench.reports.figures import slug
 
 TEMPLATES = Path(__file__).parent / "templates"
@@ -113,6 +113,7 @@ class HtmlReporter:
             report=report, table=table, rows=rows, counts=counts, total=len(df), retries=retries, csv_files=csv_files,
             generated=datetime.now(timezone.utc).isoformat(timespec="seconds"), thesis=thesis_values,
             figures_dir=FIGURES_DIR, has_dc=bool(len(tables["dc_claims"])),
+            consistency_band=statistics.CONSISTENCY_BAND, consistency_tolerance=statistics.CONSISTENCY_TOLERANCE,
         )
         index = out_dir / "index.html"
         index.write_text(html)

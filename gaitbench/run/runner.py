@@ -13,7 +13,7 @@ from __future__ import annotations
 import tempfile
 import time
 import traceback
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -281,7 +281,8 @@ class RunSummary:
 
 
 def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
-              retry_incomplete: bool = False, retry_unverified: bool = False, smallest_first: bool = False,
+              retry_incomplete: bool = False, retry_unverified: bool = False, rerun: Collection[str] = (),
+              smallest_first: bool = False,
               on_start: Callable[[int, int], None] | None = None,
               on_outcome: Callable[[CaseOutcome], None] | None = None,
               on_elsewhere: Callable[[Case], None] | None = None) -> RunSummary:
@@ -292,15 +293,15 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
     executor starts it, so runs sharing a store split the cases between them; a case another live run has claimed
     or finished meanwhile is left to it (``on_elsewhere``). With ``resume``, finished cases are skipped (failed
     ones re-run with ``retry_failed``, stopped walks with ``retry_incomplete``, complete walks without a verified
-    ACOT with ``retry_unverified``), and a dead run's claims are taken over. Cases start largest N first
-    (:func:`largest_first`), or smallest N first with ``smallest_first``. ``on_start(to_run, skipped)`` and
-    ``on_outcome(outcome)`` feed a progress display.
+    ACOT with ``retry_unverified``, and the stored cases whose keys are in ``rerun``), and a dead run's claims are
+    taken over. Cases start largest N first (:func:`largest_first`), or smallest N first with ``smallest_first``.
+    ``on_start(to_run, skipped)`` and ``on_outcome(outcome)`` feed a progress display.
     """
     started = time.perf_counter()
     with ResultStore.create(store_dir) as store:
         stored = store.case_runs()
         finished = store.finished_keys(retry_failed=retry_failed, retry_incomplete=retry_incomplete,
-                                       retry_unverified=retry_unverified)
+                                       retry_unverified=retry_unverified) - set(rerun)
         present = [case for case in suite.cases if case.key in finished]
         if present and not resume and not store.live_runs():
             raise RunRefused(
