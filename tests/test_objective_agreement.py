@@ -55,10 +55,12 @@ def test_objective_agrees_with_the_verified_cot(transcription, quadrature):
         assert outcome.verification.objective_agrees, f"{transcription}, step {outcome.index}: gap {gap:+.4f}"
 
 
-@pytest.mark.parametrize(("transcription", "quadrature"), [("dmoc", "midpoint"), ("trapezoidal", "trapezoid")])
+@pytest.mark.parametrize(("transcription", "quadrature"), [("dmoc", "midpoint"), ("trapezoidal", "trapezoid"),
+                                                            ("hermite-simpson", "nodal-simpson")])
 def test_quadratures_that_see_less_than_the_trajectory_are_caught(transcription, quadrature):
-    """DMOC's midpoint rule Σ h|τ_k·v_k| sees only each interval's net work, the trapezoid rule only the nodes: the
-    optimizer buys motion with torques whose power vanishes where the rule looks, and verification must say so."""
+    """DMOC's midpoint rule Σ h|τ_k·v_k| sees only each interval's net work, the trapezoid rule and the thesis's
+    nodal Simpson (3.77) only the nodes: the optimizer buys motion with torques whose power vanishes where the rule
+    looks, and verification must say so."""
     check = forward_walk(transcription, steps=1, quadrature=quadrature).steps[0].verification
     assert check.cot > 0.01 and check.objective_cot < 1e-3
     assert not check.objective_agrees and check.objective_gap > 0.5
