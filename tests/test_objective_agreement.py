@@ -47,8 +47,8 @@ def test_objective_agrees_with_the_verified_cot(transcription, quadrature):
     assert check.objective_agrees and abs(check.cot - check.objective_cot) <= OBJECTIVE_RTOL * check.cot, (
         f"{transcription}: objective {check.objective_cot:.5f}, verified {check.cot:.5f}")
     assert step.as_dict()["objective_agrees"] and step.as_dict()["objective_gap"] == check.objective_gap
-    # Hermite–Simpson's Simpson rule (the thesis's) leaves its nearly free first step at a 7 % gap here (1.4e-3 in
-    # COT): see the module's docstring. Every other rule agrees on every step.
+    # Hermite–Simpson's Simpson rule (nodes and midpoints) leaves its nearly free first step at a 7 % gap here
+    # (1.4e-3 in COT): see the module's docstring. Every other rule agrees on every step.
     steps = walk.steps[1:] if (transcription, quadrature) == ("hermite-simpson", "simpson") else walk.steps
     for outcome in steps:
         gap = outcome.verification.objective_gap

@@ -6,8 +6,8 @@ midpoints.
 
 The hip energy integrates the interpolant's power (cubic velocities times linear torques: a quartic on each
 interval) by Boole's rule, the nodes and ¼, ½, ¾ of the interval, exact for the quartic. ``quadrature="simpson"``
-is Simpson's rule on each interval, its two nodes and its Hermite midpoint (DECISIONS §5's reading of the thesis):
-its three points leave quartics that vanish at them unseen, and the net-power optimizer finds such powers, so the
+is Simpson's rule on each interval, its two nodes and its Hermite midpoint (the former default, not the thesis's
+rule): its three points leave quartics that vanish at them unseen, and the net-power optimizer finds such powers, so the
 verified COT exceeds the objective, on the upward slope by 33–51 % at every N from 10 to 160 (docs/convergence.md;
 ``objective_gap`` reports it per step). Boole's rule keeps the gap within 3.2 % there and 1.2 % on the forward walk,
 and with the retry ladder every walk of the study completes with it. ``quadrature="nodal-simpson"`` is the thesis's
