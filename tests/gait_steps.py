@@ -20,9 +20,10 @@ TIE_BREAK = 1e-3
 """Weight of ∫τ² next to the cost of transport: enough to make the optimum unique, small against the COT."""
 FORMER_QUADRATURE = {"hermite-simpson": "simpson", "dmoc": "midpoint", "trapezoidal": "trapezoid"}
 """The hip-energy rules the transcriptions had before Boole's rule became their default (DMOC and trapezoidal
-collocation first, Hermite–Simpson since 2026-12-02; Simpson's is the thesis's). Tests whose numbers were measured on
-those NLPs (iteration counts, a line search, the size of a translation) ask for them: the Boole NLPs have five |P|
-splits per interval, degenerate together on intervals without torque, and some solvers find them harder."""
+collocation first, Hermite–Simpson since 2026-12-02, whose former rule is Simpson's on nodes and midpoints). Tests
+whose numbers were measured on those NLPs (iteration counts, a line search, the size of a translation) ask for them:
+the Boole NLPs have five |P| splits per interval, degenerate together on intervals without torque, and some solvers
+find them harder."""
 
 
 @cache

@@ -273,7 +273,7 @@ def test_interval_lookup_matches_a_search_of_the_node_times():
                 assert locate_interval(float(t), h, n_nodes) == expected, (n_nodes, h, t)
 
 
-@pytest.mark.parametrize(("name", "offered"), [("hermite-simpson", "simpson, boole"),
+@pytest.mark.parametrize(("name", "offered"), [("hermite-simpson", "simpson, boole, nodal-simpson"),
                                                ("dmoc", "boole, simpson, midpoint"),
                                                ("trapezoidal", "boole, simpson, trapezoid")])
 def test_a_transcription_refuses_a_quadrature_it_does_not_offer_when_created(name, offered):

@@ -100,6 +100,21 @@ def _uniform_spacing(times_or_h: float | Sequence[float] | np.ndarray, n_nodes: 
     return h
 
 
+def push_off_work(accounting: str, kinetic_gain: Any, foot_velocity: Any, stance_mass: Any) -> Any:
+    """What a push-off is charged (J), by ``accounting`` (``ProblemOptions.push_off_cost``).
+
+    ``impulse``: ``kinetic_gain``, the kinetic energy the impulse adds to the robot (E_PO of (3.76), exact).
+    ``thesis``: ½ m_stance |v_foot|² of (3.77), the stance leg's mass ``stance_mass`` moving at the stance foot's
+    velocity just after the push-off, ``foot_velocity`` (q̇3, q̇4). It counts only the foot's share of the energy
+    the impulse gives the whole robot. Works on numbers and casadi expressions.
+    """
+    if accounting == "impulse":
+        return kinetic_gain
+    if accounting == "thesis":
+        return 0.5 * stance_mass * (foot_velocity[0] ** 2 + foot_velocity[1] ** 2)
+    raise ValueError(f"push-off accounting {accounting!r}: expected 'impulse' or 'thesis'")
+
+
 def cost_of_transport(energy: Any, total_mass: float, chord: float, g: float = G_CONST) -> Any:
     """COT = E / (M_total g D): energy per unit weight and unit distance (thesis (3.79), L9381–9412)."""
     if total_mass <= 0 or chord <= 0 or g <= 0:

@@ -25,12 +25,16 @@ ABSOLUTE_VALUE_FORMS = ("slack", "smooth")
 CLEARANCE_FORMS = ("terrain", "chord", "off")
 ANGLE_LIMIT_FORMS = ("physical", "thesis")
 START_POSES = ("on-ground", "printed")
+PUSH_OFF_COSTS = ("impulse", "thesis")
+FIRST_PHASE_COSTS = ("objective", "effort")
 
 OPTION_CHOICES: dict[str, tuple[str, ...]] = {
     "absolute_value": ABSOLUTE_VALUE_FORMS,
     "clearance": CLEARANCE_FORMS,
     "angle_bounds": ANGLE_LIMIT_FORMS,
     "start_pose": START_POSES,
+    "push_off_cost": PUSH_OFF_COSTS,
+    "first_phase_cost": FIRST_PHASE_COSTS,
 }
 """The allowed values of every string-valued :class:`ProblemOptions` field (suites and ``solve -p`` check them)."""
 
@@ -64,6 +68,13 @@ class ProblemOptions:
     # mechanical energy (τ·q̇ = dE/dt with torques on absolute angles), blind to torque: without a tie-break the
     # optimum is a continuum and solvers end at arbitrary, limit-saturating torques. Reported COTs exclude it.
     torque_regularization: float = 0.0
+    # What the push-off costs (:func:`gaitbench.model.energetics.push_off_work`): "impulse", the kinetic energy its
+    # impulse adds to the robot; "thesis", (3.77)'s ½ m_stance |v_foot|², the stance leg's mass at the foot's
+    # velocity after it, a fraction of that energy. In the NLP and in what verification charges alike.
+    push_off_cost: str = "impulse"
+    # What the First Phase (2-DOF) minimises: "objective", the walk's objective (its COT); "effort", the thesis's
+    # control effort ∫ (τ1² + τ2²) dt (§2.5; :data:`gaitbench.problem.objective.CONTROL_EFFORT`).
+    first_phase_cost: str = "objective"
     unilateral_contact: bool = False  # f_n ≥ 0 at every node (second phase)
     friction_coefficient: float | None = None  # |f_t| ≤ μ f_n at every node (second phase)
 

@@ -109,3 +109,21 @@ class NetPower(Objective):
 
 NET_POWER = NetPower()
 """The default objective of every step problem."""
+
+
+@dataclass(frozen=True)
+class ControlEffort(Objective):
+    """The thesis's First-Phase cost (§2.5), the control effort ∫ (τ1² + τ2²) dt, which it writes as nodal Simpson
+    Σ w_k (τ1,k² + τ2,k²) h/3; here the transcription's own quadrature integrates it, as it does every running
+    cost. Scaled by 1/(M g l √(l/g)) into watts, which leaves the minimiser unchanged. Not a COT: it has no
+    push-off (the First Phase has none) and is what ``first_phase_cost = "effort"`` minimises, never reported."""
+
+    name: ClassVar[str] = "control-effort"
+
+    def smooth_rate(self, dq_st: Any, dq_sw: Any, tau_st: Any, tau_sw: Any, robot: Any) -> Any:
+        mass, leg, g = robot[0] + robot[1] + robot[2], robot[3], robot[7]
+        return (tau_st * tau_st + tau_sw * tau_sw) / (mass * leg * (g * leg) ** 0.5)
+
+
+CONTROL_EFFORT = ControlEffort()
+"""What the First Phase minimises under ``first_phase_cost = "effort"``."""

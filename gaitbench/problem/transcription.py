@@ -12,15 +12,17 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
 
+from gaitbench.model.energetics import push_off_work
 from gaitbench.model.mechanics import BipedFunctions, biped_functions
 from gaitbench.model.terrain import clearance, leg_angle_window, terrain_clearance
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, StepStructure, roles_to_legs
 from gaitbench.problem.nlp import NLP, NLPBuilder
+from gaitbench.problem.objective import CONTROL_EFFORT
 from gaitbench.problem.step_cost import charged
 from gaitbench.problem.trajectory import Interpolant, Seed, StepTrajectory, blended_seed
 
@@ -94,7 +96,8 @@ class TranscribedStep:
     discretization: Discretization
     cost_of_transport: ca.Function | None = None
     """(x, p) -> the objective without its torque regularization: the transcription's quadrature of the running
-    cost plus the push-off's event cost, over M g D."""
+    cost plus the push-off's event cost, over M g D. None where the NLP minimises no COT (a First Phase under
+    ``first_phase_cost = "effort"``)."""
 
     def objective_cot(self, x: np.ndarray, data: StepData) -> float:
         """The cost of transport the NLP's objective assigns to ``x``, without the torque regularization: what
@@ -198,7 +201,11 @@ class Transcription(ABC):
         symbols = StepSymbols.create()
         builder = NLPBuilder()
         swing_model = biped_functions(2, 1)  # role coordinates: the stance leg is "Leg 1"
-        discretization = self.discretize(structure, builder, symbols, swing_model)
+        effort = structure.phase == "first" and structure.options.first_phase_cost == "effort"
+        # The thesis's First Phase minimises control effort: its quadrature is the transcription's, its objective
+        # no COT (verification still reports the step's COT under the walk's objective, from built.structure).
+        cost_structure = replace(structure, objective=CONTROL_EFFORT) if effort else structure
+        discretization = self.discretize(cost_structure, builder, symbols, swing_model)
         push_off_work = _add_step_constraints(structure, builder, symbols, discretization)
         if structure.objective.signed_event or structure.phase == "first":
             event_cost = push_off_work
@@ -209,7 +216,8 @@ class Transcription(ABC):
         rho = structure.options.torque_regularization
         regularization = rho * symbols.time_step * ca.sumsqr(builder.variables("torques")) if rho else 0
         nlp = builder.build(symbols.vector, (energy + regularization) / weight)
-        cost_of_transport = ca.Function("objective_cot", [nlp.x, symbols.vector], [energy / weight])
+        cost_of_transport = (None if effort
+                             else ca.Function("objective_cot", [nlp.x, symbols.vector], [energy / weight]))
         return TranscribedStep(structure=structure, nlp=nlp, discretization=discretization,
                                cost_of_transport=cost_of_transport)
 
@@ -227,7 +235,8 @@ def heel_strike_angles(symbols: StepSymbols) -> tuple[ca.SX, ca.SX]:
 def _add_step_constraints(
     structure: StepStructure, builder: NLPBuilder, symbols: StepSymbols, discretization: Discretization
 ) -> ca.SX:
-    """Constraints common to all transcriptions; returns the push-off energy (0 in the first phase)."""
+    """Constraints common to all transcriptions; returns what the push-off is charged (``options.push_off_cost``;
+    0 in the first phase)."""
     options = structure.options
     q, dq = discretization.positions, discretization.velocities
     theta = symbols.slope
@@ -266,9 +275,10 @@ def _add_step_constraints(
     q_end4 = ca.vertcat(q[:, -1], 0, 0)
     dq_end4 = ca.vertcat(dq[:, -1], 0, 0)
     dq_plus = model4.push_off(q_end4, dq_end4, impulse, symbols.robot)
-    push_off_energy = model4.kinetic_energy(q_end4, dq_plus, symbols.robot) - model4.kinetic_energy(
+    kinetic_gain = model4.kinetic_energy(q_end4, dq_plus, symbols.robot) - model4.kinetic_energy(
         q_end4, dq_end4, symbols.robot
     )
+    push_off_energy = push_off_work(options.push_off_cost, kinetic_gain, dq_plus[2:4], symbols.robot[0])
 
     if options.lift_off:
         # DECISIONS §3: the old stance foot leaves the ground. After heel strike it is the 4-DOF model's free foot

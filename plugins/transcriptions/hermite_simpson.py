@@ -6,10 +6,16 @@ midpoints.
 
 The hip energy integrates the interpolant's power (cubic velocities times linear torques: a quartic on each
 interval) by Boole's rule, the nodes and ¼, ½, ¾ of the interval, exact for the quartic. ``quadrature="simpson"``
-is the thesis's rule (DECISIONS §5): its three points leave quartics that vanish at them unseen, and the net-power
-optimizer finds such powers, so the verified COT exceeds the objective, on the upward slope by 33–51 % at every N
-from 10 to 160 (docs/convergence.md; ``objective_gap`` reports it per step). Boole's rule keeps the gap within
-3.2 % there and 1.2 % on the forward walk, and with the retry ladder every walk of the study completes with it.
+is Simpson's rule on each interval, its two nodes and its Hermite midpoint (the former default, not the thesis's
+rule): its three points leave quartics that vanish at them unseen, and the net-power optimizer finds such powers, so the
+verified COT exceeds the objective, on the upward slope by 33–51 % at every N from 10 to 160 (docs/convergence.md;
+``objective_gap`` reports it per step). Boole's rule keeps the gap within 3.2 % there and 1.2 % on the forward walk,
+and with the retry ladder every walk of the study completes with it. ``quadrature="nodal-simpson"`` is the thesis's
+(3.77) as printed: composite Simpson over the nodes t_1 … t_N alone
+(:func:`~gaitbench.model.energetics.simpson_weights`, Simpson's 3/8 rule on the last three intervals for even N). It
+sees nothing between the nodes, and the optimizer puts every node's power at zero (docs/deviations.md, "Hip-energy
+quadrature"): it is an evaluation mode (:mod:`gaitbench.solve.thesis_reading`), offered as an objective only to show
+that.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import casadi as ca
 import numpy as np
 
 from gaitbench import Registration, hookimpl
+from gaitbench.model.energetics import simpson_weights
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT
 from gaitbench.problem.step_cost import QUADRATURE_RULES, interval_running_costs, running_cost
 from gaitbench.problem.trajectory import Interpolant, cubic_hermite, locate_interval, sample_seed
@@ -29,7 +36,7 @@ from gaitbench.problem.transcription import (
     state_derivative,
 )
 
-QUADRATURES = ("simpson", "boole")
+QUADRATURES = ("simpson", "boole", "nodal-simpson")
 
 
 class HermiteSimpson(Transcription):
@@ -57,6 +64,8 @@ class HermiteSimpson(Transcription):
                                               interior_motion(dynamics, rule.points), interval, symbols.vector)
             cost = h * (rule.end_weight * ca.sum2(power_nodes[:, :-1] + power_nodes[:, 1:])
                         + ca.sum2(ca.mtimes(ca.DM(rule.weights).T, interior)))
+        elif self.quadrature == "nodal-simpson":
+            cost = h * ca.mtimes(power_nodes, ca.DM(simpson_weights(n)))
         else:
             power_mid = interval_running_costs(builder, structure, "power_midpoints", midpoint_motion(dynamics),
                                                interval, symbols.vector)
