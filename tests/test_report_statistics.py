@@ -45,7 +45,7 @@ def _cases(rows: list[dict]) -> pd.DataFrame:
     base = {"experiment": "forward", "experiment_options": {}, "transcription": "hermite-simpson", "solver": "ipopt",
             "strategy": "one-phase", "status": "solved", "message": "", "claimed_acot": None,
             "strategy_details": None, "cot_min": 0.1, "cot_max": 0.2, "wall_time_s": 1.0, "iterations": 10,
-            "max_defect": 1e-9, "max_resim_error": 1e-6, "walk_path": None, "tracking_path": None}
+            "max_defect": 1e-9, "max_resim_error": 1e-6, "walk_path": None, "tracking_path": None, "verified": 1}
     frame = pd.DataFrame([base | row for row in rows])
     frame["case_key"] = [f"k{i}" for i in range(len(frame))]
     return case_frame.prepare(frame)
@@ -188,7 +188,8 @@ def ladder(tmp_path):
         store.start_run({"run_id": "r1", "suite": "ladder", "started_at": "2026-01-01T00:00:00+00:00"})
         for case in suite.cases:
             acot = 0.60 if case.n_nodes == 110 else 0.30
-            store.record_case(case_row(CaseOutcome(case, "solved", "", 1.0, {"acot": acot}), "ladder", "r1"))
+            outcome = CaseOutcome(case, "solved", "", 1.0, {"acot": acot, "verified": True})
+            store.record_case(case_row(outcome, "ladder", "r1"))
     return path, suite, tmp_path / "store"
 
 

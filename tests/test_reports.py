@@ -60,7 +60,7 @@ def _frame(rows):
     base = {"experiment_options": {}, "transcription": "hermite-simpson", "solver": "ipopt", "status": "solved",
             "message": "", "claimed_acot": None, "strategy_details": None, "cot_min": 0.1, "cot_max": 0.2,
             "wall_time_s": 1.0, "iterations": 10, "max_defect": 1e-9, "max_resim_error": 1e-6, "walk_path": None,
-            "tracking_path": None, "experiment": "forward"}
+            "tracking_path": None, "experiment": "forward", "verified": 1}
     frame = pd.DataFrame([base | row for row in rows])
     frame["case_key"] = [f"k{i}" for i in range(len(frame))]
     return case_frame.prepare(frame)
@@ -253,12 +253,14 @@ def test_a_dc_step_whose_polish_failed_says_which_trajectory_stands_in(store, tm
     with sqlite3.connect(copy / "results.sqlite") as db:
         key, walk_path = db.execute("SELECT case_key, walk_path FROM cases WHERE method = 'D&C-DC'").fetchone()
     walk = json.loads((copy / walk_path).read_text())
-    walk["steps"][0]["details"]["polished"]["stand_in"] = "complete"
+    walk["steps"][0]["details"]["polished"] |= {"stand_in": "complete", "why": "the polish failed (infeasible)"}
     (copy / walk_path).write_text(json.dumps(walk))
     (section,) = build_report(copy, gait=key).gaits
-    assert any(note.startswith("Step 1: the polish failed") for note in section.gait.notes)
+    assert any(note.startswith("Step 1: the complete Second Phase solution") and
+               note.endswith("stands in for the polish: the polish failed (infeasible).")
+               for note in section.gait.notes)
     (section,) = build_report(store, gait=key).gaits
-    assert not any("stands in" in note for note in section.gait.notes)
+    assert not any("the polish failed (infeasible)" in note for note in section.gait.notes)
 
 
 def test_tracking_section_from_track_files(store, tmp_path):
@@ -558,7 +560,7 @@ def _synthetic_store(directory: Path) -> Path:
             "transcription": "hermite-simpson", "solver": "ipopt", "strategy": "one-phase", "repetition": 0,
             "wall_time_s": 1.0, "iterations": 10, "message": ""}
     complete = {"status": "solved", "stop_cause": "complete", "retries": 0, "steps_solved": 2,
-                "max_defect": 1e-10, "max_resim_error": 1e-6}
+                "max_defect": 1e-10, "max_resim_error": 1e-6, "verified": True}
     partial = {"status": "incomplete", "acot": None, "steps_solved": 1, "max_defect": 0.5, "max_resim_error": 0.5}
     rows = [
         {"method": "OP-DC", "N": 8, "acot": 0.30, "cot_steps": [0.20, 0.40], "cot_min": 0.20, "cot_max": 0.40,

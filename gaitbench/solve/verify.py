@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from gaitbench.model.energetics import cost_of_transport, hip_energy
+from gaitbench.model.energetics import cost_of_transport, hip_energy, push_off_work
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.simulate import OpenLoop, simulate
 from gaitbench.problem.gait_problem import StepData, role_robot_vector
@@ -41,7 +41,7 @@ class StepVerification:
     resim_error: float  # largest state error (angles in rad, rates in rad/s) at the step's end
     resim_max_error: float  # largest state error at any node along the step
     hip_energy: float  # J, the objective's running cost on a fine grid of the interpolant (net-power: exact |power|)
-    push_off_energy: float  # J, the push-off's work (kinetic-energy increase); the COT has its event cost
+    push_off_energy: float  # J, what the push-off is charged (ProblemOptions.push_off_cost); the COT has its event cost
     cot: float
     objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
     objective_gap: float | None = None  # (cot − objective_cot) / max(cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
@@ -60,11 +60,8 @@ def verify_step(
 
     objective = built.structure.objective
     energy = fine_grid_running_cost(trajectory, objective, role_robot_vector(data.robot, data.stance))
-    push_off_energy = 0.0
-    q_end, dq_end = trajectory.q[-1], trajectory.dq[-1]
-    if model.dof == 4:
-        foot = np.zeros(2)
-        _, push_off_energy = model.push_off(np.r_[q_end, foot], np.r_[dq_end, foot], trajectory.push_off, data.stance)
+    push_off_energy = push_off_charge(model, trajectory, built.structure.options.push_off_cost) \
+        if model.dof == 4 else 0.0
     cot = cost_of_transport(energy + objective.event_cost(push_off_energy), data.robot.total_mass, data.chord,
                             data.robot.g)
 
@@ -83,6 +80,16 @@ def verify_step(
         objective_gap=gap,
         objective_agrees=None if gap is None else bool(abs(gap) <= OBJECTIVE_RTOL),
     )
+
+
+def push_off_charge(model: BipedModel, trajectory: StepTrajectory, accounting: str) -> float:
+    """What the step's push-off is charged (J) under ``accounting`` (``ProblemOptions.push_off_cost``): the kinetic
+    energy the impulse adds to the robot, or the thesis's ½ m_stance |v_foot|² (:func:`push_off_work`)."""
+    foot = np.zeros(2)
+    dq_plus, gain = model.push_off(np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot],
+                                   trajectory.push_off, trajectory.stance)
+    stance_mass = role_robot_vector(model.robot, trajectory.stance)[0]
+    return float(push_off_work(accounting, gain, np.ravel(dq_plus)[2:4], stance_mass))
 
 
 def objective_gap(cot: float, objective_cot: float) -> float:

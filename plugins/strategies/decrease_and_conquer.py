@@ -47,7 +47,7 @@ from gaitbench.solve.parallel import WorkerPool
 from gaitbench.solve.rescue import coarse_grid_rescue
 from gaitbench.solve.solver import SolverResult, prepare
 from gaitbench.solve.synthesis import complete_sections, synthesize
-from gaitbench.solve.verify import verify_step
+from gaitbench.solve.verify import push_off_charge, verify_step
 from gaitbench.solve.walk import (
     StepOutcome,
     WalkProblem,
@@ -145,7 +145,7 @@ class DecreaseAndConquer:
                 failed.append({"k0": k0, "status": result.status.value, "message": result.message})
 
         costs = PointCosts(problem.objective, data.stance, role_robot_vector(data.robot, data.stance))
-        nodes = NodeValues.of(candidates, starts, n, h, problem.model("second"), costs)
+        nodes = NodeValues.of(candidates, starts, n, h, problem.model("second"), costs, problem.options.push_off_cost)
         synthesis = synthesize(nodes.pcot, nodes.values, max_checks=self.max_checks)
         completed = nodes.completed(starts)
         options = {"synthesized": nodes.patch(synthesis.selection)}
@@ -305,7 +305,8 @@ class NodeValues:
 
     @classmethod
     def of(cls, candidates: list[StepTrajectory], starts: list[int], n_nodes: int, h: float, model,
-           costs: PointCosts) -> NodeValues:
+           costs: PointCosts, push_off_cost: str) -> NodeValues:
+        """``push_off_cost``: how a push-off is charged (``ProblemOptions.push_off_cost``)."""
         shape = (len(candidates), n_nodes, 2)
         q, dq, tau = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
         push_off, energy = np.zeros(len(candidates)), np.zeros(len(candidates))
@@ -313,9 +314,7 @@ class NodeValues:
             q[j, start:], dq[j, start:] = trajectory.q, trajectory.dq
             tau[j, start:] = [trajectory.control(t) for t in trajectory.times]
             push_off[j] = trajectory.push_off
-            foot = np.zeros(2)
-            _, energy[j] = model.push_off(np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot],
-                                          trajectory.push_off, trajectory.stance)
+            energy[j] = push_off_charge(model, trajectory, push_off_cost)
         return cls(q, dq, tau, push_off, energy, costs)
 
     @property
