@@ -665,3 +665,16 @@ def test_provenance_shows_the_cpu_and_its_vector_extensions_as_one_row_each():
                                             "vector_extensions": ["AVX512F", "AVX2"]}}]
     table = tables.provenance_table(runs).set_index("item")["value"]
     assert table["cpu"] == "Intel(R) Xeon(R) Processor" and table["vector_extensions"] == "AVX512F AVX2"
+
+
+def test_each_thesis_cell_gets_a_verdict():
+    base = {"published_acot": 0.20, "bound_acot": 0.10, "published_below_bound": False, "claimed_acot": math.nan,
+            "thesis_reading_acot": math.nan}
+    assert tables.verdict(base | {"acot": 0.21, "difference_percent": 5.0}) == "reproduced"
+    below = tables.verdict(base | {"published_below_bound": True, "bound_acot": 0.5, "acot": 0.6})
+    assert below.startswith("published figure below the physical bound 0.5000")
+    missed = tables.verdict(base | {"acot": 0.30, "difference_percent": 50.0, "claimed_acot": 0.25,
+                                    "thesis_reading_acot": 0.22})
+    assert missed == ("not reproduced: our verified minimum 0.3000 (+50 %), claimed 0.2500, read the thesis's way "
+                      "0.2200")
+    assert tables.verdict(base | {"acot": math.nan}) == "not reproduced: no verified walk of this method"

@@ -148,6 +148,7 @@ def test_gaitbench_verify_rechecks_a_walk_file_and_fails_one_whose_join_was_brok
     report = json.loads(result.output)
     assert report["verified"] and report["acot"] == pytest.approx(walk.acot, rel=1e-6)
     assert report["max_join_mismatch"] < 1e-9
+    assert 0 < report["thesis_reading_acot"] == pytest.approx(walk.thesis_reading_acot)
 
     npz = path.parent / header["trajectories"]
     with np.load(npz) as stored:

@@ -20,7 +20,7 @@ from gaitbench.solve.acceptance import ACOT_RTOL
 @click.option("--store", type=click.Path(path_type=Path), default=None,
               help="Verify every stored walk of this results store and record the verdicts in its rows "
                    "(columns verified, verification_failure, max_join_mismatch, join_energy, max_defect, "
-                   "max_resim_error).")
+                   "max_resim_error, thesis_reading_acot).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object per walk instead of text.")
 @click.pass_context
 def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_json: bool) -> None:
@@ -99,6 +99,7 @@ def _report(path: Path, walk, stored_acot: Any) -> dict[str, Any]:
     return {"walk": str(path), "experiment": walk.experiment, "strategy": walk.strategy,
             "transcription": walk.transcription, "N": walk.N, "verified": not reasons, "reasons": reasons,
             "acot": verification.acot, "stored_acot": stored, "claimed_acot": walk.claimed_acot,
+            "thesis_reading_acot": walk.thesis_reading_acot,
             **{key: value for key, value in verification.as_dict().items()
                if key not in ("verified", "reason", "acot")}}
 
@@ -107,6 +108,7 @@ def _columns(walk) -> dict[str, Any]:
     """The store columns a walk's verdict fills: the flag, its reason, and the maxima of the steps it reports."""
     verification = walk.verification
     return {"verified": verification.verified, "verification_failure": verification.reason,
+            "thesis_reading_acot": walk.thesis_reading_acot,
             "max_join_mismatch": verification.max_join_mismatch, "join_energy": verification.join_energy,
             "max_defect": verification.max_defect, "max_resim_error": verification.max_resim_error}
 

@@ -57,7 +57,8 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     """
     df = cases.copy()
     for column in ("stop_cause", "stop_step", "stop_status", "retries", "back_ups", "cot_steps", "steps_solved",
-                   "objective", "verified", "verification_failure", "max_join_mismatch", "join_energy"):
+                   "objective", "verified", "verification_failure", "max_join_mismatch", "join_energy",
+                   "thesis_reading_acot"):
         if column not in df.columns:
             df[column] = None
     if df.empty:
@@ -91,6 +92,7 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
         for done, flag, reason in zip(complete, flags, df["verification_failure"], strict=True)]
     df["acot"] = df["verified_acot"].where(ranked)
     df["claimed_acot"] = df["claimed_acot"].where(ranked & df["is_dc"])
+    df["thesis_reading_acot"] = pd.to_numeric(df["thesis_reading_acot"], errors="coerce").where(ranked)
     for column in ("cot_min", "cot_max", "wall_time_s", "iterations", "max_defect", "max_resim_error", "N",
                    "retries", "back_ups", "steps_solved", "max_join_mismatch", "join_energy"):
         df[column] = pd.to_numeric(df[column], errors="coerce")

@@ -30,17 +30,17 @@ if TYPE_CHECKING:
 ENERGETICS_OPTIONS = ("mass_ratio", "length_ratio", "speed", "step_length", "slope")
 
 ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "verified", "completion_rate", "acot", "claimed_acot",
-                "cot_min",
+                "thesis_reading_acot", "cot_min",
                 "cot_max", "wall_time_s", "iterations", "retries", "max_defect", "max_resim_error", "is_minimum"]
 MINIMA_COLUMNS = ["experiment", "method", "thesis_method", "min_acot", "N_at_min", "claimed_acot_at_min",
-                  "N_values", "N_solved"]
+                  "thesis_reading_at_min", "N_values", "N_solved"]
 COT_BOUNDS_COLUMNS = ["experiment", "method", "N", "cot_min", "cot_max", "acot"]
 SAVINGS_COLUMNS = ["experiment", "method", "baseline", "baseline_kind", "N", "acot", "baseline_acot",
                    "savings_percent", "claimed_acot", "claimed_savings_percent"]
 PUBLISHED_COLUMNS = ["experiment", "thesis_method", "method", "published_acot", "published_N", "acot", "N_at_min",
-                     "difference", "difference_percent", "claimed_acot", "claimed_difference", "bound_acot",
-                     "published_below_bound", "thesis_push_off_bound_acot", "published_below_thesis_push_off_bound",
-                     "source"]
+                     "difference", "difference_percent", "claimed_acot", "claimed_difference", "thesis_reading_acot",
+                     "bound_acot", "published_below_bound", "thesis_push_off_bound_acot",
+                     "published_below_thesis_push_off_bound", "verdict", "source"]
 PUBLISHED_SAVINGS_COLUMNS = ["experiment", "comparison", "published_min_percent", "published_min_N",
                              "published_max_percent", "published_max_N", "min_percent", "min_N", "max_percent",
                              "max_N", "claimed_max_percent", "claimed_max_N", "source"]
@@ -85,7 +85,8 @@ def acot_table(df: pd.DataFrame) -> pd.DataFrame:
     grouped = solved.groupby(["experiment", "method", "N"], sort=False)
     table = grouped.agg(cases=("case_key", "size"), solved=("is_solved", "sum"), verified=("is_ranked", "sum"),
                         acot=("acot", "mean"),
-                        claimed_acot=("claimed_acot", "mean"), cot_min=("cot_min", "min"),
+                        claimed_acot=("claimed_acot", "mean"), thesis_reading_acot=("thesis_reading_acot", "mean"),
+                        cot_min=("cot_min", "min"),
                         cot_max=("cot_max", "max"), wall_time_s=("wall_time_s", "mean"),
                         iterations=("iterations", "mean"), retries=("retries", "sum"),
                         max_defect=("complete_defect", "max"), max_resim_error=("complete_resim", "max")).reset_index()
@@ -118,10 +119,11 @@ def method_minima(acot: pd.DataFrame, info: pd.DataFrame | None = None) -> pd.Da
         best = group[group["is_minimum"]]
         row = {"experiment": experiment, "method": method, "thesis_method": thesis.get((experiment, method)),
                "min_acot": math.nan, "N_at_min": None, "claimed_acot_at_min": math.nan,
-               "N_values": len(group), "N_solved": int((group["solved"] > 0).sum())}
+               "thesis_reading_at_min": math.nan, "N_values": len(group), "N_solved": int((group["solved"] > 0).sum())}
         if not best.empty:
             row |= {"min_acot": float(best["acot"].iloc[0]), "N_at_min": int(best["N"].iloc[0]),
-                    "claimed_acot_at_min": float(best["claimed_acot"].iloc[0])}
+                    "claimed_acot_at_min": float(best["claimed_acot"].iloc[0]),
+                    "thesis_reading_at_min": float(best["thesis_reading_acot"].iloc[0])}
         rows.append(row)
     return _integers(pd.DataFrame(rows, columns=MINIMA_COLUMNS), "N_at_min")
 
@@ -193,16 +195,43 @@ def published_comparison(minima: pd.DataFrame, bounds: Mapping[str, ExperimentBo
             row = {"experiment": experiment, "thesis_method": thesis_method, "method": None,
                    "published_acot": value, "published_N": n_published, "acot": math.nan, "N_at_min": None,
                    "difference": math.nan, "difference_percent": math.nan, "claimed_acot": math.nan,
-                   "claimed_difference": math.nan, **_bound_cells(value, bounds.get(experiment)),
+                   "claimed_difference": math.nan, "thesis_reading_acot": math.nan,
+                   **_bound_cells(value, bounds.get(experiment)),
                    "source": f"ch5 §2.3, {thesis_values.MINIMUM_ACOT_LINES[experiment]}"}
             if not match.empty:
                 m = match.iloc[0]
                 ours_acot, claimed = m["min_acot"], m["claimed_acot_at_min"]
                 row |= {"method": m["method"], "acot": ours_acot, "N_at_min": m["N_at_min"],
                         "difference": ours_acot - value, "difference_percent": 100 * (ours_acot - value) / value,
-                        "claimed_acot": claimed, "claimed_difference": claimed - value}
+                        "claimed_acot": claimed, "claimed_difference": claimed - value,
+                        "thesis_reading_acot": m["thesis_reading_at_min"]}
+            row["verdict"] = verdict(row)
             rows.append(row)
     return _integers(pd.DataFrame(rows, columns=PUBLISHED_COLUMNS), "N_at_min")
+
+
+REPRODUCED_WITHIN = 0.10
+"""A published figure is reproduced when our verified minimum lies within 10 % of it."""
+
+
+def verdict(row: Mapping[str, Any]) -> str:
+    """One cell of the thesis comparison in words: the published figure below the physical bound (no motion can
+    cost that little), reproduced (our verified minimum within :data:`REPRODUCED_WITHIN`), or not reproduced, with
+    what we measured instead."""
+    if row.get("published_below_bound") is True:
+        return f"published figure below the physical bound {row['bound_acot']:.4f}: no walk can cost that little"
+    ours = row.get("acot")
+    if ours is None or not math.isfinite(ours):
+        return "not reproduced: no verified walk of this method"
+    if abs(ours - row["published_acot"]) <= REPRODUCED_WITHIN * row["published_acot"]:
+        return "reproduced"
+    reading, claimed = row.get("thesis_reading_acot"), row.get("claimed_acot")
+    measured = [f"our verified minimum {ours:.4f} ({row['difference_percent']:+.0f} %)"]
+    if claimed is not None and math.isfinite(claimed):
+        measured.append(f"claimed {claimed:.4f}")
+    if reading is not None and math.isfinite(reading):
+        measured.append(f"read the thesis's way {reading:.4f}")
+    return "not reproduced: " + ", ".join(measured)
 
 
 def _bound_cells(published: float, bounds: ExperimentBounds | None) -> dict[str, Any]:

@@ -237,6 +237,7 @@ def walk_metrics(walk) -> dict[str, Any]:
     return {
         "acot": walk.acot,
         "claimed_acot": walk.claimed_acot,
+        "thesis_reading_acot": walk.thesis_reading_acot,
         "cot_steps": cots,
         "cot_min": min(solved) if solved else None,
         "cot_max": max(solved) if solved else None,

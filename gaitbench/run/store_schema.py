@@ -56,6 +56,7 @@ CASE_COLUMNS: dict[str, str] = {
     "message": "TEXT",
     "acot": "REAL",
     "claimed_acot": "REAL",
+    "thesis_reading_acot": "REAL",
     "cot_steps": "TEXT",
     "cot_min": "REAL",
     "cot_max": "REAL",
@@ -167,9 +168,9 @@ MIGRATIONS: tuple[Migration, ...] = (
               columns={"cases": {"objective": "TEXT"}},
               fill=("UPDATE cases SET objective = 'net-power' WHERE objective IS NULL",)),  # the only one before
     # left null in older rows: `gaitbench verify --store` checks their walk files and fills them
-    Migration(6, "whole-walk verification: the verified flag, its reason, the joins",
-              columns={"cases": {"verified": "INTEGER", "verification_failure": "TEXT", "max_join_mismatch": "REAL",
-                                 "join_energy": "REAL"}}),
+    Migration(6, "whole-walk verification: the verified flag, its reason, the joins; the thesis's reading",
+              columns={"cases": {"thesis_reading_acot": "REAL", "verified": "INTEGER", "verification_failure": "TEXT",
+                                 "max_join_mismatch": "REAL", "join_energy": "REAL"}}),
 )
 """Every schema change, oldest first; the last one's version is :data:`SCHEMA_VERSION`."""
 

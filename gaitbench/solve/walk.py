@@ -123,6 +123,9 @@ class WalkResult:
     verification: WalkVerification | None = field(default=None, repr=False)
     """The walk checked as one motion (:func:`gaitbench.solve.walk_verification.verify_walk`), set by whoever
     solved it (``gaitbench solve``, the suite runner) or re-checked it (``gaitbench verify``)."""
+    thesis_reading_acot: float | None = None
+    """The walk's figure as the thesis would have computed it (nodal powers, its push-off term; of each step's own
+    trajectory, so decrease and conquer's claim), set with :attr:`verification`."""
     resumed: dict = field(default_factory=dict)
     """For a walk resumed from a checkpoint (:mod:`gaitbench.solve.checkpoint`): how many of its steps were
     restored (``steps``) and the time it had run before it was stopped (``elapsed_s``); empty otherwise."""
@@ -171,6 +174,7 @@ class WalkResult:
             "complete": self.complete,
             "acot": self.acot,
             "claimed_acot": self.claimed_acot,
+            "thesis_reading_acot": self.thesis_reading_acot,
             "verified": self.verified,
             **({"verification": self.verification.as_dict()} if self.verification is not None else {}),
             "failure": self.failure,

@@ -20,11 +20,13 @@ import numpy as np
 
 from gaitbench.contracts import Strategy
 from gaitbench.model.energetics import average_cot
+from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.gait_problem import StepData, StepStructure
 from gaitbench.solve.acceptance import Thresholds, join_failure, step_failures
+from gaitbench.solve.thesis_reading import thesis_reading_acot
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult
 from gaitbench.solve.walk_file import WalkFile
@@ -125,7 +127,22 @@ def solve_verified(strategy: Strategy, problem: WalkProblem,
     and the suite runner both run."""
     walk = strategy.solve(problem, on_step=on_step)
     walk.verification = verify_walk(walk, problem.start_state(), problem.experiment.robot)
+    walk.thesis_reading_acot = thesis_reading_of(walk, problem.experiment)
     return walk
+
+
+def thesis_reading_of(walk: WalkResult, experiment: Experiment) -> float | None:
+    """The walk's ACOT as the thesis would have computed it (:mod:`gaitbench.solve.thesis_reading`), of the figure
+    the thesis would have reported: each step's own trajectory, so decrease and conquer's patchworks, the claim;
+    None unless the walk is complete."""
+    if not walk.complete:
+        return None
+    terrain = experiment.terrain
+    return thesis_reading_acot(
+        (step.trajectory, StepData(experiment.robot, step.stance, np.r_[step.trajectory.q[0], step.trajectory.dq[0]],
+                                   terrain.steps[step.index - 1].D, terrain.steps[step.index - 1].theta,
+                                   float(step.trajectory.times[1] - step.trajectory.times[0])))
+        for step in walk.steps)
 
 
 def reverify(walk_file: WalkFile, registry: PluginRegistry | None = None) -> WalkResult:
@@ -149,4 +166,5 @@ def reverify(walk_file: WalkFile, registry: PluginRegistry | None = None) -> Wal
                         previous_slope=terrain.ground_behind(step.index))
         motion.verification = verify_step(built, built.variables(trajectory, data), data, trajectory, model)
     walk.verification = verify_walk(walk, experiment.start_state(options.start_pose), experiment.robot)
+    walk.thesis_reading_acot = thesis_reading_of(walk, experiment)
     return walk
