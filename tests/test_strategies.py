@@ -436,7 +436,9 @@ def test_verification_tells_a_solution_from_a_patchwork(forward):
     x = built.initial_guess(data, patch.seed())
     check = verify_step(built, x, data, patch, problem.model("second"))
     assert check.max_defect < 1e-7
-    assert "polished" not in step.details
+    # not polished: the step reports its complete Second Phase solution, the motion the walk goes on from
+    assert step.details["polished"]["motion"] == "complete" and step.details["polished"]["why"] == "not polished"
+    assert step.verified is step.polished and step.polished.verification.max_defect < 1e-7
 
 
 def test_warm_start_records_the_first_phase(forward):

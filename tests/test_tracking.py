@@ -225,7 +225,7 @@ def test_track_command(saved, tmp_path):
 
 def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tmp_path):
     """Tracking follows the polished trajectory and compares with the verified ACOT, in memory and from the saved
-    walk; without polish there is no verified trajectory, and the chosen one is tracked."""
+    walk; without polish, the complete Second Phase solution each step reports."""
     from plugins.strategies.decrease_and_conquer import DecreaseAndConquer
 
     experiment = REGISTRY.create("experiment", "forward")
@@ -244,5 +244,5 @@ def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tm
 
     unpolished = DecreaseAndConquer(polish=False).solve(problem)
     result = track_walk(unpolished, "thesis", "ideal", "none", registry=REGISTRY)
-    assert result.walk["trajectory"] == "walk"
-    assert result.acot_reference == pytest.approx(unpolished.strategy_details["claimed_acot"], rel=1e-9)
+    assert result.walk["trajectory"] == "polished"
+    assert result.acot_reference == pytest.approx(unpolished.acot, rel=1e-9)
