@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 from functools import cache
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -17,12 +18,13 @@ from gaitbench.model.mechanics import BipedModel, biped_functions
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, role_robot_vector
+from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.problem.objective import NET_POWER
-from gaitbench.problem.step_cost import QUADRATURE_RULES
+from gaitbench.problem.step_cost import QUADRATURE_RULES, charged
 from gaitbench.problem.trajectory import Interpolant, StepTrajectory
 from gaitbench.solve.verify import OBJECTIVE_RTOL, StepVerification, fine_grid_running_cost, verify_step
-from gaitbench.solve.walk import StepOutcome, WalkResult
-from plugins.objectives.energy_costs import ActuatorWork
+from gaitbench.solve.walk import StepOutcome, WalkResult, next_step_state
+from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.dmoc import interval_motion
 
@@ -198,18 +200,17 @@ def _sign_changing_step(stance: int, a: float = 30.0, b: float = 20.0, periods: 
                           _interpolant=Interpolant(state, control))
 
 
+@pytest.mark.parametrize("objective", list(OBJECTIVES))
 @pytest.mark.parametrize("stance", [1, 2])
-def test_the_charged_power_is_its_magnitude_where_it_changes_sign(stance):
-    """Net power a sin + 2 b cos and actuator work |b cos| + |(a sin + b cos)|: their ∫|·| in closed form, where the
+def test_the_charged_power_is_its_magnitude_where_it_changes_sign(objective, stance):
+    """Net power a sin + 2 b cos; actuator work |b cos| + |(a sin + b cos)|: their ∫|·| in closed form, where the
     signed integrals vanish."""
     a, b = 30.0, 20.0
     trajectory = _sign_changing_step(stance, a, b)
     whole = 2 * trajectory.duration / np.pi  # ∫|sin| over whole periods, per unit amplitude
-    robot = np.zeros(8)
-    net = fine_grid_running_cost(trajectory, NET_POWER, robot)
-    assert net == pytest.approx(whole * np.hypot(a, 2 * b), rel=1e-3)
-    actuators = fine_grid_running_cost(trajectory, ActuatorWork(), robot)
-    assert actuators == pytest.approx(whole * (b + np.hypot(a, b)), rel=1e-3)
+    amplitude = {"net-power": np.hypot(a, 2 * b), "actuator-work": b + np.hypot(a, b)}[objective]
+    energy = fine_grid_running_cost(trajectory, OBJECTIVES[objective], np.zeros(8))
+    assert energy == pytest.approx(whole * amplitude, rel=1e-3)
 
 
 @pytest.mark.parametrize("objective", list(OBJECTIVES))
@@ -256,3 +257,53 @@ def test_a_leg_2_stance_step_of_unequal_legs_is_a_motion_of_that_robot(transcrip
     assert check.resim_max_error < max(2 * reference_check.resim_max_error, 0.02)
     # unequal legs walk another step: the lopsided robot's optimum is not the symmetric one's
     assert np.abs(trajectory.q - reference.q).max() > 1e-3
+
+
+@pytest.mark.parametrize("absolute_value", ["slack", "smooth"])
+def test_the_nlp_charges_positive_and_negative_work_by_their_own_weights(absolute_value):
+    """Margaria's actuator work as the NLP charges one power: 4 J per joule of positive work and 1/1.2 J per joule of
+    negative work, exactly with the slack split (at its optimum) and within ε·(w⁺ + w⁻)/2 with the thesis's
+    smoothed |P|."""
+    objective = ActuatorWork(margaria=True)
+    options = ProblemOptions(absolute_value=absolute_value)
+    structure = StepStructure("second", 5, options, objective=objective)
+    builder = NLPBuilder()
+    power = builder.variable("power", (1, 1), -np.inf, np.inf)
+    cost = charged(builder, structure, "charge", power)
+    nlp = builder.build(ca.SX.sym("p", 0), cost)
+    tolerance = options.smoothing_eps * (objective.positive_weight + objective.negative_weight) / 2
+    for value, expected in ((10.0, 4 * 10.0), (-12.0, 12.0 / 1.2)):
+        x = np.zeros(nlp.n_variables)
+        x[nlp.variable_blocks["power"]] = value
+        if absolute_value == "slack":  # the split at its optimum: the power's positive and negative parts
+            x[nlp.variable_blocks["charge_positive"]] = max(value, 0.0)
+            x[nlp.variable_blocks["charge_negative"]] = max(-value, 0.0)
+            assert nlp.violation(x, np.zeros(0)) == 0.0
+        assert float(nlp.functions.objective(x, np.zeros(0))) == pytest.approx(expected, abs=tolerance + 1e-12)
+
+
+def test_torque_squared_scales_by_the_robot_s_own_units_on_a_leg_that_is_not_1_m():
+    """c = 1 / (M g l √(l/g)): torques in units of M g l over times in units of √(l/g). On a 1 m leg, √(g/l) and
+    √(g l) coincide; on 0.8 m they do not."""
+    robot = dataclasses.replace(LOPSIDED, l=0.8, a=0.35)
+    vector = role_robot_vector(robot, 1)
+    rate = TorqueSquared().rate(np.zeros((1, 2)), np.array([[3.0, 4.0]]), 1, vector)
+    unit_torque, unit_time = robot.total_mass * robot.g * robot.l, np.sqrt(robot.l / robot.g)
+    assert rate == pytest.approx(25.0 / (unit_torque * unit_time), rel=1e-12)
+
+
+def test_the_next_step_starts_after_the_push_off_and_the_heel_strike():
+    """The heel strike's only impulse acts at the landing foot, so the robot's angular momentum about that foot just
+    after the push-off is the one the next step starts with (the old stance foot lifting off); the push-off, whose
+    impulse acts along the stance leg, changes it first."""
+    _, _, data, trajectory, model, _ = solved_step()
+    stance = data.stance
+    q, dq = np.r_[trajectory.q[-1], 0.0, 0.0], np.r_[trajectory.dq[-1], 0.0, 0.0]
+    pushed, _ = model.push_off(q, dq, trajectory.push_off, stance)
+    momentum = model.angular_momentum_about_swing_foot(q, pushed, stance)
+    assert abs(momentum - model.angular_momentum_about_swing_foot(q, dq, stance)) > 0.01 * abs(momentum)
+    start = next_step_state(model, trajectory)
+    lifting_foot = model.heel_strike(q, pushed, stance).lifting_foot_velocity
+    after = model.angular_momentum_about_swing_foot(q, np.r_[start[2:], lifting_foot], stance)
+    assert after == pytest.approx(momentum, rel=1e-9)
+    np.testing.assert_allclose(start[:2], trajectory.q[-1], atol=1e-12)  # angles unchanged, legs' labels kept
