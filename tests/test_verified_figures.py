@@ -60,16 +60,14 @@ def solved_step(experiment_name: str = "stairs", transcription: str = "hermite-s
     return built, result.x, data, trajectory, model, verify_step(built, result.x, data, trajectory, model)
 
 
-def dense_running_cost(trajectory: StepTrajectory, objective, stance: int, robot: np.ndarray,
-                       samples_per_interval: int = 400) -> float:
-    """∫ r dt by the trapezoid rule on a dense grid of each interval (read just inside its ends)."""
+def dense_hip_energy(trajectory: StepTrajectory, samples_per_interval: int = 400) -> float:
+    """∫ |τ·q̇| dt by the trapezoid rule on a dense grid of each interval (read just inside its ends)."""
     energy = 0.0
     for start, end in zip(trajectory.times[:-1], trajectory.times[1:], strict=True):
         t = np.linspace(start, end, samples_per_interval + 1)
         inside = np.clip(t, start + 1e-12, end - 1e-12)
-        dq = np.array([trajectory.state(s)[1] for s in inside])
-        tau = np.array([trajectory.control(s) for s in inside])
-        energy += np.trapezoid(objective.rate(dq, tau, stance, robot), t)
+        power = [trajectory.control(s) @ trajectory.state(s)[1] for s in inside]
+        energy += np.trapezoid(np.abs(power), t)
     return float(energy)
 
 
@@ -78,7 +76,7 @@ def test_the_verified_cot_charges_the_push_off_energy():
     on a solved stairs step (whose optimum pushes off) and on the same step with a harder push."""
     built, x, data, trajectory, model, _ = solved_step()
     robot = data.robot
-    hip = dense_running_cost(trajectory, NET_POWER, data.stance, role_robot_vector(robot, data.stance))
+    hip = dense_hip_energy(trajectory)
     q = np.r_[trajectory.q[-1], 0.0, 0.0]
     dq = np.r_[trajectory.dq[-1], 0.0, 0.0]
     for impulse in (trajectory.push_off, 3 * trajectory.push_off + 20.0):
@@ -153,6 +151,17 @@ def test_acot_is_the_mean_of_a_complete_walk_and_none_for_a_partial_one():
         assert not partial.complete and partial.acot is None
         assert partial.as_dict()["acot"] is None
     assert walk([0.2, 0.5, None], 3).failure == "step 3: infeasible: made up"
+
+
+def test_a_polished_step_reports_its_polished_outcome_when_that_solved():
+    """Decrease and conquer's patchwork need not be a motion: the step's verified outcome (the trajectory tracked and
+    reported) is its polished re-solve, unless that failed."""
+    patchwork, polished = _outcome(1, 0.3), _outcome(1, 0.4)
+    patchwork.polished = polished
+    assert patchwork.verified is polished
+    patchwork.polished = _outcome(1, None)
+    assert patchwork.verified is patchwork
+    assert _outcome(1, 0.3).verified.verification.cot == 0.3
 
 
 EXACT_DEGREE = {"trapezoid": 1, "simpson": 3, "boole": 5}
