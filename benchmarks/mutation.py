@@ -245,7 +245,8 @@ def table(outcomes: list[Outcome], selection: str, commit: str) -> str:
     ]
     for outcome in outcomes:
         test = outcome.failed_test.removeprefix("tests/")
-        lines.append(f"| {outcome.mutant.name} | `{outcome.mutant.path}` | {outcome.status} | "
+        name = outcome.mutant.name.replace("|", "\\|")  # a table cell's own bars
+        lines.append(f"| {name} | `{outcome.mutant.path}` | {outcome.status} | "
                      f"{f'`{test}`' if test else ''} | {outcome.seconds:.0f} |")
     return "\n".join(lines) + "\n"
 
