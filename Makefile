@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 INSTALLED := $(VENV)/.installed
 
-.PHONY: run test lint
+.PHONY: run test lint mutation
 
 # The main job: the demo suite (the four terrains walked whole at N = 20, OP-DC and OP-DM: 8 walks solved and
 # verified), its result table and the path of its HTML report, in about a minute on 2 cores. The store is
@@ -16,6 +16,10 @@ run: $(INSTALLED)
 
 test: $(INSTALLED)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/pytest -q  # threaded BLAS thrashes small dense solves on 2 cores
+
+# Which hand-made mistakes in the figures' code the fast tests catch (benchmarks/mutation.py; --full: every test).
+mutation: $(INSTALLED)
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python benchmarks/mutation.py
 
 lint: $(INSTALLED)
 	$(VENV)/bin/ruff check .

@@ -306,3 +306,16 @@ def test_the_recorded_solver_table_is_the_rendering_of_the_recorded_results():
     solvers = _solvers_module()
     results = json.loads((BENCHMARKS / "results" / "solvers.json").read_text())
     assert solvers.markdown(results) == (BENCHMARKS / "results" / "solvers.md").read_text()
+
+
+def test_every_mutant_of_the_mutation_check_names_text_that_occurs_once_in_its_file():
+    """A mutant whose text the code no longer has (or has twice) would test nothing: the list must follow the code."""
+    mutation = _benchmark("mutation")
+    root = BENCHMARKS.parent
+    names = [mutant.name for mutant in mutation.MUTANTS]
+    assert len(set(names)) == len(names)
+    for mutant in mutation.MUTANTS:
+        text = (root / mutant.path).read_text()
+        assert text.count(mutant.original) == 1, mutant.name
+        assert mutant.replacement != mutant.original
+    assert all((root / test).is_file() for test in mutation.FAST_TESTS)
