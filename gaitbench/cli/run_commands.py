@@ -371,7 +371,8 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Output file [default: STORE/cases.csv or STORE/cases.parquet].")
 def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
-    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV)."""
+    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV; text a spreadsheet would take
+    for a formula, such as a label beginning with =, escaped with a leading ')."""
     import json
 
     from gaitbench.run.store import load_results
@@ -386,7 +387,9 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     out = out or Path(store_dir) / f"cases.{fmt}"
     try:
         if fmt == "csv":
-            frame.to_csv(out, index=False)
+            from gaitbench.reports.tables import spreadsheet_safe
+
+            spreadsheet_safe(frame).to_csv(out, index=False)
         else:
             frame.to_parquet(out, index=False)
     except OSError as error:  # e.g. the default, inside a store in a read-only place
