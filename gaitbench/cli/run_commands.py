@@ -128,12 +128,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             raise click.BadParameter(str(error), param_hint="--method") from None
     if scheduler:
         executor = "dask"
-    if executor != "inprocess" and not scheduler:  # the workers share this machine's memory
-        from gaitbench.run.memory import concurrent_problem
-
-        problem = concurrent_problem(list(suite.memory_mb.values()), jobs)
-        if problem is not None:
-            raise click.BadParameter(problem, param_hint="--jobs")
+    if executor != "inprocess" and not scheduler:  # the workers start on this machine
+        jobs = _jobs_that_help(jobs, suite, console)
     store_dir = store_dir or suite.output
     rerun: set[str] = set()
     if retry_inconsistent and Path(store_dir).exists():
@@ -194,6 +190,22 @@ def _suite_results(suite, store_dir: Path) -> Table:
                       _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
                       ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
     return table
+
+
+def _jobs_that_help(jobs: int, suite, console: Console) -> int:
+    """``--jobs``, lowered with a warning line to the number of cases (more workers would only idle) and to what
+    fits in this machine's memory (:func:`gaitbench.run.memory.jobs_that_fit`)."""
+    from gaitbench.run.memory import jobs_that_fit
+
+    if jobs > len(suite.cases) > 0:
+        console.print(Text(f"warning: --jobs {jobs} lowered to {len(suite.cases)}: the suite has "
+                           f"{len(suite.cases)} cases", style="yellow"), soft_wrap=True)
+        jobs = len(suite.cases)
+    fitting, why = jobs_that_fit([suite.memory_mb[case.key] for case in suite.cases if case.key in suite.memory_mb],
+                                 jobs)
+    if why is not None:
+        console.print(Text(f"warning: --jobs {jobs} lowered to {fitting}: {why}", style="yellow"), soft_wrap=True)
+    return fitting
 
 
 def _executor(name: str, jobs: int, scheduler: str | None):
