@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
-from contextlib import ExitStack
+import signal
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -104,7 +106,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
     the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
-    Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
+    Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid, 143 if stopped by
+    SIGTERM (which, like Ctrl-C, stops the workers and keeps every finished case).
     """
     from gaitbench.run.executors import ExecutorError
     from gaitbench.run.runner import RunRefused, run_suite
@@ -137,14 +140,18 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             rerun = inconsistent_keys(Path(store_dir), band, tolerance)
         except StoreError as error:
             raise click.ClickException(str(error)) from None
-    with CaseProgress(console, StepsInFlight(Path(store_dir), suite.cases)) as progress:
-        try:
+    try:
+        with CaseProgress(console, StepsInFlight(Path(store_dir), suite.cases)) as progress, _sigterm_unwinds():
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
                                 retry_unverified=retry_unverified, rerun=rerun, smallest_first=smallest_first,
                                 on_start=progress.start, on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
-        except (RunRefused, StoreError, ExecutorError) as error:
-            raise click.ClickException(str(error)) from None
+    except (RunRefused, StoreError, ExecutorError) as error:
+        raise click.ClickException(str(error)) from None
+    except Terminated as stop:
+        console.print(f"stopped by SIGTERM; the finished cases are in {store_dir}: run again with --resume to do "
+                      "the rest")
+        raise SystemExit(stop.code) from None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
@@ -190,6 +197,30 @@ def _suite_results(suite, store_dir: Path) -> Table:
                       _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
                       ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
     return table
+
+
+class Terminated(SystemExit):
+    """SIGTERM, raised where the run is, so that it unwinds (:func:`_sigterm_unwinds`)."""
+
+
+@contextmanager
+def _sigterm_unwinds() -> Iterator[None]:
+    """SIGTERM stops the run as Ctrl-C does, unwinding: the finished cases recorded, the run closed in the store, the
+    workers stopped and what they share with this process released (ended outright, the resource tracker warned of
+    leaked semaphores). A second SIGTERM ends the process at once. Exit status 128 + SIGTERM, as a shell reports."""
+    def stop(signum: int, frame) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        raise Terminated(128 + signum)
+
+    try:
+        previous = signal.signal(signal.SIGTERM, stop)
+    except ValueError:  # not the main thread (an embedding program's): its own handling stays
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _jobs_that_help(jobs: int, suite, console: Console) -> int:
