@@ -133,7 +133,7 @@ class DaskExecutor:
         from distributed import Client, LocalCluster
         from distributed import as_completed as dask_completed
 
-        with dask.config.set({NOT_DAEMONIC: False}):  # read by the local nannies at every start of a worker
+        with dask.config.set({DAEMON_SETTING: False}):  # read by the local nannies at every start of a worker
             cluster = None
             if self.scheduler is None:
                 cluster = LocalCluster(n_workers=self.jobs, threads_per_worker=1, processes=True,
@@ -164,8 +164,9 @@ class DaskExecutor:
                     cluster.close()
 
 
-NOT_DAEMONIC = "distributed.worker.daemon"
-"""The Dask setting that, false, keeps a nanny's worker a process that may start the process its cases run in."""
+DAEMON_SETTING = "distributed.worker.daemon"
+"""The Dask setting whose value a nanny gives its worker's daemon flag: false, the worker may start the process its
+cases run in."""
 
 DAEMONIC_FIX = ("start the workers with DASK_DISTRIBUTED__WORKER__DAEMON=False in the environment of `dask worker` "
                 "(or distributed.worker.daemon: false in its Dask configuration), or with `dask worker --no-nanny`")
