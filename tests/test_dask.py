@@ -27,11 +27,15 @@ class Slow:
     """IPOPT after a pause: a case long enough for its worker to be killed while it runs."""
     name = "slow-ipopt"
 
-    def __init__(self, pause_s=4.0, **options):
+    def __init__(self, pause_s=3.0, log=None, **options):
         from plugins.solvers.ipopt import Ipopt
-        self.pause_s, self.ipopt = pause_s, Ipopt(**options)
+        self.pause_s, self.log, self.ipopt = pause_s, log, Ipopt(**options)
 
     def solve(self, nlp, parameters, initial_guess):
+        import os
+        if self.log:  # the Dask worker whose case process this is
+            with open(self.log, "a") as file:
+                file.write(f"{os.getppid()} ")
         time.sleep(self.pause_s)
         return self.ipopt.solve(nlp, parameters, initial_guess)
 
@@ -56,8 +60,8 @@ def register_solvers():
 '''
 
 
-def slow_case(n_nodes: int, plugin_dir: Path, solver: str = "slow-ipopt") -> Case:
-    return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice(solver),
+def slow_case(n_nodes: int, plugin_dir: Path, solver: str = "slow-ipopt", **options) -> Case:
+    return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice(solver, options),
                 PluginChoice("one-phase"), steps=1, method="OP-DC slow", time_limit_s=120,
                 plugin_dirs=(str(plugin_dir),))
 
@@ -72,39 +76,40 @@ def _plugin_dir(tmp_path: Path) -> Path:
     return tmp_path / "plugins"
 
 
-def _busy_dask_worker() -> psutil.Process | None:
-    """A worker process of this process's local cluster that is running a case: a child of this process (the
-    nannies run here) with a child of its own (the process its case runs in)."""
+def _dask_workers() -> list[psutil.Process]:
+    """The worker processes of this process's local cluster: its children started by spawn (the nannies run here)."""
+    workers = []
     for child in psutil.Process().children():
         try:
-            if child.children() and "spawn" in " ".join(child.cmdline()):
-                return child
+            if "spawn_main" in " ".join(child.cmdline()):
+                workers.append(child)
         except psutil.NoSuchProcess:
             continue
-    return None
+    return workers
 
 
-@pytest.mark.slow
 def test_a_killed_local_worker_s_case_is_solved_on_another_and_its_replacement_runs_cases(tmp_path: Path) -> None:
-    """kill -9 of a worker of the local cluster mid-case: every case is solved, none recorded as an error, and the
-    case processes of the dead worker are gone with it."""
-    plugins = _plugin_dir(tmp_path)
-    cases = [slow_case(n, plugins) for n in (8, 9, 10, 11, 12, 13)]
+    """kill -9 of a worker of the local cluster mid-case: every case is solved, none recorded as an error (the
+    replacement the nanny starts is not daemonic, and runs cases), and the dead worker's case process is gone."""
+    plugins, log = _plugin_dir(tmp_path), tmp_path / "workers.log"
+    cases = [slow_case(n, plugins, log=str(log)) for n in (8, 9, 10, 11)]
     suite = _suite(tmp_path, cases)
     killed: list[int] = []
+    first: set[int] = set()
     orphans: list[int] = []
 
     def kill_one_worker() -> None:
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
-            worker = _busy_dask_worker()
-            if worker is not None:
-                time.sleep(1.0)  # inside its case's pause
+            started = log.read_text().split() if log.exists() else []
+            if started:  # a case is in its pause, in a process of this worker
+                worker = psutil.Process(int(started[0]))
+                first.update(process.pid for process in _dask_workers())
                 orphans.extend(child.pid for child in worker.children(recursive=True))
                 os.kill(worker.pid, signal.SIGKILL)
                 killed.append(worker.pid)
                 return
-            time.sleep(0.2)
+            time.sleep(0.1)
 
     killer = threading.Thread(target=kill_one_worker, daemon=True)
     killer.start()
@@ -115,6 +120,9 @@ def test_a_killed_local_worker_s_case_is_solved_on_another_and_its_replacement_r
     rows = gaitbench.load_results(tmp_path / "store").to_dict("records")
     assert {row["status"]: row["message"] for row in rows if row["status"] != "solved"} == {}
     assert summary.solved == len(cases) == len(rows) and summary.failed == 0
+    ran_on = [int(pid) for pid in log.read_text().split()]
+    assert len(ran_on) == len(cases) + 1  # the killed case's solve started twice
+    assert set(ran_on) - first, "the replacement worker ran no case"
     assert not [pid for pid in orphans if psutil.pid_exists(pid)
                 and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE]
 
