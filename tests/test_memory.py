@@ -198,3 +198,21 @@ def test_run_lowers_jobs_to_the_cases_and_to_what_fits_together_with_a_warning(t
 
     with ResultStore.open(tmp_path / "s") as store:
         assert [run["jobs"] for run in store.runs()] == [1]
+
+
+def test_a_resumed_run_starts_no_more_workers_than_cases_left(tmp_path, monkeypatch):
+    monkeypatch.delenv(MEMORY_LIMIT_ENV, raising=False)
+    store = tmp_path / "s"
+    first = CliRunner().invoke(main, ["run", str(_suite(tmp_path, [8], transcription="hermite-simpson")),
+                                      "--executor", "inprocess", "--no-report", "--store", str(store)])
+    assert first.exit_code == 0, first.output
+    path = _suite(tmp_path, [8, 9], transcription="hermite-simpson")
+    result = CliRunner().invoke(main, ["run", str(path), "--resume", "--jobs", "2", "--no-report", "--store",
+                                       str(store)])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning: --jobs")]
+    assert warnings == ["warning: --jobs 2 lowered to 1: 1 of the suite's cases are left to run"]
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.open(store) as opened:
+        assert [(run["executor"], run["jobs"]) for run in opened.runs()] == [("inprocess", 1), ("local", 1)]

@@ -145,7 +145,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
                                 retry_unverified=retry_unverified, rerun=rerun, smallest_first=smallest_first,
-                                on_start=progress.start, on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
+                                on_start=_warning_fewer_cases(jobs if not scheduler else 0, progress, console),
+                                on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
     except (RunRefused, StoreError, ExecutorError) as error:
         raise click.ClickException(str(error)) from None
     except Terminated as stop:
@@ -237,6 +238,18 @@ def _jobs_that_help(jobs: int, suite, console: Console) -> int:
     if why is not None:
         console.print(Text(f"warning: --jobs {jobs} lowered to {fitting}: {why}", style="yellow"), soft_wrap=True)
     return fitting
+
+
+def _warning_fewer_cases(jobs: int, progress: CaseProgress, console: Console):
+    """``progress.start``, after the warning line that ``jobs`` workers are lowered to the cases left to run (the
+    runner starts no more: a resumed run's few cases)."""
+    def start(to_run: int, skipped: int) -> None:
+        if 0 < to_run < jobs:
+            console.print(Text(f"warning: --jobs {jobs} lowered to {to_run}: {to_run} of the suite's cases are left "
+                               "to run", style="yellow"), soft_wrap=True)
+        progress.start(to_run, skipped)
+
+    return start
 
 
 def _executor(name: str, jobs: int, scheduler: str | None):
