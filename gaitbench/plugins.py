@@ -3,7 +3,8 @@
 Plugins come from two places: the ``gaitbench`` entry-point group (the built-in plugins use it too, so they
 get no special treatment) and plugin directories, whose ``*.py`` files are loaded as one-off plugins. Every
 source is loaded and asked for its registrations on its own, so one broken plugin becomes a recorded
-:class:`PluginProblem` instead of taking the whole tool down.
+:class:`PluginProblem` instead of taking the whole tool down: whatever it raises, ``SystemExit`` included, except
+a ``KeyboardInterrupt``, which is the user's.
 """
 
 from __future__ import annotations
@@ -218,7 +219,9 @@ def load_registry(plugin_dirs: Sequence[str | Path] = (), *, use_entry_points: b
         source = str(path)
         try:
             module = _import_file(path)
-        except Exception as exc:
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # SystemExit too: one plugin's exit() must not end every command
             problems.append(PluginProblem(source, f"import failed: {_describe(exc)}"))
             continue
         _register(manager, module, source, problems)
@@ -230,7 +233,9 @@ def _load_entry_points(manager: pluggy.PluginManager, problems: list[PluginProbl
     for entry_point in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda ep: ep.name):
         try:
             plugin = entry_point.load()
-        except Exception as exc:
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # SystemExit too, as for plugin files
             problems.append(
                 PluginProblem(
                     f"entry point {entry_point.name!r} ({entry_point.value})",
@@ -318,7 +323,9 @@ def _collect(manager: pluggy.PluginManager, problems: list[PluginProblem]) -> li
         for impl in getattr(manager.hook, hook_name).get_hookimpls():
             try:
                 result = impl.function()
-            except Exception as exc:
+            except KeyboardInterrupt:
+                raise
+            except BaseException as exc:
                 problems.append(PluginProblem(impl.plugin_name, f"{hook_name}() raised {_describe(exc)}"))
                 continue
             error = _registration_error(result)

@@ -14,8 +14,8 @@ from gaitbench.plugins import load_registry
 from gaitbench.run.memory import (
     MEMORY_LIMIT_ENV,
     MemoryLimit,
-    concurrent_problem,
     estimate_case_memory,
+    jobs_that_fit,
     largest_fitting_nodes,
     memory_limit,
     memory_problem,
@@ -123,11 +123,13 @@ def test_the_message_gives_the_estimate_the_limit_and_the_fix():
 
 def test_workers_that_start_together_must_fit_together():
     limit = MemoryLimit(2048, "available on this machine")
-    assert concurrent_problem([1500, 400, 300], 2, limit) is None
-    assert concurrent_problem([1500, 1000], 1, limit) is None
-    message = concurrent_problem([1500, 1000, 300], 2, limit)
-    assert message.startswith("2 workers start the 2 largest cases together (largest N first), which need about "
-                              "2.4 GB together, more than the 2.0 GB available on this machine. Use --jobs 1")
+    assert jobs_that_fit([1500, 400, 300], 2, limit) == (2, None)
+    assert jobs_that_fit([1500, 1000], 1, limit) == (1, None)
+    assert jobs_that_fit([300, 1500, 400, 200], 4, limit)[0] == 2  # the largest first: 1500 + 400 fit, + 300 not
+    fitting, why = jobs_that_fit([1500, 1000, 300], 2, limit)
+    assert fitting == 1 and why.startswith(
+        "2 workers would start the 2 largest cases together (largest N first), which need about 2.4 GB together, "
+        "more than the 2.0 GB available on this machine; 1 fit")
 
 
 # At suite load and in `gaitbench solve`
@@ -181,10 +183,36 @@ def test_solve_refuses_a_size_that_cannot_fit(monkeypatch):
     assert "Lower N to at most" in error and "ACOT" not in result.stdout
 
 
-def test_run_refuses_workers_whose_largest_cases_cannot_fit_together(tmp_path, monkeypatch):
-    monkeypatch.setenv(MEMORY_LIMIT_ENV, "800M")  # one HS case at N = 2000 fits (about 480 MB), two do not
-    path = _suite(tmp_path, [1900, 2000], transcription="hermite-simpson")
-    result = CliRunner().invoke(main, ["run", str(path), "--jobs", "2", "--no-report", "--store", str(tmp_path / "s")])
-    assert result.exit_code == 2
-    assert "Invalid value for --jobs: 2 workers start the 2 largest cases together" in " ".join(result.stderr.split())
-    assert not (tmp_path / "s").exists()
+def test_run_lowers_jobs_to_the_cases_and_to_what_fits_together_with_a_warning(tmp_path, monkeypatch):
+    """--jobs 3 on 2 cases starts 2 workers at most, and 1 when two N = 8 cases (about 170 MB each) do not fit in
+    300 MB together: each lowering is one warning line, and the run goes on."""
+    monkeypatch.setenv(MEMORY_LIMIT_ENV, "300M")
+    path = _suite(tmp_path, [8, 9], transcription="hermite-simpson")
+    result = CliRunner().invoke(main, ["run", str(path), "--jobs", "3", "--no-report", "--store", str(tmp_path / "s")])
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning: --jobs")]
+    assert warnings[0] == "warning: --jobs 3 lowered to 2: the suite has 2 cases"
+    assert warnings[1].startswith("warning: --jobs 2 lowered to 1: 2 workers would start the 2 largest cases "
+                                  "together (largest N first), which need about 3")
+    assert len(warnings) == 2 and "Traceback" not in result.output
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.open(tmp_path / "s") as store:
+        assert [run["jobs"] for run in store.runs()] == [1]
+
+
+def test_a_resumed_run_starts_no_more_workers_than_cases_left(tmp_path, monkeypatch):
+    monkeypatch.delenv(MEMORY_LIMIT_ENV, raising=False)
+    store = tmp_path / "s"
+    first = CliRunner().invoke(main, ["run", str(_suite(tmp_path, [8], transcription="hermite-simpson")),
+                                      "--executor", "inprocess", "--no-report", "--store", str(store)])
+    assert first.exit_code == 0, first.output
+    path = _suite(tmp_path, [8, 9], transcription="hermite-simpson")
+    result = CliRunner().invoke(main, ["run", str(path), "--resume", "--jobs", "2", "--no-report", "--store",
+                                       str(store)])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning: --jobs")]
+    assert warnings == ["warning: --jobs 2 lowered to 1: 1 of the suite's cases are left to run"]
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.open(store) as opened:
+        assert [(run["executor"], run["jobs"]) for run in opened.runs()] == [("inprocess", 1), ("local", 1)]

@@ -130,6 +130,29 @@ def test_plugins_that_fail_to_import_are_problems_and_others_still_load(
     assert "SyntaxError" in problems[str(broken_file.resolve())]
 
 
+def test_plugins_that_exit_at_import_are_problems_and_others_still_load(
+    fake_entry_points, plugin_file, experiment_plugin
+):
+    fake_entry_points("ep_exits", "import sys\nsys.exit('no licence server')\n")
+    fake_entry_points("ep_good", experiment_plugin("good-ep"))
+    exiting_file = plugin_file("exiting_file", "raise SystemExit(3)\n")
+    plugin_file("good_file", experiment_plugin("good-file"))
+
+    registry = load_registry([exiting_file.parent])
+
+    assert registry.names("experiment") == ["good-ep", "good-file"]
+    problems = {p.source: p.message for p in registry.problems}
+    assert problems == {"entry point 'ep_exits' (ep_exits)": "import failed: SystemExit: no licence server",
+                        str(exiting_file.resolve()): "import failed: SystemExit: 3"}
+
+
+def test_a_keyboard_interrupt_at_plugin_import_is_not_swallowed(plugin_file):
+    interrupting = plugin_file("interrupting", "raise KeyboardInterrupt\n")
+
+    with pytest.raises(KeyboardInterrupt):
+        load_registry([interrupting.parent], use_entry_points=False)
+
+
 def test_hook_that_raises_is_a_problem_and_others_still_load(fake_entry_points, experiment_plugin):
     fake_entry_points(
         "ep_raises",

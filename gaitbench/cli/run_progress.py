@@ -34,6 +34,12 @@ class StepsInFlight(ProgressColumn):
             self.text = Text(steps_in_flight(saved_progress(self.directory), self.labels))
         return self.text
 
+    def finished(self, key: str) -> None:
+        """The case ``key`` is done: no longer in flight, though a failed walk keeps its checkpoint (for ``--resume``)
+        and so its saved steps."""
+        self.labels.pop(key, None)
+        self.read_at = -math.inf
+
     def new_steps(self, seen: dict[str, int]) -> list[str]:
         """``step 3 of 11 saved (forward N=140 D&C-DM), 1.25 h`` for each walk of this suite whose saved steps
         changed since ``seen`` (case key → steps saved, updated here; fewer is a walk started again from step 1,
@@ -130,7 +136,7 @@ class CaseProgress:
 
     def advance(self, outcome) -> None:
         self.done += 1
-        self.in_flight.read_at = -math.inf  # the finished walk's steps are no longer in flight
+        self.in_flight.finished(outcome.case.key)
         total = self.progress.tasks[0].total or 0
         if outcome.failed:
             self.failed += 1

@@ -103,8 +103,6 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     ``gait`` is a case key (or a unique prefix) whose gait is shown; by default each sweep experiment's solved case
     with the lowest verified ACOT. ``progress(what, done, total)`` is told about each part as it is done.
     """
-    import numpy as np
-
     from gaitbench.reports import case_frame
     from gaitbench.reports import figures as fig
     from gaitbench.reports import statistics as st
@@ -112,6 +110,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
     from gaitbench.run.store import ResultStore, load_results
     from gaitbench.run.store_schema import StoreError
+    from gaitbench.solve.walk_file import WalkFileError, beside, read_arrays
 
     own = not isinstance(progress, _Steps)
     steps = _Steps(progress) if own else progress
@@ -196,11 +195,13 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         steps.start(f"tracking of {case['experiment']}, {case['method']}, N = {int(case['N'])}")
         label = f"{case['experiment']}, {case['method']}, N = {int(case['N'])} (case {key})"
         series = {}
-        name = summary.get("series")
-        npz_path = (store_dir / case["tracking_path"]).parent / name if name else None
-        if npz_path is not None and npz_path.is_file():
-            with np.load(npz_path) as npz:
-                series = {k: npz[k] for k in npz.files}
+        if summary.get("series"):
+            try:  # a series that is gone, broken or points outside the store costs its figures, not the report
+                npz_path = beside(store_dir / case["tracking_path"], summary["series"])
+                if npz_path.is_file():
+                    series = read_arrays(npz_path, "track the walk again")
+            except (ValueError, WalkFileError) as error:
+                report.gait_problems.append(f"case {key}: tracking series not shown ({error})")
         report.tracking.append(TrackingSection(key, label, summary, fig.tracking_figures(key, label, series, summary)))
     if own:
         steps.finish()

@@ -7,7 +7,8 @@ A quarter of the case's time limit is each solve's own limit (so a slow solve en
 status and the next rung of the retry ladder gets the rest), and the whole limit is the walk's deadline, after which
 no solve starts. Outside the in-process executor the limit is also enforced from outside: a case still running at
 1.25 × its limit + 30 s has its process stopped and is recorded as ``timeout``. A worker that dies takes only its
-case with it (``crashed``, with the exit signal); the run goes on.
+case with it (``crashed``, with the exit signal); the run goes on. On Dask, a case whose Dask worker dies is run
+again on another worker first (:class:`DaskExecutor`).
 """
 
 from __future__ import annotations
@@ -103,11 +104,16 @@ class DaskExecutor:
 
     Each Dask worker thread runs its cases in a one-process :class:`~gaitbench.solve.parallel.WorkerPool` of its
     own, as the local executor does, so a case that crashes or hangs costs that case and not the Dask worker, and
-    the pool's process keeps what its walks build for the next case. That process is a child of the Dask worker,
-    which Dask allows only of workers that are not daemonic: the local cluster is started so, and the workers of
-    an existing cluster need ``distributed.worker.daemon: false`` (the environment variable
-    ``DASK_DISTRIBUTED__WORKER__DAEMON=False`` where they start). The workers need gaitbench and the suite's
-    plugins installed, and plugin directories at the same paths.
+    the pool's process keeps what its walks build for the next case; it dies with its Dask worker. That process is a
+    child of the Dask worker, which Python allows only of processes that are not daemonic. A nanny makes its worker
+    daemonic unless ``distributed.worker.daemon`` is false, and reads that setting each time it (re)starts the worker:
+    the local cluster's nannies run in this process, which holds the setting false for the cluster's whole life; the
+    workers of an existing cluster need it where they start (:data:`DAEMONIC_FIX`).
+
+    A case whose worker dies is run again on another worker by the scheduler, up to its
+    ``distributed.scheduler.allowed-failures`` (3 by default) deaths; after that it is recorded as ``crashed`` with
+    the cause "worker died". The workers need gaitbench and the suite's plugins installed, and plugin directories
+    at the same paths.
     """
 
     name = "dask"
@@ -127,38 +133,58 @@ class DaskExecutor:
         from distributed import Client, LocalCluster
         from distributed import as_completed as dask_completed
 
-        cluster = None
-        if self.scheduler is None:
-            with dask.config.set({"distributed.worker.daemon": False}):
+        with dask.config.set({DAEMON_SETTING: False}):  # read by the local nannies at every start of a worker
+            cluster = None
+            if self.scheduler is None:
                 cluster = LocalCluster(n_workers=self.jobs, threads_per_worker=1, processes=True,
                                        dashboard_address=None)
-        try:
-            with Client(self.scheduler or cluster, timeout="30s") as client:
-                daemonic = [address for address, flag in client.run(_daemonic).items() if flag]
-                if daemonic:
-                    raise ExecutorError(_daemonic_message(daemonic))
-                upcoming = iter(cases)
-                running = {}
-                completed = dask_completed()
+            try:
+                with Client(self.scheduler or cluster, timeout="30s") as client:
+                    daemonic = [address for address, flag in client.run(_daemonic).items() if flag]
+                    if daemonic:
+                        raise ExecutorError(_daemonic_message(daemonic))
+                    upcoming = iter(cases)
+                    running = {}
+                    completed = dask_completed()
 
-                def fill() -> None:  # as many cases as the cluster has threads now (workers may come and go)
-                    slots = max(self.jobs, sum(client.nthreads().values()))
-                    while len(running) < slots and (case := next(upcoming, None)) is not None:
-                        future = client.submit(run_case_pooled, case, key=f"case-{case.key}", pure=False)
-                        running[future] = case
-                        completed.add(future)
+                    def fill() -> None:  # as many cases as the cluster has threads now (workers come and go)
+                        slots = max(self.jobs, sum(client.nthreads().values()))
+                        while len(running) < slots and (case := next(upcoming, None)) is not None:
+                            future = client.submit(run_case_pooled, case, key=f"case-{case.key}", pure=False)
+                            running[future] = case
+                            completed.add(future)
 
-                fill()
-                for future in completed:
-                    case = running.pop(future)
                     fill()
-                    try:
-                        yield future.result()
-                    except Exception as error:  # the worker was lost (KilledWorker) or the task failed
-                        yield failed_outcome(case, "crashed", f"Dask task failed: {type(error).__name__}: {error}")
-        finally:
-            if cluster is not None:
-                cluster.close()
+                    for future in completed:
+                        case = running.pop(future)
+                        fill()
+                        yield _dask_outcome(future, case)
+            finally:
+                if cluster is not None:
+                    cluster.close()
+
+
+DAEMON_SETTING = "distributed.worker.daemon"
+"""The Dask setting whose value a nanny gives its worker's daemon flag: false, the worker may start the process its
+cases run in."""
+
+DAEMONIC_FIX = ("start the workers with DASK_DISTRIBUTED__WORKER__DAEMON=False in the environment of `dask worker` "
+                "(or distributed.worker.daemon: false in its Dask configuration), or with `dask worker --no-nanny`")
+"""How to start the workers of an existing cluster so that they can run cases, restarts included."""
+
+
+def _dask_outcome(future, case: Case) -> CaseOutcome:
+    """The outcome a Dask task sent back; a task whose workers all died is ``crashed`` ("worker died")."""
+    from distributed.scheduler import KilledWorker
+
+    try:
+        return future.result()
+    except KilledWorker as error:
+        return failed_outcome(case, "crashed", f"worker died: the {error.allowed_failures + 1} Dask workers that "
+                              "ran this case each died while running it (distributed.scheduler.allowed-failures = "
+                              f"{error.allowed_failures})")
+    except Exception as error:  # the task could not be run or its result not sent back
+        return failed_outcome(case, "error", f"Dask task failed: {type(error).__name__}: {error}")
 
 
 class ExecutorError(Exception):
@@ -170,14 +196,15 @@ _POOLS = threading.local()
 
 def run_case_pooled(case: Case) -> CaseOutcome:
     """The Dask task: ``case`` run in this worker thread's one-process pool, stopped past :func:`hard_limit`."""
-    if multiprocessing.current_process().daemon:  # a worker that joined after the run checked them
+    if multiprocessing.current_process().daemon:  # a worker of an existing cluster that joined after the check
         from distributed import get_worker
 
         return failed_outcome(case, "error", _daemonic_message([get_worker().address]))
     if not hasattr(_POOLS, "pool"):
         for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
             os.environ.pop(name, None)
-        _POOLS.pool = WorkerPool(1, state=BuildCache, start="spawn")
+        # dies with the Dask worker: a case whose worker was killed is run again elsewhere, not twice at once
+        _POOLS.pool = WorkerPool(1, state=BuildCache, start="spawn", die_with_parent=True)
     return _pool_outcome(_POOLS.pool.schedule(run_case, case, timeout=hard_limit(case)), case)
 
 
@@ -187,8 +214,7 @@ def _daemonic() -> bool:
 
 def _daemonic_message(workers: list[str]) -> str:
     return (f"Dask worker(s) {', '.join(workers)} are daemonic, and a daemonic process may not start the process "
-            "each case runs in; start the workers with DASK_DISTRIBUTED__WORKER__DAEMON=False in their environment "
-            "(or distributed.worker.daemon: false in their Dask configuration)")
+            f"each case runs in; {DAEMONIC_FIX}")
 
 
 def _timeout_message(case: Case) -> str:

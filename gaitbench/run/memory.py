@@ -181,21 +181,23 @@ def memory_problem(transcription: str, strategy: str, n_nodes: int, steps: int, 
             f"{MEMORY_LIMIT_ENV} to that size (e.g. {MEMORY_LIMIT_ENV}={_suggest(estimate.mb)})")
 
 
-def concurrent_problem(estimates_mb: list[float], jobs: int, limit: MemoryLimit | None = None) -> str | None:
-    """Why ``jobs`` workers on this machine cannot run the cases whose estimates are ``estimates_mb``, or None.
+def jobs_that_fit(estimates_mb: list[float], jobs: int, limit: MemoryLimit | None = None) -> tuple[int, str | None]:
+    """How many of ``jobs`` workers on this machine can run the cases whose estimates are ``estimates_mb``, and why
+    fewer when fewer (None when all ``jobs`` fit).
 
-    A run starts its cases largest N first, so its ``jobs`` largest cases run together.
+    A run starts its cases largest N first, so its ``jobs`` largest cases run together; each case alone fits (a
+    suite with one that does not is refused when it loads), so at least one worker always does.
     """
     largest = sorted(estimates_mb, reverse=True)[:jobs]
     if len(largest) < 2:
-        return None
+        return jobs, None
     limit = limit or memory_limit()
     if sum(largest) <= limit.mb:
-        return None
+        return jobs, None
     fitting = max([count for count in range(1, len(largest) + 1) if sum(largest[:count]) <= limit.mb], default=1)
-    return (f"{jobs} workers start the {len(largest)} largest cases together (largest N first), which need about "
-            f"{_size(sum(largest))} together, more than the {_size(limit.mb)} {limit.source}. Use --jobs {fitting} "
-            f"or lower N, or, if the workers run where more memory is available, set {MEMORY_LIMIT_ENV}")
+    return fitting, (f"{jobs} workers would start the {len(largest)} largest cases together (largest N first), which "
+                     f"need about {_size(sum(largest))} together, more than the {_size(limit.mb)} {limit.source}; "
+                     f"{fitting} fit (set {MEMORY_LIMIT_ENV} if the workers run where more memory is available)")
 
 
 def _size(mb: float) -> str:

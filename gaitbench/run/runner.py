@@ -296,7 +296,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
     ones re-run with ``retry_failed``, stopped walks with ``retry_incomplete``, complete walks without a verified
     ACOT with ``retry_unverified``, and the stored cases whose keys are in ``rerun``), and a dead run's claims are
     taken over. Cases start largest N first (:func:`largest_first`), or smallest N first with ``smallest_first``.
-    ``on_start(to_run, skipped)`` and ``on_outcome(outcome)`` feed a progress display.
+    An executor with more ``jobs`` than cases to run gets as many as there are cases. ``on_start(to_run, skipped)``
+    and ``on_outcome(outcome)`` feed a progress display.
     """
     started = time.perf_counter()
     with ResultStore.create(store_dir) as store:
@@ -311,6 +312,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
             )
         pending = [case for case in suite.cases if case.key not in finished]
         pending = sorted(pending, key=lambda case: case.n_nodes) if smallest_first else largest_first(pending)
+        if 0 < len(pending) < executor.jobs:  # more workers would start only to idle (a resumed run's few cases)
+            executor.jobs = len(pending)
         if getattr(executor, "local_files", False):  # its workers can write in the store's directory
             pending = [replace(case, checkpoint=str(store.directory / checkpoint_file(case.key))) for case in pending]
         run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,

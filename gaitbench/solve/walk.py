@@ -26,7 +26,7 @@ from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.cores import IdleCores
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solve.solver import SolverResult, SolverStatus, checked
 from gaitbench.solve.verify import StepVerification, verify_step
 
 if TYPE_CHECKING:
@@ -218,6 +218,7 @@ class WalkProblem:
         return self.deadline is not None and time.monotonic() >= self.deadline
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "solver", checked(self.solver))  # every solve of the walk: the solver boundary
         if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
             raise ValueError(f"steps = {self.steps}: the {self.experiment.name} experiment has "
                              f"{self.experiment.n_steps} steps")
@@ -367,11 +368,11 @@ def solve_and_verify(problem: WalkProblem, index: int, built: TranscribedStep, d
 
 
 RETRIED_STATUSES = (SolverStatus.INFEASIBLE.value, SolverStatus.ITERATION_LIMIT.value, SolverStatus.ERROR.value,
-                    SolverStatus.TIME_LIMIT.value)
+                    SolverStatus.TIME_LIMIT.value, SolverStatus.NON_FINITE.value)
 """Failures worth another try: a local solver that calls a feasible step infeasible, runs out of iterations or of
 its own time (a suite gives each solve a quarter of the case's limit, :attr:`gaitbench.run.case.Case.
-solve_time_limit_s`), or fails in its restoration phase has often only started badly. The walk's deadline is final:
-no rung starts after it."""
+solve_time_limit_s`), fails in its restoration phase or ends at non-finite values has often only started badly.
+The walk's deadline is final: no rung starts after it."""
 
 
 def solve_with_retries(problem: WalkProblem, index: int, built: TranscribedStep, data: StepData,

@@ -23,6 +23,9 @@ from __future__ import annotations
 import ast
 import json
 import math
+import re
+import zipfile
+import zlib
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
@@ -244,16 +247,76 @@ def read_walk(path: str | Path) -> WalkFile:
         raise WalkFileError(f"{path}: not a walk result, missing {', '.join(missing)}; {rerun}")
     arrays: dict[str, np.ndarray] = {}
     if "trajectories" in header:
-        npz = path.parent / header["trajectories"]
+        try:
+            npz = beside(path, header["trajectories"])
+        except ValueError as exc:
+            raise WalkFileError(f"{path}: trajectories: {exc}; {rerun}") from None
         if not npz.is_file():
             raise WalkFileError(f"{path}: its trajectories file {npz} is missing; keep the .npz beside the JSON or "
                                 f"{rerun}")
-        try:
-            with np.load(npz) as stored:
-                arrays = {key: stored[key] for key in stored.files}
-        except (OSError, ValueError) as exc:
-            raise WalkFileError(f"{npz}: unreadable trajectories ({exc}); {rerun}") from None
+        arrays = read_arrays(npz, rerun)
+        problem = trajectory_problem(arrays)
+        if problem:
+            raise WalkFileError(f"{npz}: {problem}; {rerun}")
     return WalkFile(path, version, header, arrays)
+
+
+def beside(path: Path, name: object) -> Path:
+    """The file ``name`` (from the header of the file at ``path``) in ``path``'s directory, where the writers put
+    it. Anything else (another directory, ``../../etc/passwd``, an absolute path, not a name) is refused with a
+    ``ValueError``: a walk file from elsewhere must not make gaitbench open files outside its directory."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"expected the name of a file beside it, got {name!r}")
+    directory = path.parent.resolve()
+    target = (directory / name).resolve()
+    if not target.is_relative_to(directory) or target == directory:
+        raise ValueError(f"{name!r} is outside the file's directory {directory}; only a file beside it is read")
+    return target
+
+
+def read_arrays(npz: Path, fix: str) -> dict[str, np.ndarray]:
+    """Every array of the NPZ at ``npz``; a file that is not a whole NPZ of plain arrays (truncated, not a zip,
+    pickled objects) is a :class:`WalkFileError` naming it and ``fix``."""
+    try:
+        with np.load(npz) as stored:
+            return {key: stored[key] for key in stored.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise WalkFileError(f"{npz}: unreadable trajectories ({type(exc).__name__}: {exc}); {fix}") from None
+
+
+TRAJECTORY_ARRAYS = ("t", "q", "dq", "tau", "tau_t", "push_off")
+"""The arrays of each stored trajectory, ``stepNN_<name>`` (``stepNN_polished_<name>`` for a polished one)."""
+
+_TRAJECTORY_KEY = re.compile(rf"(step\d+(?:_{POLISHED})?)_({'|'.join(sorted(TRAJECTORY_ARRAYS, key=len)[::-1])})")
+
+
+def trajectory_problem(arrays: dict[str, np.ndarray]) -> str | None:
+    """What is wrong with a walk NPZ's trajectories, or None: each one whole (all of :data:`TRAJECTORY_ARRAYS`),
+    finite numbers, ``t`` increasing, ``q`` and ``dq`` one row of 2 per time, ``tau`` one row of 2 per control time
+    (one per node, or per interval), and one push-off."""
+    groups: dict[str, dict[str, np.ndarray]] = {}
+    for key, value in arrays.items():
+        match = _TRAJECTORY_KEY.fullmatch(key)
+        if match:
+            groups.setdefault(match.group(1), {})[match.group(2)] = value
+    for prefix, group in sorted(groups.items()):
+        missing = [name for name in TRAJECTORY_ARRAYS if name not in group]
+        if missing:
+            return f"{prefix} lacks {', '.join(f'{prefix}_{name}' for name in missing)}"
+        for name, value in group.items():
+            if not np.issubdtype(value.dtype, np.number) or np.issubdtype(value.dtype, np.complexfloating):
+                return f"{prefix}_{name} holds {value.dtype} values, not real numbers"
+            if not np.all(np.isfinite(value)):
+                return f"{prefix}_{name} holds {int(np.size(value) - np.isfinite(value).sum())} non-finite values"
+        n, m = len(group["t"].reshape(-1)), len(group["tau_t"].reshape(-1))
+        expected = {"t": (n,), "q": (n, 2), "dq": (n, 2), "tau_t": (m,), "tau": (m, 2), "push_off": (1,)}
+        if n < 2 or m not in (n - 1, n) or any(group[name].shape != expected[name] for name in TRAJECTORY_ARRAYS):
+            shapes = ", ".join(f"{name} {group[name].shape}" for name in TRAJECTORY_ARRAYS)
+            return (f"{prefix}'s arrays do not fit together ({shapes}; expected t (n,) with n >= 2, q and dq (n, 2), "
+                    "tau_t (m,) and tau (m, 2) with m = n or n - 1, push_off (1,))")
+        if np.any(np.diff(group["t"]) <= 0):
+            return f"{prefix}_t is not increasing"
+    return None
 
 
 def load_walk(path: str | Path, registry: PluginRegistry | None = None) -> tuple[WalkResult, Experiment]:
