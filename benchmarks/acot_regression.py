@@ -1,7 +1,8 @@
 """Speed-ups must not change results: the ACOT of a fixed case set against a recorded baseline.
 
 Run:    .venv/bin/python benchmarks/acot_regression.py            (compare; exit status 1 on any difference)
-        .venv/bin/python benchmarks/acot_regression.py --record   (write the baseline; do this only before a change)
+        .venv/bin/python benchmarks/acot_regression.py --record   (write the baseline; do this only before a change,
+                        or after a change kept for what it does to the results, with --reason "one line why")
         .venv/bin/python benchmarks/acot_regression.py --record-band 6   (add the rounding band; same commit)
         .venv/bin/python benchmarks/acot_regression.py --solver-option nlp_scaling_obj_target_gradient=1
                         (what a solver option does to the results: the same comparison, with the option on every case)
@@ -128,6 +129,8 @@ def differences(baseline: dict[str, dict], current: dict[str, dict], tolerance: 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--record", action="store_true", help="write the baseline instead of comparing")
+    parser.add_argument("--reason", default=None, help="with --record: one line saying why the baseline moves "
+                                                        "(kept in the baseline)")
     parser.add_argument("--record-band", type=int, metavar="K", default=0,
                         help="add to the baseline the rounding band of K perturbed runs (run at the baseline's code)")
     parser.add_argument("--perturbation", type=float, default=1e-14, help="relative size of the band's nudges")
@@ -148,7 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.perf_counter() - started
     commit = provenance()["git_commit"]
     if args.record:
-        BASELINE.write_text(json.dumps({"commit": commit, "wall_time_s": wall, "cases": current}, indent=2) + "\n")
+        reason = {"reason": args.reason} if args.reason else {}
+        BASELINE.write_text(json.dumps({"commit": commit, **reason, "wall_time_s": wall, "cases": current},
+                                       indent=2) + "\n")
         print(f"baseline of {len(current)} cases written to {BASELINE} ({wall:.0f} s)")
         return 0
     baseline = json.loads(BASELINE.read_text())
