@@ -226,6 +226,7 @@ EDITS = {
     "a word in acot": ("UPDATE cases SET acot = 'fast'", "table cases, row case_key = '{key}', column acot: "
                                                          "expected a number or null, found text 'fast'"),
     "a fraction in N": ("UPDATE cases SET N = 6.5", "column N: expected an integer or null, found real 6.5"),
+    "no experiment": ("UPDATE cases SET experiment = NULL", "column experiment: expected text, found null (the"),
     "bad JSON": ("UPDATE cases SET cot_steps = '[0.1,'", "table cases, row case_key = '{key}', column cot_steps: "
                                                          "not JSON"),
     "JSON of the wrong shape": ("UPDATE cases SET provenance = '[1]'", "column provenance: expected a JSON object"),

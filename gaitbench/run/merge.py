@@ -71,7 +71,12 @@ def merge_store(destination: ResultStore, source: ResultStore, replace: bool = F
     run_ids = _merge_runs(destination, source, {row["run_id"] for row in chosen if row["run_id"]}, summary)
     for row in chosen:  # one case's files in memory at a time
         run_id = run_ids.get(row["run_id"], row["run_id"])
-        destination.record_case(row | {"run_id": run_id}, case_files(source.directory, row["case_key"]))
+        try:
+            files = case_files(source.directory, row["case_key"])
+        except OSError as error:
+            raise StoreError(f"{source.directory}: cannot read the files of case {row['case_key']} "
+                             f"({error.strerror or error}); the cases before it were merged") from None
+        destination.record_case(row | {"run_id": run_id}, files)
     return summary
 
 

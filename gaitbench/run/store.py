@@ -333,14 +333,15 @@ class ResultStore:
         return removed
 
     def runs(self) -> list[dict[str, Any]]:
-        """Every run, oldest first, with how many of the stored cases it computed and how many failed."""
+        """Every run, oldest first, with how many of the stored cases it computed and how many failed (every column
+        of :data:`RUN_COLUMNS` present, null where a store lacks it)."""
         with self._failing("read the runs"):
             rows = self._db.execute(
                 "SELECT runs.*, COUNT(cases.case_key) AS cases_done, "
                 "SUM(CASE WHEN cases.status != 'solved' THEN 1 ELSE 0 END) AS cases_failed "
                 "FROM runs LEFT JOIN cases ON cases.run_id = runs.run_id GROUP BY runs.run_id ORDER BY started_at"
             ).fetchall()
-        return [decode_json("runs", dict(row), self.database) for row in rows]
+        return [decode_json("runs", dict.fromkeys(RUN_COLUMNS) | dict(row), self.database) for row in rows]
 
     # --- cases ----------------------------------------------------------------------------------------------
 

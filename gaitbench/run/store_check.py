@@ -22,6 +22,10 @@ REQUIRED_COLUMNS = {"cases": ("case_key", "run_id", "status"), "runs": ("run_id"
                     "claims": ("case_key", "run_id")}
 """The columns every store has had since its table existed, which the store's own queries need."""
 
+NOT_NULL = {"cases": ("case_key", "experiment"), "runs": ("run_id",), "claims": ("case_key", "run_id")}
+"""The cells that every row gaitbench writes has and the readers cannot do without (a case's experiment names its
+table and figures in the report)."""
+
 CLAIMS_VERSION = next(migration.version for migration in MIGRATIONS if "claims" in migration.tables)
 """The schema version that added ``claims``: an older store, read where it cannot be migrated, has none."""
 
@@ -61,7 +65,7 @@ def check_tables(connection: sqlite3.Connection, database: Path) -> set[str]:
 
 def check_types(connection: sqlite3.Connection, database: Path, tables: set[str]) -> None:
     """:class:`StoreError` naming the first cell whose SQLite type is not its column's (a word in ``acot``, a
-    fraction in ``N``), or a row without its key, in every table gaitbench reads."""
+    fraction in ``N``), or that is null where :data:`NOT_NULL` needs a value, in every table gaitbench reads."""
     for table, columns in TABLES.items():
         if table not in tables:
             continue
@@ -71,16 +75,17 @@ def check_types(connection: sqlite3.Connection, database: Path, tables: set[str]
             if column not in present:
                 continue
             kind = declared.split()[0]
-            allowed = _STORAGE[kind] + (() if column == key else ("null",))
+            required = column in NOT_NULL[table]
+            allowed = _STORAGE[kind] + (() if required else ("null",))
             found = connection.execute(
                 f"SELECT {key}, {column}, typeof({column}) FROM {table} "
                 f"WHERE typeof({column}) NOT IN ({', '.join('?' * len(allowed))}) LIMIT 1", allowed).fetchone()
             if found is not None:
                 name, value, stored = found[0], found[1], found[2]
-                expected = _WHAT[kind] + ("" if column == key else " or null")
+                expected = _WHAT[kind] + ("" if required else " or null")
                 raise StoreError(f"{database}: table {table}, row {key} = {name!r}, column {column}: expected "
-                                 f"{expected}, found {stored} {_shown(value)} (the store was changed outside "
-                                 "gaitbench)")
+                                 f"{expected}, found {stored}{'' if value is None else ' ' + _shown(value)} (the "
+                                 "store was changed outside gaitbench)")
 
 
 def check_json(connection: sqlite3.Connection, database: Path, tables: set[str]) -> None:
