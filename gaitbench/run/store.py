@@ -183,7 +183,7 @@ class ResultStore:
         self._db.close()
 
     @contextmanager
-    def _write(self, what: str) -> Iterator[None]:
+    def _write(self, what: str = "write the results store") -> Iterator[None]:
         """A write transaction that takes SQLite's write lock at once (``BEGIN IMMEDIATE``): what is read inside it
         stays true until the commit, which is what makes claims and run ids race-free between processes. Errors
         as :meth:`_failing`; ``what`` names the operation in them."""
@@ -191,12 +191,12 @@ class ResultStore:
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 yield
-            except BaseException:
+                self._db.execute("COMMIT")
+            except BaseException:  # a commit that fails (a full disk) is rolled back too
                 if self._db.in_transaction:
                     with suppress(sqlite3.Error):
                         self._db.execute("ROLLBACK")
                 raise
-            self._db.execute("COMMIT")
 
     @contextmanager
     def _failing(self, what: str) -> Iterator[None]:
