@@ -251,3 +251,13 @@ def test_a_store_changed_by_hand_is_one_line_in_every_reader(tmp_path: Path, sui
                     ["report", str(store), "--out", str(tmp_path / "report")],
                     ["run", str(suite_file), "--store", str(store), "--resume", *INPROCESS]):
         assert_one_line_error(run_cli(*command), str(store / DATABASE), expected)
+
+
+def test_a_report_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
+    """`report --out` where nothing can be written (under a regular file: root is not stopped by permissions; a
+    full disk gives the same OSError from the reporter's writes)."""
+    run_suite(suite_of([fake_case(6)]), tmp_path / "store", Instant())
+    (tmp_path / "file").write_text("a regular file, so nothing can be written under it")
+    out = tmp_path / "file" / "report"
+    assert_one_line_error(run_cli("report", str(tmp_path / "store"), "--out", str(out)), str(out),
+                          "cannot write the report")
