@@ -109,7 +109,8 @@ def toml_text(suite: dict) -> str:
 @st.composite
 def suite_texts(draw, root: Path) -> str:
     """The base suite with a few of its values replaced, keys dropped or added, its output chosen from
-    :data:`OUTPUTS`, and its text then perhaps cut or spliced."""
+    :data:`OUTPUTS`, and its text then perhaps cut or spliced after the output line (which stays as chosen, so that
+    no edit makes an absolute path outside the sandbox)."""
     suite = json.loads(json.dumps(BASE_SUITE))
     for _ in range(draw(st.sampled_from([0, 0, 0, 1, 2, 4]))):  # the base suite, intact, often: it runs
         table = draw(st.sampled_from(["suite", "sweep"]))
@@ -120,14 +121,13 @@ def suite_texts(draw, root: Path) -> str:
         else:
             suite[table][key] = draw(VALUES)
     output = draw(st.sampled_from(OUTPUTS)).format(root=root)
-    if output:
-        suite["suite"]["output"] = output
     if draw(st.integers(0, 7)) == 7:  # not at the simplest example, which is the base suite as it is
         suite["suite"]["plugins"] = ["no-such-plugin-directory"]  # never a real directory: no code is loaded
-    text = toml_text(suite)
+    head = "[suite]\n" + (f"output = {json.dumps(output)}\n" if output else "")
+    text = toml_text(suite).replace("[suite]\n", head, 1)
     edit = draw(st.sampled_from(["none", "none", "none", "none", "cut", "splice"]))
-    if edit != "none" and text:
-        at = draw(st.integers(0, len(text) - 1))
+    if edit != "none" and len(text) > len(head):
+        at = draw(st.integers(len(head), len(text) - 1))
         text = text[:at] if edit == "cut" else text[:at] + draw(st.text(max_size=6)) + text[at + 1:]
     return text
 
