@@ -15,7 +15,7 @@ from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.executors import InProcessExecutor
 from gaitbench.run.provenance import code_fingerprint
 from gaitbench.run.runner import run_suite
-from gaitbench.run.store import checkpoint_file, load_results
+from gaitbench.run.store import ResultStore, checkpoint_file, load_results
 from gaitbench.solve.checkpoint import WalkCheckpoint, progress_file
 from gaitbench.solve.walk import StepOutcome, WalkProblem, walk_step_by_step
 
@@ -133,7 +133,9 @@ def _case(time_limit_s: float = 600) -> Case:
 
 
 def _stopped_run(store: Path, case: Case, code: str | None = None) -> Path:
-    """What a run killed in step 3 of ``case`` leaves in ``store``: its checkpoint of steps 1 and 2."""
+    """What a run killed in step 3 of ``case`` leaves in ``store``: its checkpoint of steps 1 and 2 (beside the
+    database the run had created)."""
+    ResultStore.create(store).close()
     path = store / checkpoint_file(case.key)
     checkpoint = WalkCheckpoint(path, {"case": case.key, "code": code or code_fingerprint()})
     with pytest.raises(Stopped):

@@ -564,7 +564,7 @@ def test_a_store_written_before_the_stop_columns_opens_and_gains_them(tmp_path: 
         db.execute("CREATE TABLE runs (run_id TEXT PRIMARY KEY, suite TEXT, suite_path TEXT, suite_text TEXT, "
                    "executor TEXT, jobs INTEGER, cases_total INTEGER, cases_skipped INTEGER, started_at TEXT, "
                    "finished_at TEXT, provenance TEXT)")  # as the first stores had it (schema version 1)
-        db.execute("INSERT INTO cases (case_key, status, acot) VALUES ('old', 'solved', 0.03)")
+        db.execute("INSERT INTO cases (case_key, experiment, status, acot) VALUES ('old', 'forward', 'solved', 0.03)")
     frame = gaitbench.load_results(tmp_path)  # reading opens it
     assert list(frame.columns) == list(CASE_COLUMNS)
     assert frame.iloc[0]["acot"] == 0.03 and frame.iloc[0]["stop_cause"] is None

@@ -3,6 +3,7 @@ read-only place, and what a killed run leaves behind."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -23,6 +24,7 @@ from gaitbench.cli.main import main
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.runner import CaseOutcome, case_row, run_suite
 from gaitbench.run.store import DATABASE, ResultStore
+from gaitbench.run.store_files import CASE_MARKER
 from gaitbench.run.store_schema import StoreError
 
 GAITBENCH = str(Path(sys.executable).with_name("gaitbench"))
@@ -451,21 +453,45 @@ def test_an_export_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
 
 # --- 7. kill-safety at the edges --------------------------------------------------------------------------------
 
-def test_resume_removes_what_a_killed_run_left(tmp_path: Path) -> None:
-    kept = fake_case(6)
-    run_suite(suite_of([kept]), tmp_path, Instant())
-    staging = tmp_path / f".{fake_case(7).key}-k1lled00"
-    staging.mkdir()
-    (staging / "walk.json").write_text("{}")
-    rowless = tmp_path / "cases" / fake_case(8).key
-    rowless.mkdir()
-    (rowless / "walk.json").write_text("{}")
+def test_resume_removes_what_a_killed_run_left_and_only_that(tmp_path: Path) -> None:
+    """What the store wrote (its marker proves it) and no row needs goes; everything else stays: a directory a user
+    put in cases/, a case directory from before markers, a staging directory without the marker, a checkpoint
+    file being written by a live process."""
+    kept, rowless = fake_case(6), fake_case(8)
+    run_suite(suite_of([kept, rowless]), tmp_path, Instant())
+    with sqlite3.connect(tmp_path / DATABASE) as db:  # a kill between the rename of its files and its row
+        db.execute("DELETE FROM cases WHERE case_key = ?", (rowless.key,))
+    db.close()
+    staged = tmp_path / f".{fake_case(7).key}-k1lled00"  # a kill before the rename
+    shutil.copytree(tmp_path / "cases" / kept.key, staged)
+    (staged / CASE_MARKER).write_text(json.dumps({"gaitbench": "case", "case_key": fake_case(7).key}))
+    empty_staging = tmp_path / f".{fake_case(9).key}-abcd1234"  # a kill before the marker
+    empty_staging.mkdir()
+    unmarked_staging = tmp_path / f".{fake_case(10).key}-abcd1234"
+    unmarked_staging.mkdir()
+    (unmarked_staging / "notes.txt").write_text("mine")
+    legacy = tmp_path / "cases" / fake_case(11).key  # written before markers: never deleted
+    legacy.mkdir()
+    (legacy / "walk.json").write_text("{}")
+    photos = tmp_path / "cases" / "photos"
+    photos.mkdir()
+    (photos / "a.jpg").write_bytes(b"\xff\xd8")
+    checkpoints = tmp_path / "checkpoints"
+    checkpoints.mkdir(exist_ok=True)
+    dead, live = dead_pid(), os.getpid()
+    written = [checkpoints / f".{fake_case(12).key}.{dead}", checkpoints / f".{fake_case(12).key}.json.{dead}"]
+    writing = checkpoints / f".{fake_case(13).key}.{live}"
+    notes = checkpoints / f".notes.{dead}"
+    for path in (*written, writing, notes):
+        path.write_bytes(b"part")
     other = tmp_path / ".not-gaitbench"
     other.mkdir()
 
-    run_suite(suite_of([kept, fake_case(9)]), tmp_path, Instant(), resume=True)
-    assert not staging.exists() and not rowless.exists()
-    assert other.exists() and (tmp_path / "cases" / kept.key / "walk.json").exists()
+    run_suite(suite_of([kept, fake_case(14)]), tmp_path, Instant(), resume=True)
+    gone = (tmp_path / "cases" / rowless.key, staged, empty_staging, *written)
+    assert not any(path.exists() for path in gone)
+    assert all(path.exists() for path in (unmarked_staging, legacy, photos / "a.jpg", writing, notes, other))
+    assert (tmp_path / "cases" / kept.key / "walk.json").exists()
 
 
 def test_leftovers_are_kept_while_another_run_is_live(tmp_path: Path) -> None:

@@ -18,6 +18,7 @@ from rich.text import Text
 from gaitbench.cli.run_progress import CaseProgress, StepsInFlight
 from gaitbench.plugins import PLUGINS_DIR_ENV
 from gaitbench.run.executors import EXECUTORS
+from gaitbench.run.store import LOCK_TIMEOUT_S
 
 
 def _band(ctx, param, value: str | None) -> tuple[int, int] | None:
@@ -92,20 +93,24 @@ def inconsistent_keys(store_dir: Path, band: tuple[int, int] | None, tolerance: 
               help="Start cases smallest N first instead of largest first. Largest first ends a run soonest; "
                    "smallest first suits a sweep run over several sessions with --resume (the thesis suites' "
                    "reference column: hours per case from N = 100 on), whose tables then fill N by N.")
+@click.option("--lock-timeout", type=click.FloatRange(min=0), default=LOCK_TIMEOUT_S, show_default=True,
+              metavar="SECONDS", help="How long a store operation waits for the store's write lock (held by "
+                                      "another run or program) before the run stops with an error.")
 @click.option("--report/--no-report", "write_report", default=True, show_default=True,
               help="Write the HTML and CSV report (`gaitbench report`) to reports/<store name> at the end.")
 @click.pass_obj
 def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None, store_dir: Path | None,
         methods: tuple[str, ...], resume: bool, retry_failed: bool, retry_incomplete: bool,
         retry_unverified: bool, retry_inconsistent: bool, band: tuple[int, int] | None, tolerance: float | None,
-        smallest_first: bool, write_report: bool) -> None:
+        smallest_first: bool, lock_timeout: float, write_report: bool) -> None:
     """Run every case of a suite and record each in the results store as it finishes.
 
     Cases start largest N first, so that the longest ones do not finish the run alone while other workers idle
     (--smallest-first for the other order).
 
-    A run that is stopped (Ctrl-C, a kill, a crash) keeps every finished case; run again with --resume to do
-    the rest. Runs started on the same store while one is running share its cases (no case is solved twice).
+    A run that is stopped (Ctrl-C, a kill, a crash, a store that fails) keeps every finished case; run again with
+    --resume to do the rest. Runs started on the same store while one is running share its cases (no case is
+    solved twice). The store is a new or empty directory, or a store: a directory with other files is refused.
     Exit status 1 if any case failed or the store cannot be used, 2 if the suite is invalid, 143 if stopped by
     SIGTERM (which, like Ctrl-C, stops the workers and keeps every finished case).
     """
@@ -145,6 +150,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             summary = run_suite(suite, store_dir, _executor(executor, jobs, scheduler), resume=resume,
                                 retry_failed=retry_failed, retry_incomplete=retry_incomplete,
                                 retry_unverified=retry_unverified, rerun=rerun, smallest_first=smallest_first,
+                                lock_timeout=lock_timeout,
                                 on_start=_warning_fewer_cases(jobs if not scheduler else 0, progress, console),
                                 on_outcome=progress.advance, on_elsewhere=progress.elsewhere)
     except (RunRefused, StoreError, ExecutorError) as error:
@@ -156,11 +162,18 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
                   f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
-    Console().print(_suite_results(suite, store_dir))
+    try:
+        Console().print(_suite_results(suite, store_dir))
+    except StoreError as error:
+        raise click.ClickException(str(error)) from None
     if write_report:
         from gaitbench.cli.report_command import default_report_dir, write_with_progress
+        from gaitbench.reports import ReportError
 
-        index = write_with_progress(store_dir, default_report_dir(store_dir), console)
+        try:
+            index = write_with_progress(store_dir, default_report_dir(store_dir), console)
+        except ReportError as error:
+            raise click.ClickException(str(error)) from None
         console.print(Text(f"report: {Path(index).resolve()}", style="bold"), soft_wrap=True)
     if summary.failed:
         raise SystemExit(1)

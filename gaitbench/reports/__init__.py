@@ -256,9 +256,9 @@ def write_report(store_dir: str | Path, out_dir: str | Path, gait: str | None = 
     """Write the report of the store at ``store_dir`` into ``out_dir`` with the named reporter plugins.
 
     Returns the HTML page (``out_dir/index.html``) when the ``html`` reporter ran, else ``out_dir``.
-    Raises :class:`ReportError` for a missing store or an unknown ``gait`` case key. ``progress(what, done, total)``
-    is told about each part (tables, each experiment's figures, each gait and tracked case, each reporter) as it is
-    done.
+    Raises :class:`ReportError` for a missing store, an unknown ``gait`` case key or a report that cannot be written
+    (a full disk). ``progress(what, done, total)`` is told about each part (tables, each experiment's figures, each
+    gait and tracked case, each reporter) as it is done.
     """
     from gaitbench.plugins import load_registry
 
@@ -267,10 +267,15 @@ def write_report(store_dir: str | Path, out_dir: str | Path, gait: str | None = 
     steps = _Steps(progress, total=len(built))
     report = build_report(store_dir, gait=gait, registry=registry, progress=steps)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for name, reporter in zip(reporters, built, strict=True):
-        steps.start(f"writing {name}")
-        reporter.write(report, out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for name, reporter in zip(reporters, built, strict=True):
+            steps.start(f"writing {name}")
+            reporter.write(report, out_dir)
+    except OSError as error:  # a full disk, a place that cannot be written
+        where = f": {error.filename}" if error.filename else ""
+        raise ReportError(f"{out_dir}: cannot write the report ({error.strerror or error}{where}); "
+                          "free some space or choose another directory with --out") from None
     steps.finish()
     index = out_dir / "index.html"
     return index if "html" in reporters else out_dir

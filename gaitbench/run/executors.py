@@ -83,9 +83,11 @@ class LocalPoolExecutor:
             while running:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 finished = [(future, running.pop(future)) for future in done]
-                fill()  # the freed workers start their next cases while these are recorded
-                for future, case in finished:
-                    yield _pool_outcome(future, case)
+                try:
+                    fill()  # the freed workers start their next cases while these are recorded
+                finally:  # taking a case failed (the store): the finished outcomes go first
+                    for future, case in finished:
+                        yield _pool_outcome(future, case)
 
 
 def _pool_outcome(future, case: Case) -> CaseOutcome:
@@ -157,8 +159,10 @@ class DaskExecutor:
                     fill()
                     for future in completed:
                         case = running.pop(future)
-                        fill()
-                        yield _dask_outcome(future, case)
+                        try:
+                            fill()
+                        finally:  # taking a case failed (the store): the finished outcome goes first
+                            yield _dask_outcome(future, case)
             finally:
                 if cluster is not None:
                     cluster.close()
@@ -185,6 +189,13 @@ def _dask_outcome(future, case: Case) -> CaseOutcome:
                               f"{error.allowed_failures})")
     except Exception as error:  # the task could not be run or its result not sent back
         return failed_outcome(case, "error", f"Dask task failed: {type(error).__name__}: {error}")
+
+
+def _dask_outcome(future, case: Case) -> CaseOutcome:
+    try:
+        return future.result()
+    except Exception as error:  # the worker was lost (KilledWorker) or the task failed
+        return failed_outcome(case, "crashed", f"Dask task failed: {type(error).__name__}: {error}")
 
 
 class ExecutorError(Exception):

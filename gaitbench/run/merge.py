@@ -15,7 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gaitbench.run.store import ResultStore, case_file
+from gaitbench.run.store import ResultStore
+from gaitbench.run.store_files import case_files
 from gaitbench.run.store_schema import RUN_COLUMNS, StoreError
 
 _SAME_RUN = tuple(column for column in RUN_COLUMNS if column not in ("heartbeat_at", "finished_at"))
@@ -70,7 +71,12 @@ def merge_store(destination: ResultStore, source: ResultStore, replace: bool = F
     run_ids = _merge_runs(destination, source, {row["run_id"] for row in chosen if row["run_id"]}, summary)
     for row in chosen:  # one case's files in memory at a time
         run_id = run_ids.get(row["run_id"], row["run_id"])
-        destination.record_case(row | {"run_id": run_id}, _case_files(source, row["case_key"]))
+        try:
+            files = case_files(source.directory, row["case_key"])
+        except OSError as error:
+            raise StoreError(f"{source.directory}: cannot read the files of case {row['case_key']} "
+                             f"({error.strerror or error}); the cases before it were merged") from None
+        destination.record_case(row | {"run_id": run_id}, files)
     return summary
 
 
@@ -85,14 +91,6 @@ def _check_files(source: ResultStore, row: dict) -> None:
         if row[column] and not (source.directory / row[column]).is_file():
             raise StoreError(f"{source.directory / row[column]}: missing, but case {row['case_key']} names it in "
                              f"{column}; nothing was merged")
-
-
-def _case_files(source: ResultStore, case_key: str) -> dict[str, bytes]:
-    """The files of one source case, by name."""
-    directory = source.directory / case_file(case_key)
-    if not directory.is_dir():
-        return {}
-    return {path.name: path.read_bytes() for path in sorted(directory.iterdir()) if path.is_file()}
 
 
 def _merge_runs(destination: ResultStore, source: ResultStore, needed: set[str],

@@ -14,6 +14,7 @@ import tempfile
 import time
 import traceback
 from collections.abc import Callable, Collection, Iterable, Iterator
+from contextlib import suppress
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -22,8 +23,9 @@ from typing import TYPE_CHECKING, Any
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import code_fingerprint, provenance
-from gaitbench.run.store import ResultStore, case_file, checkpoint_file
-from gaitbench.solve.checkpoint import WalkCheckpoint, remove_checkpoint
+from gaitbench.run.store import LOCK_TIMEOUT_S, ResultStore, case_file, checkpoint_file
+from gaitbench.run.store_schema import StoreError
+from gaitbench.solve.checkpoint import CheckpointError, WalkCheckpoint, remove_checkpoint
 from gaitbench.solve.cores import IdleCores
 
 if TYPE_CHECKING:
@@ -40,6 +42,8 @@ class CaseOutcome:
 
     ``metrics`` are store columns computed in the worker (:func:`walk_metrics`, :func:`tracking_metrics`);
     ``files`` are the saved walk (and tracking) by file name, written into the store beside the row.
+    ``store_error`` says why the worker could not write to the store (its checkpoint): the run stops on it, and
+    the case is not recorded.
     """
 
     case: Case
@@ -49,6 +53,7 @@ class CaseOutcome:
     metrics: dict[str, Any] = field(default_factory=dict)
     files: dict[str, bytes] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    store_error: str = ""
 
     @property
     def failed(self) -> bool:
@@ -72,6 +77,8 @@ def run_case(case: Case, builds: BuildCache | None = None) -> CaseOutcome:
             tracking = _track(case, walk)
             metrics |= tracking_metrics(tracking)
             files |= _saved_files(tracking.save, TRACK_FILE)
+    except CheckpointError as error:  # the store failing, not the case: the run stops on it
+        return CaseOutcome(case, "error", str(error), time.perf_counter() - started, store_error=str(error))
     except Exception as error:  # a failing plugin is this case's result, not the run's end
         status, message = "error", _describe(error)
     earlier = walk.resumed.get("elapsed_s", 0.0) if walk is not None else 0.0  # before a stop, from its checkpoint
@@ -283,7 +290,7 @@ class RunSummary:
 
 def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, retry_failed: bool = False,
               retry_incomplete: bool = False, retry_unverified: bool = False, rerun: Collection[str] = (),
-              smallest_first: bool = False,
+              smallest_first: bool = False, lock_timeout: float = LOCK_TIMEOUT_S,
               on_start: Callable[[int, int], None] | None = None,
               on_outcome: Callable[[CaseOutcome], None] | None = None,
               on_elsewhere: Callable[[Case], None] | None = None) -> RunSummary:
@@ -298,9 +305,14 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
     taken over. Cases start largest N first (:func:`largest_first`), or smallest N first with ``smallest_first``.
     An executor with more ``jobs`` than cases to run gets as many as there are cases. ``on_start(to_run, skipped)``
     and ``on_outcome(outcome)`` feed a progress display.
+
+    The first store error (a claim, a recording or a worker's checkpoint that cannot be written; a write lock held
+    past ``lock_timeout`` seconds) stops the run with that :class:`StoreError`: the outcomes the executor already
+    has are recorded first where the store still takes them, the walks in flight are stopped, and every walk not
+    recorded keeps its checkpoint (under a local executor), from which ``--resume`` goes on.
     """
     started = time.perf_counter()
-    with ResultStore.create(store_dir) as store:
+    with ResultStore.create(store_dir, lock_timeout=lock_timeout) as store:
         stored = store.case_runs()
         finished = store.finished_keys(retry_failed=retry_failed, retry_incomplete=retry_incomplete,
                                        retry_unverified=retry_unverified) - set(rerun)
@@ -337,19 +349,35 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
 
             with store.heartbeat(run_id):
                 for outcome in executor.run(_claimed(store, run_id, pending, stored, left)):
+                    if outcome.store_error:
+                        raise StoreError(f"{store.directory}: the run stopped: {outcome.store_error}")
                     row = case_row(outcome, suite.name, run_id)
                     store.record_case(row, outcome.files)
                     if outcome.case.checkpoint and not resumable(outcome, row):
-                        remove_checkpoint(outcome.case.checkpoint)  # its walk is recorded whole
+                        _remove_checkpoint(store, outcome.case)  # its walk is recorded whole
                     solved += not outcome.failed
                     failed += outcome.failed
                     if on_outcome:
                         on_outcome(outcome)
             finished_at = _now()
-        finally:
-            store.finish_run(run_id, finished_at)  # a stopped run's claims go too; it stays unfinished
+        except StoreError:
+            store.forget_run(run_id)  # the store failing: its claims die with this process (run_alive)
+            raise
+        except BaseException:
+            with suppress(StoreError):  # the error on its way out is the one to report
+                store.finish_run(run_id, None)  # a stopped run's claims go too; it stays unfinished
+            raise
+        store.finish_run(run_id, finished_at)
     return RunSummary(run_id, Path(store_dir), len(suite.cases), len(present), solved, failed,
                       time.perf_counter() - started, len(elsewhere))
+
+
+def _remove_checkpoint(store: ResultStore, case: Case) -> None:
+    try:
+        remove_checkpoint(case.checkpoint)
+    except OSError as error:
+        raise StoreError(f"{store.directory}: cannot remove the checkpoint of case {case.key}, recorded "
+                         f"({error.strerror or error})") from None
 
 
 def run_provenance(suite) -> dict[str, Any]:

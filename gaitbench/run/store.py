@@ -3,7 +3,7 @@
 Layout of a store directory::
 
     results.sqlite          runs (one row per `gaitbench run` session) and cases (one row per case key)
-    cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked
+    cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked, the marker
     checkpoints/<case_key>  the solved steps of a walk in flight (gaitbench.solve.checkpoint), until its row is in
 
 Only the processes that run suites write: workers return their results and the runner records each one as soon
@@ -14,8 +14,11 @@ crash or kill loses at most the steps in flight: the next run of the case goes o
 Several runs may share a store: each claims a case (table ``claims``, under SQLite's write lock) right before it
 starts it, so no case is solved twice, and a claim dies with its run (same host: the process is gone; any host:
 no heartbeat for :data:`LEASE_S`). Readers open the store read-only and never change it; a file that is not a
-gaitbench store is refused before anything is written to it. The tables, their schema version and the migrations of
-older stores are in :mod:`gaitbench.run.store_schema`.
+gaitbench store, or a directory with other files and no store, is refused before anything is written to it. The
+tables, their schema version and the migrations of older stores are in :mod:`gaitbench.run.store_schema`; what is
+checked of what they hold, in :mod:`gaitbench.run.store_check`; which files the store writes and may delete, in
+:mod:`gaitbench.run.store_files`. Every SQLite or file-system error of a store operation is a :class:`StoreError`
+naming the store, the operation and the cause (a full disk, a file-size limit, a lock held past the lock timeout).
 """
 
 from __future__ import annotations
@@ -23,19 +26,27 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
-import shutil
 import socket
 import sqlite3
-import tempfile
 import threading
 import time
 from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from gaitbench.run.store_check import check_store, decode_json
+from gaitbench.run.store_files import (
+    CASES_DIR,
+    CHECKPOINTS_DIR,
+    case_file,
+    checkpoint_file,
+    leftovers,
+    place_case,
+    process_alive,
+    remove,
+)
 from gaitbench.run.store_schema import (
     CASE_COLUMNS,
     CLAIM_COLUMNS,
@@ -46,13 +57,19 @@ from gaitbench.run.store_schema import (
     check_file,
     check_schema,
     connect_read_only,
+    failure_cause,
     upgrade,
     upgrade_file,
 )
 
 DATABASE = "results.sqlite"
-CASES_DIR = "cases"
-CHECKPOINTS_DIR = "checkpoints"
+
+__all__ = ["CASES_DIR", "CHECKPOINTS_DIR", "DATABASE", "ResultStore", "case_file", "checkpoint_file", "load_results",
+           "run_alive"]
+
+LOCK_TIMEOUT_S = 60.0
+"""How long a store operation waits for SQLite's write lock, which another run holds for milliseconds at a time,
+before it fails (``gaitbench run --lock-timeout``)."""
 
 HEARTBEAT_S = 20.0
 """How often a running suite refreshes its run's ``heartbeat_at``."""
@@ -61,8 +78,6 @@ LEASE_S = 120.0
 """A run whose heartbeat is older than this is dead, and its claims free: the only test for a run on another host
 (on the same host a run is also dead as soon as its process is)."""
 
-_STAGING = re.compile(r"^\.[0-9a-f]{16}-")
-
 _OPEN_RUNS: set[str] = set()
 """Runs this process is running: a claim whose pid is this process's is alive only if its run is one of them."""
 
@@ -70,47 +85,56 @@ _OPEN_RUNS: set[str] = set()
 class ResultStore:
     """A store directory; open with :meth:`create` (writing) or :meth:`open` (reading an existing one)."""
 
-    def __init__(self, directory: Path, connection: sqlite3.Connection) -> None:
+    def __init__(self, directory: Path, connection: sqlite3.Connection, tables: set[str],
+                 lock_timeout: float = LOCK_TIMEOUT_S) -> None:
         self.directory = directory
         self._db = connection
+        self._tables = tables
+        self.lock_timeout = lock_timeout
 
     @property
     def database(self) -> Path:
         return self.directory / DATABASE
 
     @classmethod
-    def create(cls, directory: str | Path) -> ResultStore:
-        """Open the store at ``directory`` for writing, creating it (and its tables) if needed.
+    def create(cls, directory: str | Path, lock_timeout: float = LOCK_TIMEOUT_S) -> ResultStore:
+        """Open the store at ``directory`` for writing, creating it (and its tables) if needed; each write waits up
+        to ``lock_timeout`` seconds for the write lock.
 
-        :class:`StoreError` (one line naming the path) if the directory cannot be written or ``results.sqlite`` is
-        not a gaitbench store, or one newer than this code; such a file is left exactly as it was. A store written
-        by an older gaitbench is migrated to today's schema version.
+        :class:`StoreError` (one line naming the path) if the directory cannot be written, holds other files but no
+        ``results.sqlite``, or its ``results.sqlite`` is not a gaitbench store, one newer than this code or one
+        whose tables were changed outside gaitbench (:mod:`gaitbench.run.store_check`); nothing is changed then. A
+        store written by an older gaitbench is migrated to today's schema version.
         """
         directory = Path(directory)
         database = directory / DATABASE
+        if directory.is_dir() and not database.exists() and _holds_anything(directory):
+            raise StoreError(f"{directory}: not a gaitbench results store (a directory with other files and no "
+                             f"{DATABASE}); nothing was changed; choose a new or empty directory, or a store")
         try:
             directory.mkdir(parents=True, exist_ok=True)
         except OSError as error:
-            raise StoreError(f"{directory}: cannot create the results store here ({_reason(error)})") from None
+            raise StoreError(f"{directory}: cannot create the results store here ({failure_cause(error)})") from None
         check_file(database)
         try:
-            connection = sqlite3.connect(database, timeout=30, isolation_level=None)
+            connection = sqlite3.connect(database, timeout=lock_timeout, isolation_level=None)
         except sqlite3.Error as error:
-            raise StoreError(f"{database}: cannot open the results store for writing ({error})") from None
-        store = cls(directory, connection)
+            raise StoreError(f"{database}: cannot open the results store for writing "
+                             f"({failure_cause(error, lock_timeout)})") from None
+        store = cls(directory, connection, set(), lock_timeout)
         try:
             connection.row_factory = sqlite3.Row
-            with store._write():  # checked again under the write lock: what the WAL holds, and a file made meanwhile
+            with store._write("check the results store"):  # again under the write lock: what the WAL holds
                 check_schema(connection, database)
             # readers (`runs show` during a run) never block the writer, and several runs can share the store
-            connection.execute("PRAGMA journal_mode=WAL")
-            connection.execute("PRAGMA synchronous=FULL")
-            with store._write():
+            with store._failing("switch the results store to write-ahead logging"):
+                connection.execute("PRAGMA journal_mode=WAL")
+                connection.execute("PRAGMA synchronous=FULL")
+            with store._write("create or migrate the results store's tables"):
                 upgrade(connection, database)
-        except sqlite3.Error as error:
-            connection.close()
-            raise StoreError(f"{database}: cannot write the results store ({error})") from None
-        except StoreError:
+            with store._failing("check the results store's tables"):
+                store._tables = check_store(connection, database)
+        except BaseException:
             connection.close()
             raise
         return store
@@ -135,26 +159,53 @@ class ResultStore:
             upgrade_file(database)
         try:
             connection = connect_read_only(database, immutable=not writable)
+        except sqlite3.Error as error:
+            raise StoreError(f"{database}: cannot open the results store ({failure_cause(error)})") from None
+        try:
             check_schema(connection, database)
             connection.execute("SELECT case_key FROM cases LIMIT 1")
         except sqlite3.DatabaseError as error:
+            connection.close()
             raise StoreError(f"{database}: not a gaitbench results store ({error})") from None
-        return cls(database.parent, connection)
+        except StoreError:
+            connection.close()
+            raise
+        store = cls(database.parent, connection, set())
+        try:
+            with store._failing("check the results store's tables"):
+                store._tables = check_store(connection, database)
+        except StoreError:
+            connection.close()
+            raise
+        return store
 
     def close(self) -> None:
         self._db.close()
 
     @contextmanager
-    def _write(self) -> Iterator[None]:
+    def _write(self, what: str = "write the results store") -> Iterator[None]:
         """A write transaction that takes SQLite's write lock at once (``BEGIN IMMEDIATE``): what is read inside it
-        stays true until the commit, which is what makes claims and run ids race-free between processes."""
-        self._db.execute("BEGIN IMMEDIATE")
+        stays true until the commit, which is what makes claims and run ids race-free between processes. Errors
+        as :meth:`_failing`; ``what`` names the operation in them."""
+        with self._failing(what):
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                yield
+                self._db.execute("COMMIT")
+            except BaseException:  # a commit that fails (a full disk) is rolled back too
+                if self._db.in_transaction:
+                    with suppress(sqlite3.Error):
+                        self._db.execute("ROLLBACK")
+                raise
+
+    @contextmanager
+    def _failing(self, what: str) -> Iterator[None]:
+        """Turn an SQLite or file-system error inside into one :class:`StoreError` line: the store, ``what`` it
+        could not do, and why (:func:`failure_cause`)."""
         try:
             yield
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
-        self._db.execute("COMMIT")
+        except (sqlite3.Error, OSError) as error:
+            raise StoreError(f"{self.directory}: cannot {what} ({failure_cause(error, self.lock_timeout)})") from None
 
     def __enter__(self) -> ResultStore:
         return self
@@ -179,7 +230,7 @@ class ResultStore:
 
     def _add_run(self, run: dict[str, Any]) -> str:
         stem = run["run_id"]
-        with self._write():
+        with self._write(f"record run {stem}"):
             taken = {row[0] for row in self._db.execute(
                 "SELECT run_id FROM runs WHERE run_id = ? OR run_id LIKE ?", (stem, f"{stem}-%"))}
             run_id = next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
@@ -190,10 +241,15 @@ class ResultStore:
     def finish_run(self, run_id: str, finished_at: str | None) -> None:
         """End a run: its claims go, and ``finished_at`` is set (left null for a run that was stopped)."""
         _OPEN_RUNS.discard(run_id)
-        with self._write():
+        with self._write(f"end run {run_id}"):
             self._db.execute("DELETE FROM claims WHERE run_id = ?", (run_id,))
             if finished_at is not None:
                 self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+
+    def forget_run(self, run_id: str) -> None:
+        """End ``run_id`` in this process without writing (the store failed): its row stays unfinished, and its
+        claims are dead at once here and with this process elsewhere (:func:`run_alive`)."""
+        _OPEN_RUNS.discard(run_id)
 
     @contextmanager
     def heartbeat(self, run_id: str) -> Iterator[None]:
@@ -201,7 +257,10 @@ class ResultStore:
         stop = threading.Event()
 
         def beat() -> None:
-            connection = sqlite3.connect(self.database, timeout=30, isolation_level=None)
+            try:
+                connection = sqlite3.connect(self.database, timeout=self.lock_timeout, isolation_level=None)
+            except sqlite3.Error:  # the run's own writes will say what is wrong with the store
+                return
             try:
                 while not stop.wait(HEARTBEAT_S):
                     try:
@@ -221,13 +280,18 @@ class ResultStore:
 
     def live_runs(self, exclude: str | None = None) -> list[dict[str, Any]]:
         """The runs working on this store now (unfinished, process alive, heartbeat fresh), but ``exclude``."""
-        rows = self._db.execute("SELECT * FROM runs WHERE finished_at IS NULL").fetchall()
+        with self._failing("read the runs"):
+            rows = self._db.execute("SELECT * FROM runs WHERE finished_at IS NULL").fetchall()
         return [dict(row) for row in rows if row["run_id"] != exclude and run_alive(row)]
 
     def live_claims(self) -> set[str]:
-        """The keys of the cases that live runs are solving now."""
-        rows = self._db.execute(
-            "SELECT claims.case_key AS claimed, runs.* FROM claims JOIN runs ON runs.run_id = claims.run_id").fetchall()
+        """The keys of the cases that live runs are solving now (none in a store from before claims, read where it
+        cannot be migrated)."""
+        if "claims" not in self._tables:
+            return set()
+        with self._failing("read the claims"):
+            rows = self._db.execute("SELECT claims.case_key AS claimed, runs.* FROM claims "
+                                    "JOIN runs ON runs.run_id = claims.run_id").fetchall()
         return {row["claimed"] for row in rows if run_alive(row)}
 
     def claim(self, case_key: str, run_id: str, expected: str | None) -> str:
@@ -237,7 +301,7 @@ class ResultStore:
         ``expected`` is the run id of the case's row when this run planned it (``""`` for a row without one, None
         for no row). A claim whose run is dead is taken over.
         """
-        with self._write():
+        with self._write(f"claim case {case_key}"):
             holder = self._db.execute(
                 "SELECT runs.* FROM claims LEFT JOIN runs ON runs.run_id = claims.run_id WHERE claims.case_key = ?",
                 (case_key,)).fetchone()
@@ -251,34 +315,33 @@ class ResultStore:
         return "claimed"
 
     def clean_leftovers(self, run_id: str) -> list[str]:
-        """Remove what a killed run can leave (staging directories ``.KEY-xxxx``, case directories that no row
-        names) unless another run is live, whose files these might be; the paths removed, relative to the store.
+        """Remove what a killed run can leave and the store can prove it wrote (:func:`store_files.leftovers`:
+        marked staging and case directories that no row names, checkpoint files being written by a process that is
+        gone) unless another run is live, whose files these might be; the paths removed, relative to the store.
 
         Under the write lock, so that no run can start (and begin writing files) between the check and the removal.
         """
         removed = []
-        with self._write():
+        with self._write("remove what a stopped run left"):
             if self.live_runs(exclude=run_id):
                 return removed
             named = {row[0] for row in self._db.execute(
                 "SELECT case_key FROM cases WHERE walk_path IS NOT NULL OR tracking_path IS NOT NULL")}
-            staging = [path for path in self.directory.iterdir() if path.is_dir() and _STAGING.match(path.name)]
-            cases_dir = self.directory / CASES_DIR
-            unnamed = [path for path in cases_dir.iterdir() if path.is_dir() and path.name not in named] \
-                if cases_dir.is_dir() else []
-            for path in (*staging, *unnamed):
-                shutil.rmtree(path, ignore_errors=True)
+            for path in leftovers(self.directory, named):
+                remove(path)
                 removed.append(path.relative_to(self.directory).as_posix())
         return removed
 
     def runs(self) -> list[dict[str, Any]]:
-        """Every run, oldest first, with how many of the stored cases it computed and how many failed."""
-        rows = self._db.execute(
-            "SELECT runs.*, COUNT(cases.case_key) AS cases_done, "
-            "SUM(CASE WHEN cases.status != 'solved' THEN 1 ELSE 0 END) AS cases_failed "
-            "FROM runs LEFT JOIN cases ON cases.run_id = runs.run_id GROUP BY runs.run_id ORDER BY started_at"
-        ).fetchall()
-        return [_decode(dict(row)) for row in rows]
+        """Every run, oldest first, with how many of the stored cases it computed and how many failed (every column
+        of :data:`RUN_COLUMNS` present, null where a store lacks it)."""
+        with self._failing("read the runs"):
+            rows = self._db.execute(
+                "SELECT runs.*, COUNT(cases.case_key) AS cases_done, "
+                "SUM(CASE WHEN cases.status != 'solved' THEN 1 ELSE 0 END) AS cases_failed "
+                "FROM runs LEFT JOIN cases ON cases.run_id = runs.run_id GROUP BY runs.run_id ORDER BY started_at"
+            ).fetchall()
+        return [decode_json("runs", dict.fromkeys(RUN_COLUMNS) | dict(row), self.database) for row in rows]
 
     # --- cases ----------------------------------------------------------------------------------------------
 
@@ -291,63 +354,57 @@ class ResultStore:
         query = f"SELECT case_key FROM cases WHERE status NOT IN ({', '.join('?' * len(again))})"
         if retry_unverified:
             query += " AND NOT (status = 'solved' AND acot IS NULL)"
-        return {key for (key,) in self._db.execute(query, again)}
+        with self._failing("read the cases"):
+            return {key for (key,) in self._db.execute(query, again)}
 
     def case_runs(self) -> dict[str, str]:
         """The run id of every stored case (``""`` where a row has none): what :meth:`claim` expects."""
-        return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
+        with self._failing("read the cases"):
+            return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
 
     def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> None:
         """Write one finished case: its files first (renamed into place as one directory), then its row, which
         releases the case's claim.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
-        :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``.
+        :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``, and the
+        store's marker (:mod:`gaitbench.run.store_files`); an earlier directory of the case is replaced only if it
+        has the marker or the case's row names it.
         """
-        try:
+        key = row["case_key"]
+        with self._failing(f"record case {key}"):
             if files:
-                target = self.directory / case_file(row["case_key"])
-                staging = Path(tempfile.mkdtemp(prefix=f".{row['case_key']}-", dir=self.directory))
-                try:
-                    for name, content in files.items():
-                        (staging / name).write_bytes(content)
-                    staging.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would hide the results from other users
-                    if target.exists():  # a retried case replaces its earlier files
-                        shutil.rmtree(target)
-                    target.parent.mkdir(exist_ok=True)
-                    os.replace(staging, target)
-                finally:
-                    shutil.rmtree(staging, ignore_errors=True)
-            with self._write():
-                self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
-                self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?",
-                                 (row["case_key"], row.get("run_id")))
-        except (OSError, sqlite3.Error) as error:
-            raise StoreError(f"{self.directory}: cannot record case {row['case_key']} ({_reason(error)})") from None
+                stored = self._db.execute("SELECT walk_path, tracking_path FROM cases WHERE case_key = ?",
+                                          (key,)).fetchone()
+                named = stored is not None and any(
+                    isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored)
+                place_case(self.directory, key, files, 0o777 & ~_umask(), replaceable=named)
+        with self._write(f"record case {key}"):
+            self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+            self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
 
     def update_cases(self, updates: Mapping[str, Mapping[str, Any]]) -> None:
         """Set some columns of stored cases, ``{case_key: {column: value}}``, in one transaction: what a later
         check of stored walks adds to their rows (``gaitbench verify --store``)."""
-        try:
-            with self._write():
-                for case_key, values in updates.items():
-                    unknown = set(values) - set(CASE_COLUMNS)
-                    if unknown:
-                        raise ValueError(f"unknown case columns {sorted(unknown)}")
-                    assignments = ", ".join(f"{column} = ?" for column in values)
-                    self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?",
-                                     (*(_encode(column, value) for column, value in values.items()), case_key))
-        except (OSError, sqlite3.Error) as error:
-            raise StoreError(f"{self.directory}: cannot update cases ({_reason(error)})") from None
+        for values in updates.values():
+            unknown = set(values) - set(CASE_COLUMNS)
+            if unknown:
+                raise ValueError(f"unknown case columns {sorted(unknown)}")
+        with self._write("update cases"):
+            for case_key, values in updates.items():
+                assignments = ", ".join(f"{column} = ?" for column in values)
+                self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?",
+                                 (*(_encode(column, value) for column, value in values.items()), case_key))
 
     def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
         """Stored case rows (JSON columns decoded, every column of :data:`CASE_COLUMNS` present, null where a
         store predates it), optionally only those a given run computed."""
-        if run_id is None:
-            rows = self._db.execute("SELECT * FROM cases ORDER BY rowid")
-        else:
-            rows = self._db.execute("SELECT * FROM cases WHERE run_id = ? ORDER BY rowid", (run_id,))
-        return [_decode(dict.fromkeys(CASE_COLUMNS) | dict(row)) for row in rows]
+        with self._failing("read the cases"):
+            if run_id is None:
+                rows = self._db.execute("SELECT * FROM cases ORDER BY rowid").fetchall()
+            else:
+                rows = self._db.execute("SELECT * FROM cases WHERE run_id = ? ORDER BY rowid", (run_id,)).fetchall()
+        return [decode_json("cases", dict.fromkeys(CASE_COLUMNS) | dict(row), self.database) for row in rows]
 
     def resolve_run(self, run: str) -> str:
         """A run id from a full id or a unique prefix of one; :class:`StoreError` otherwise."""
@@ -358,16 +415,6 @@ class ResultStore:
         known = ", ".join(ids) or "none"
         problem = "matches several runs" if matches else "is not a run"
         raise StoreError(f"{self.directory}: {run!r} {problem} of this store; runs: {known}")
-
-
-def checkpoint_file(case_key: str) -> str:
-    """Where a case's walk keeps its solved steps while it runs, relative to the store directory."""
-    return f"{CHECKPOINTS_DIR}/{case_key}"
-
-
-def case_file(case_key: str, name: str = "") -> str:
-    """Where a case's files live, relative to the store directory (the form path columns hold)."""
-    return f"{CASES_DIR}/{case_key}" + (f"/{name}" if name else "")
 
 
 def load_results(path: str | Path):
@@ -406,13 +453,6 @@ def _encode(column: str, value: Any) -> Any:
     return value
 
 
-def _decode(row: dict[str, Any]) -> dict[str, Any]:
-    for column in JSON_COLUMNS:
-        if isinstance(row.get(column), str):
-            row[column] = json.loads(row[column])
-    return row
-
-
 def _json_default(value: Any) -> Any:
     if hasattr(value, "tolist"):
         return value.tolist()
@@ -430,7 +470,7 @@ def run_alive(run: Mapping[str, Any]) -> bool:
     if host == socket.gethostname() and pid:
         if pid == os.getpid():
             return run["run_id"] in _OPEN_RUNS
-        if not _process_alive(pid):
+        if not process_alive(pid):
             return False
     beat = (run["heartbeat_at"] if "heartbeat_at" in keys else None) or run["started_at"]
     try:
@@ -438,19 +478,6 @@ def run_alive(run: Mapping[str, Any]) -> bool:
     except (TypeError, ValueError):
         return False
     return age < LEASE_S
-
-
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    try:  # a zombie (killed, not yet reaped by its parent) is dead
-        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
-    except (OSError, IndexError):
-        return True
 
 
 def _umask() -> int:
@@ -466,10 +493,11 @@ def _umask() -> int:
     return mask
 
 
-def _reason(error: Exception) -> str:
-    if isinstance(error, OSError) and error.strerror:
-        return error.strerror
-    return str(error)
+def _holds_anything(directory: Path) -> bool:
+    try:
+        return next(directory.iterdir(), None) is not None
+    except OSError:  # unreadable: mkdir and SQLite say what is wrong
+        return False
 
 
 def _now() -> str:

@@ -11,6 +11,7 @@ that the oldest schema migrated equals a new store.
 
 from __future__ import annotations
 
+import errno
 import sqlite3
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -180,6 +181,29 @@ SCHEMA_VERSION = MIGRATIONS[-1].version
 
 class StoreError(Exception):
     """A store that is missing, unreadable, not a gaitbench store or too new; the message says which path and why."""
+
+
+def failure_cause(error: Exception, lock_timeout: float | None = None) -> str:
+    """Why a store operation failed, in words: a full disk, a file-size limit, a lock held past ``lock_timeout``,
+    a place that cannot be written, else SQLite's or the system's own message."""
+    if isinstance(error, sqlite3.Error):
+        name = getattr(error, "sqlite_errorname", "") or ""
+        if name.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
+            waited = f" for {lock_timeout:g} s" if lock_timeout is not None else ""
+            return (f"{error}: another process holds the store's write lock; waited{waited}, "
+                    "--lock-timeout waits longer")
+        if name.startswith("SQLITE_IOERR"):
+            return f"{error}: the disk may be full, or a file-size limit (ulimit -f) reached"
+        if name.startswith("SQLITE_READONLY"):
+            return f"{error}: the store cannot be written here"
+        return str(error)
+    if isinstance(error, OSError):
+        where = f": {error.filename}" if error.filename else ""
+        words = {errno.ENOSPC: "no space left on the device: the disk is full",
+                 errno.EFBIG: "file too large: a file-size limit (ulimit -f) reached",
+                 errno.EDQUOT: "disk quota exceeded"}.get(error.errno, error.strerror or str(error))
+        return words + (where if error.strerror else "")
+    return str(error)
 
 
 def stored_version(connection: sqlite3.Connection) -> int:

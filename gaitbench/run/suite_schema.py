@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import re
 import sys
 from dataclasses import fields
@@ -75,7 +76,7 @@ class _Parser:
             raise self.error("[suite].name", f"expected lowercase letters, digits and dashes ([a-z0-9-]+), "
                                              f"found {name!r}")
         description = self.string(suite, "description", "[suite]") or ""
-        output = self.string(suite, "output", "[suite]")
+        output = self.output(suite)
         repetitions = self.integer(suite, "repetitions", "[suite]", minimum=1, default=DEFAULT_REPETITIONS)
         time_limit = self.number(suite, "time_limit_s", "[suite]", default=DEFAULT_TIME_LIMIT_S)
         steps = self.integer(suite, "steps", "[suite]", minimum=1, default=None)
@@ -101,6 +102,15 @@ class _Parser:
             methods=methods, exclusions=self.exclusions(data.get("exclude")),
             tracking=self.tracking(data.get("tracking")),
         )
+
+    def output(self, suite: dict) -> str | None:
+        """``[suite].output``: absolute as written, or relative to the current directory and inside it (``..`` that
+        climbs out is refused), so that a suite file from elsewhere cannot point a run at any directory."""
+        output = self.string(suite, "output", "[suite]")
+        if output and not Path(output).is_absolute() and Path(os.path.normpath(output)).parts[:1] == ("..",):
+            raise self.error("[suite].output", f"{output!r} leads out of the current directory, which a relative "
+                                               "output is inside; write an absolute path to keep the results there")
+        return output
 
     def _syntax_error(self, exc: Exception) -> SuiteError:
         message = str(exc)

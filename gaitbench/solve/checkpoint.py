@@ -17,6 +17,7 @@ progress display that should not unpickle whole walks to show it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from dataclasses import dataclass, field
@@ -62,16 +63,28 @@ class WalkCheckpoint:
                 checkpoint.steps, checkpoint.backed_up = saved["steps"], set(saved["backed_up"])
                 checkpoint.elapsed_s = float(saved["elapsed_s"])
                 return checkpoint
-        remove_checkpoint(checkpoint.path)
+        try:
+            remove_checkpoint(checkpoint.path)
+        except OSError as error:
+            raise CheckpointError(f"{checkpoint.path}: cannot remove the checkpoint ({_reason(error)})") from None
         return checkpoint
 
     def save(self, steps: list[Any], backed_up: set[int], elapsed_s: float, of: int | None = None) -> None:
         """Keep ``steps`` (every one solved, of ``of`` the walk has) on disk for a resumed walk; the attributes stay
-        what was opened."""
-        _write_whole(self.path, cloudpickle.dumps({"fingerprint": self.fingerprint, "steps": list(steps),
-                                                   "backed_up": sorted(backed_up), "elapsed_s": elapsed_s}))
-        _write_whole(progress_file(self.path), json.dumps({"saved": len(steps), "of": of,
-                                                           "elapsed_s": elapsed_s}).encode())
+        what was opened. :class:`CheckpointError` where the file cannot be written (a full disk, a directory that
+        cannot be written): the store failing, which ends the run rather than fails the case."""
+        content = cloudpickle.dumps({"fingerprint": self.fingerprint, "steps": list(steps),
+                                     "backed_up": sorted(backed_up), "elapsed_s": elapsed_s})
+        try:
+            _write_whole(self.path, content)
+            _write_whole(progress_file(self.path), json.dumps({"saved": len(steps), "of": of,
+                                                               "elapsed_s": elapsed_s}).encode())
+        except OSError as error:
+            raise CheckpointError(f"{self.path}: cannot save the walk's checkpoint ({_reason(error)})") from None
+
+
+class CheckpointError(Exception):
+    """A checkpoint that cannot be written or removed; the message names the file and the cause."""
 
 
 def remove_checkpoint(path: str | Path) -> None:
@@ -100,8 +113,18 @@ def saved_progress(directory: str | Path) -> dict[str, dict[str, Any]]:
 
 
 def _write_whole(path: Path, content: bytes) -> None:
-    """Write and then rename, so that a kill during the write leaves the previous file."""
+    """Write ``.<name>.<pid>`` and then rename it, so that a kill during the write leaves the previous file; a
+    write that fails (a full disk) removes its part-written file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     staging = path.with_name(f".{path.name}.{os.getpid()}")
-    staging.write_bytes(content)
-    os.replace(staging, path)
+    try:
+        staging.write_bytes(content)
+        os.replace(staging, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            staging.unlink(missing_ok=True)
+        raise
+
+
+def _reason(error: OSError) -> str:
+    return error.strerror or str(error)
