@@ -1,10 +1,26 @@
 """The layout is the architecture (docs/architecture.md): packages import only the layers below them, the core never
-imports a plugin, and no module outgrows one concept."""
+imports a plugin, no two packages import each other, and no module outgrows one concept.
+
+Every check reads the source with :mod:`ast`, so it sees what a running program would follow: relative imports are
+resolved against their package, and ``importlib.import_module("...")`` / ``__import__("...")`` with a literal name
+count as imports. Each check also says how many modules it read, and the tests compare that with the package that
+is actually imported, so a check that finds no files fails instead of passing.
+"""
 
 from __future__ import annotations
 
 import ast
+import functools
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
+
+import pytest
+
+import gaitbench
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -15,23 +31,45 @@ model's and problem's value classes and is what solving and everything above it 
 FACADE = "gaitbench"
 """The package face (``gaitbench/__init__.py``) re-exports for users, so it may reach any layer (lazily)."""
 
+MIN_CORE_MODULES = 80
+"""A floor under the number of core modules a check reads (the core has more); the exact count is compared with the
+imported package's own files."""
+
 MAX_LINES = 500
 
-
-def _layer(module: str) -> str | None:
-    parts = module.split(".")
-    if parts[0] != "gaitbench" or module == FACADE:
-        return None
-    return parts[1] if len(parts) > 1 and parts[1] in LAYERS[1:] else "spine"
+_DYNAMIC_IMPORTS = {"import_module", "__import__"}
 
 
-def _core_modules() -> list[tuple[str, Path]]:
-    modules = []
-    for path in sorted((ROOT / "gaitbench").rglob("*.py")):
-        parts = path.relative_to(ROOT).with_suffix("").parts
-        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-        modules.append((name, path))
-    return modules
+@dataclass(frozen=True)
+class Module:
+    name: str
+    path: Path
+    is_package: bool
+
+    @property
+    def package(self) -> str:
+        """The package a relative import in this module starts from."""
+        return self.name if self.is_package else self.name.rpartition(".")[0]
+
+
+@dataclass(frozen=True)
+class Arrow:
+    source: Module
+    target: str
+    line: int
+
+    def __str__(self) -> str:
+        return f"{self.source.path.name}:{self.line} ({self.source.name}) imports {self.target}"
+
+
+def modules(root: Path, top: str) -> list[Module]:
+    """Every module of the package ``top`` under ``root``."""
+    found = []
+    for path in sorted((root / top).rglob("*.py")):
+        parts = path.relative_to(root).with_suffix("").parts
+        is_package = parts[-1] == "__init__"
+        found.append(Module(".".join(parts[:-1] if is_package else parts), path, is_package))
+    return found
 
 
 def _type_only(tree: ast.Module) -> set[ast.AST]:
@@ -41,55 +79,233 @@ def _type_only(tree: ast.Module) -> set[ast.AST]:
             for statement in block.body for node in ast.walk(statement)}
 
 
-def _imports(path: Path) -> list[str]:
+def _absolute(module: Module, node: ast.ImportFrom) -> str:
+    """The module a ``from ... import`` names, relative imports resolved against the importing module's package."""
+    if node.level == 0:
+        return node.module or ""
+    base = module.package.split(".")
+    base = base[:len(base) - (node.level - 1)] if node.level > 1 else base
+    return ".".join([*base, *([node.module] if node.module else [])])
+
+
+def _dynamic_target(node: ast.Call) -> str | None:
+    """The module ``importlib.import_module(...)`` or ``__import__(...)`` loads, when its name is written in the
+    source (a literal, or the literal start of an f-string)."""
+    function = node.func
+    name = function.attr if isinstance(function, ast.Attribute) else getattr(function, "id", None)
+    if name not in _DYNAMIC_IMPORTS or not node.args:
+        return None
+    first = node.args[0]
+    if isinstance(first, ast.Constant) and isinstance(first.value, str):
+        return first.value
+    if isinstance(first, ast.JoinedStr) and first.values and isinstance(first.values[0], ast.Constant):
+        return str(first.values[0].value).rstrip(".") or None
+    return None
+
+
+@functools.cache
+def imports(module: Module) -> list[Arrow]:
     """Every module a file imports at run time, at top level or inside a function (a lazy import is still an
-    arrow)."""
-    found = []
-    tree = ast.parse(path.read_text(), filename=str(path))
+    arrow), relative and dynamic imports included."""
+    tree = ast.parse(module.path.read_text(), filename=str(module.path))
     type_only = _type_only(tree)
+    found = []
     for node in ast.walk(tree):
         if node in type_only:
             continue
         if isinstance(node, ast.Import):
-            found += [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.append(node.module)
-            found += [f"{node.module}.{alias.name}" for alias in node.names]
+            found += [Arrow(module, alias.name, node.lineno) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            target = _absolute(module, node)
+            found.append(Arrow(module, target, node.lineno))
+            found += [Arrow(module, f"{target}.{alias.name}", node.lineno) for alias in node.names]
+        elif isinstance(node, ast.Call) and (target := _dynamic_target(node)):
+            found.append(Arrow(module, target, node.lineno))
     return found
 
 
-def test_the_core_never_imports_a_plugin():
-    offenders = [f"{path.relative_to(ROOT)} imports {target}" for _, path in _core_modules()
-                 for target in _imports(path) if target.split(".")[0] == "plugins"]
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[0] != "gaitbench" or module == FACADE:
+        return None
+    return parts[1] if len(parts) > 1 and parts[1] in LAYERS[1:] else "spine"
+
+
+def _room(module: str) -> str | None:
+    """The package a module belongs to in the structure: a core layer, or one built-in plugin."""
+    parts = module.split(".")
+    if parts[0] == "gaitbench":
+        return None if module == FACADE else f"gaitbench:{_layer(module)}"
+    if parts[0] == "plugins" and len(parts) > 1:
+        return ".".join(parts[:3])
+    return None
+
+
+def core_imports_plugin(core: list[Module]) -> list[str]:
+    return [str(arrow) for module in core for arrow in imports(module) if arrow.target.split(".")[0] == "plugins"]
+
+
+def upward_imports(core: list[Module]) -> list[str]:
+    upward = []
+    for module in core:
+        source = _layer(module.name)
+        if source is None:
+            continue
+        for arrow in imports(module):
+            layer = _layer(arrow.target)
+            if layer is not None and LAYERS.index(layer) > LAYERS.index(source):
+                upward.append(f"{arrow} ({source} -> {layer})")
+    return upward
+
+
+def plugins_reaching_other_plugins(plugins: list[Module]) -> list[str]:
+    offenders = []
+    for module in plugins:
+        own = ".".join(module.name.split(".")[:3])  # plugins.<kind>.<plugin>
+        offenders += [str(arrow) for arrow in imports(module)
+                      if arrow.target.split(".")[0] == "plugins" and not (arrow.target + ".").startswith(own + ".")]
+    return offenders
+
+
+def circles(all_modules: list[Module]) -> list[list[str]]:
+    """The groups of packages (core layers and built-in plugins) that import one another, directly or round a
+    circle: the strongly connected components of the package graph with more than one member."""
+    graph: dict[str, set[str]] = {}
+    for module in all_modules:
+        source = _room(module.name)
+        if source is None:
+            continue
+        graph.setdefault(source, set())
+        for arrow in imports(module):
+            target = _room(arrow.target)
+            if target is not None and target != source:
+                graph[source].add(target)
+                graph.setdefault(target, set())
+    order: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found = []
+
+    def visit(room: str) -> None:  # Tarjan's algorithm
+        order[room] = low[room] = len(order)
+        stack.append(room)
+        for target in graph[room]:
+            if target not in order:
+                visit(target)
+                low[room] = min(low[room], low[target])
+            elif target in stack:
+                low[room] = min(low[room], order[target])
+        if low[room] == order[room]:
+            component = []
+            while (member := stack.pop()) != room:
+                component.append(member)
+            if component:
+                found.append(sorted([room, *component]))
+
+    for room in sorted(graph):
+        if room not in order:
+            visit(room)
+    return found
+
+
+def too_long(root: Path) -> list[str]:
+    return [f"{path.relative_to(root)}: {n} lines" for path in sorted(root.glob("*/**/*.py"))
+            if path.parts[len(root.parts)] in ("gaitbench", "plugins", "benchmarks")
+            and (n := len(path.read_text().splitlines())) > MAX_LINES]
+
+
+@pytest.fixture(scope="module")
+def tree() -> tuple[list[Module], list[Module]]:
+    return modules(ROOT, "gaitbench"), modules(ROOT, "plugins")
+
+
+def test_the_checks_read_every_core_module(tree):
+    core, plugins = tree
+    expected = sum(1 for _ in Path(gaitbench.__file__).parent.rglob("*.py"))
+    assert len(core) == expected, f"read {len(core)} core modules under {ROOT}, the imported package has {expected}"
+    assert len(core) >= MIN_CORE_MODULES
+    assert plugins, f"no plugin modules under {ROOT}"
+
+
+def test_the_core_never_imports_a_plugin(tree):
+    offenders = core_imports_plugin(tree[0])
     assert not offenders, offenders
 
 
-def test_each_package_imports_only_the_layers_below_it():
-    upward = []
-    for name, path in _core_modules():
-        source = _layer(name)
-        if source is None:
-            continue
-        for target in _imports(path):
-            layer = _layer(target)
-            if layer is not None and LAYERS.index(layer) > LAYERS.index(source):
-                upward.append(f"{path.relative_to(ROOT)} ({source}) imports {target} ({layer})")
+def test_each_package_imports_only_the_layers_below_it(tree):
+    upward = upward_imports(tree[0])
     assert not upward, upward
 
 
-def test_plugins_use_each_other_only_through_the_core():
-    offenders = []
-    for path in sorted((ROOT / "plugins").rglob("*.py")):
-        own = path.relative_to(ROOT).parts[:3]  # plugins/<kind>/<plugin>[.py | /...]
-        own_module = ".".join(own).removesuffix(".py")
-        for target in _imports(path):
-            if target.split(".")[0] == "plugins" and not (target + ".").startswith(own_module + "."):
-                offenders.append(f"{path.relative_to(ROOT)} imports {target}")
+def test_no_packages_import_each_other(tree):
+    core, plugins = tree
+    found = circles(core + plugins)
+    assert not found, found
+
+
+def test_plugins_use_each_other_only_through_the_core(tree):
+    offenders = plugins_reaching_other_plugins(tree[1])
     assert not offenders, offenders
 
 
 def test_no_module_outgrows_one_concept():
-    long = [f"{path.relative_to(ROOT)}: {n} lines" for path in sorted(ROOT.glob("*/**/*.py"))
-            if path.parts[len(ROOT.parts)] in ("gaitbench", "plugins", "benchmarks")
-            and (n := len(path.read_text().splitlines())) > MAX_LINES]
+    long = too_long(ROOT)
     assert not long, long
+
+
+def _replace(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, f"{old!r} not in {path}"
+    path.write_text(text.replace(old, new, 1))
+
+
+def _import_plugin_from_core(root: Path) -> None:
+    _replace(root / "gaitbench" / "model" / "terrain.py", "from __future__ import annotations\n",
+             "from __future__ import annotations\n\nimport importlib\n\n"
+             "_SOLVER = importlib.import_module(\"plugins.solvers.sqp\")\n")
+
+
+def _move_the_test_deeper(root: Path) -> None:
+    deeper = root / "tests" / "deeper"
+    deeper.mkdir()
+    (root / "tests" / "test_architecture.py").rename(deeper / "test_architecture.py")
+
+
+def _import_the_cli_from_the_model(root: Path) -> None:
+    _replace(root / "gaitbench" / "model" / "robot.py", "from __future__ import annotations\n",
+             "from __future__ import annotations\n\nfrom ..cli import main  # noqa: F401\n")
+
+
+MUTATIONS = {
+    "relative import of the CLI in the model": (_import_the_cli_from_the_model,
+                                                "test_each_package_imports_only_the_layers_below_it"),
+    "importlib loads a plugin in the core": (_import_plugin_from_core, "test_the_core_never_imports_a_plugin"),
+    "the test moved a folder deeper": (_move_the_test_deeper, "test_the_checks_read_every_core_module"),
+}
+"""Each way to break the tree, and the test that must catch it."""
+
+
+@pytest.mark.parametrize("mutation", sorted(MUTATIONS))
+def test_the_checks_fail_on_a_broken_copy_of_the_tree(tmp_path, mutation):
+    """Each mutation breaks the architecture (or the test's view of it) in a copy of the tree; the import checks of
+    this file, run on that copy in their own process, pass on the unbroken copy and fail on the broken one."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for top in ("gaitbench", "plugins"):
+        shutil.copytree(ROOT / top, tmp_path / top, ignore=ignore)
+    (tmp_path / "tests").mkdir()
+    shutil.copy(Path(__file__), tmp_path / "tests" / "test_architecture.py")
+
+    def run() -> subprocess.CompletedProcess:
+        test = next((tmp_path / "tests").rglob("test_architecture.py"))
+        return subprocess.run([sys.executable, "-m", "pytest", str(test), "-q", "-rf", "-p", "no:cacheprovider",
+                               "-k", "not broken_copy and not outgrows"], cwd=tmp_path, capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(tmp_path)}, timeout=120)
+
+    before = run()
+    assert before.returncode == 0, before.stdout + before.stderr
+    mutate, catcher = MUTATIONS[mutation]
+    mutate(tmp_path)
+    after = run()
+    assert after.returncode == 1, after.stdout + after.stderr
+    test = next((tmp_path / "tests").rglob("test_architecture.py")).relative_to(tmp_path)
+    assert f"FAILED {test.as_posix()}::{catcher}" in after.stdout, after.stdout
