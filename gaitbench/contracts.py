@@ -33,13 +33,13 @@ from gaitbench.problem.objective import Objective
 if TYPE_CHECKING:
     import numpy as np
 
-    from gaitbench.control.step_info import StepInfo
     from gaitbench.problem.gait_problem import StepStructure
     from gaitbench.problem.nlp import NLP
     from gaitbench.problem.transcription import TranscribedStep
-    from gaitbench.reports import ReportData
-    from gaitbench.solve.solver import SolverResult
+    from gaitbench.report_data import ReportData
     from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult
+    from gaitbench.solver_result import SolverResult
+    from gaitbench.step_info import StepInfo
 
 __all__ = ["CONTRACTS", "BipedModel", "Controller", "Disturbance", "Experiment", "Kind", "Objective", "Observer",
            "Reporter", "Solver", "Strategy", "Transcription", "contract_violations"]

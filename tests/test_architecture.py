@@ -1,10 +1,11 @@
 """The layout is the architecture (docs/architecture.md): packages import only the layers below them, the core never
 imports a plugin, no two packages import each other, and no module outgrows one concept.
 
-Every check reads the source with :mod:`ast`, so it sees what a running program would follow: relative imports are
-resolved against their package, and ``importlib.import_module("...")`` / ``__import__("...")`` with a literal name
-count as imports. Each check also says how many modules it read, and the tests compare that with the package that
-is actually imported, so a check that finds no files fails instead of passing.
+Every check reads the source with :mod:`ast`: relative imports are resolved against their package,
+``importlib.import_module("...")`` / ``__import__("...")`` with a literal name count as imports, and so do imports
+under ``if TYPE_CHECKING:`` (a name in an annotation ties two packages as much as a call does). Each check also says
+how many modules it read, and the tests compare that with the package that is actually imported, so a check that
+finds no files fails instead of passing.
 """
 
 from __future__ import annotations
@@ -24,9 +25,15 @@ import gaitbench
 
 ROOT = Path(__file__).resolve().parents[1]
 
-LAYERS = ["spine", "model", "problem", "contracts", "solve", "control", "run", "reports", "cli"]
-"""Bottom to top: each package may import the ones before it, never one after. ``contracts`` (one module) names the
-model's and problem's value classes and is what solving and everything above it programs against."""
+LAYERS = ["model", "problem", "contracts", "solve", "control", "run", "reports", "cli"]
+"""Bottom to top: each package may import the ones before it, never one after. ``contracts`` is every module at the
+top of ``gaitbench/``: the plugin contracts, the values they name, the registry that builds plugins to them, and the
+option checks; it names the model's and problem's value classes and is what solving and everything above it
+programs against."""
+
+PENDING = {("gaitbench.contracts", "gaitbench.solve.walk")}
+"""Upward imports not yet removed, as (importing module, imported module): the ``strategy`` contract names the walk
+types, which still live in ``solve/``. Each entry must still occur (so the list only shrinks)."""
 
 FACADE = "gaitbench"
 """The package face (``gaitbench/__init__.py``) re-exports for users, so it may reach any layer (lazily)."""
@@ -72,13 +79,6 @@ def modules(root: Path, top: str) -> list[Module]:
     return found
 
 
-def _type_only(tree: ast.Module) -> set[ast.AST]:
-    """The nodes under ``if TYPE_CHECKING:``: names for annotations, not arrows a running program follows."""
-    return {node for block in ast.walk(tree)
-            if isinstance(block, ast.If) and isinstance(block.test, ast.Name) and block.test.id == "TYPE_CHECKING"
-            for statement in block.body for node in ast.walk(statement)}
-
-
 def _absolute(module: Module, node: ast.ImportFrom) -> str:
     """The module a ``from ... import`` names, relative imports resolved against the importing module's package."""
     if node.level == 0:
@@ -105,14 +105,11 @@ def _dynamic_target(node: ast.Call) -> str | None:
 
 @functools.cache
 def imports(module: Module) -> list[Arrow]:
-    """Every module a file imports at run time, at top level or inside a function (a lazy import is still an
-    arrow), relative and dynamic imports included."""
+    """Every module a file imports, at top level, inside a function (a lazy import is still an arrow) or for type
+    checking, relative and dynamic imports included."""
     tree = ast.parse(module.path.read_text(), filename=str(module.path))
-    type_only = _type_only(tree)
     found = []
     for node in ast.walk(tree):
-        if node in type_only:
-            continue
         if isinstance(node, ast.Import):
             found += [Arrow(module, alias.name, node.lineno) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -128,7 +125,7 @@ def _layer(module: str) -> str | None:
     parts = module.split(".")
     if parts[0] != "gaitbench" or module == FACADE:
         return None
-    return parts[1] if len(parts) > 1 and parts[1] in LAYERS[1:] else "spine"
+    return parts[1] if len(parts) > 1 and parts[1] in LAYERS else "contracts"
 
 
 def _room(module: str) -> str | None:
@@ -139,6 +136,11 @@ def _room(module: str) -> str | None:
     if parts[0] == "plugins" and len(parts) > 1:
         return ".".join(parts[:3])
     return None
+
+
+def _pending(arrow: Arrow) -> bool:
+    return any(arrow.source.name == source and (arrow.target + ".").startswith(target + ".")
+               for source, target in PENDING)
 
 
 def core_imports_plugin(core: list[Module]) -> list[str]:
@@ -152,6 +154,8 @@ def upward_imports(core: list[Module]) -> list[str]:
         if source is None:
             continue
         for arrow in imports(module):
+            if _pending(arrow):
+                continue
             layer = _layer(arrow.target)
             if layer is not None and LAYERS.index(layer) > LAYERS.index(source):
                 upward.append(f"{arrow} ({source} -> {layer})")
@@ -178,7 +182,7 @@ def circles(all_modules: list[Module]) -> list[list[str]]:
         graph.setdefault(source, set())
         for arrow in imports(module):
             target = _room(arrow.target)
-            if target is not None and target != source:
+            if target is not None and target != source and not _pending(arrow):
                 graph[source].add(target)
                 graph.setdefault(target, set())
     order: dict[str, int] = {}
@@ -235,6 +239,13 @@ def test_the_core_never_imports_a_plugin(tree):
 def test_each_package_imports_only_the_layers_below_it(tree):
     upward = upward_imports(tree[0])
     assert not upward, upward
+
+
+def test_each_pending_upward_import_still_occurs(tree):
+    arrows = {(arrow.source.name, target) for module in tree[0] for arrow in imports(module)
+              for _, target in PENDING if (arrow.target + ".").startswith(target + ".")}
+    gone = PENDING - arrows
+    assert not gone, f"no longer imported, remove from PENDING: {gone}"
 
 
 def test_no_packages_import_each_other(tree):

@@ -24,9 +24,9 @@ from gaitbench.control.dynamics import held_foot_acceleration
 from gaitbench.control.falls import FallCriteria, fall_events, landing_miss
 from gaitbench.control.reference import Reference
 from gaitbench.control.results import SERIES_KEYS, Fall, StepTracking, TrackingResult
-from gaitbench.control.step_info import StepInfo
 from gaitbench.model.energetics import cost_of_transport, hip_power
 from gaitbench.model.mechanics import BipedModel
+from gaitbench.step_info import StepInfo
 
 DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-10

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from gaitbench.control.reference import Reference
-from gaitbench.control.step_info import StepInfo
 from gaitbench.model.mechanics import other_leg
 from gaitbench.model.terrain import clearance
+from gaitbench.step_info import StepInfo
 
 FallEvent = Callable[[float, np.ndarray], float]
 """A terminal event of :func:`scipy.integrate.solve_ivp` on the loop's augmented state: positive while upright."""

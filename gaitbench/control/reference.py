@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from gaitbench.control.dynamics import inverse_dynamics
-from gaitbench.control.step_info import StepInfo
 from gaitbench.model.energetics import cost_of_transport, hip_energy, hip_power
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
@@ -24,6 +23,7 @@ from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.trajectory import StepTrajectory
 from gaitbench.solve.walk import WalkResult
 from gaitbench.solve.walk_file import load_walk
+from gaitbench.step_info import StepInfo
 
 
 class TrackingInputError(ValueError):

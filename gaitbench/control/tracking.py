@@ -5,7 +5,7 @@ linearization, velocity and disturbance observers, and actuator friction as the 
 DECISIONS §9). This module is the entry point of the CLI and the suite runner: it checks a run's options, builds
 the plugins and runs the loop. The pieces:
 
-- :mod:`~gaitbench.control.step_info`: what every plugin call is told about the current step (the plugins'
+- :mod:`~gaitbench.step_info`: what every plugin call is told about the current step (the plugins'
   contracts are in :mod:`gaitbench.contracts`);
 - :mod:`~gaitbench.control.reference`: the walk to follow, as twice-differentiable desired leg angles;
 - :mod:`~gaitbench.control.closed_loop`: the simulation, with :mod:`~gaitbench.control.falls` and the held-foot

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from gaitbench.report_data import GaitSection, ReportData, TrackingSection
 
 if TYPE_CHECKING:
     from gaitbench.plugins import PluginRegistry
@@ -60,40 +61,6 @@ class ReportError(Exception):
 
 class GaitNotFound(ReportError):
     """``gait`` names no case of the store, or several."""
-
-
-@dataclass
-class GaitSection:
-    gait: Any  # gaitbench.reports.gait.Gait
-    figures: list
-    animation: str
-    dc_claim: dict | None = None  # claimed and verified ACOT of a D&C gait
-
-
-@dataclass
-class TrackingSection:
-    case_key: str
-    label: str
-    summary: dict
-    figures: list
-
-
-@dataclass
-class ReportData:
-    """Everything a reporter renders: the tables (by CSV name), the figures and the gait and tracking sections."""
-
-    store_dir: Path
-    title: str
-    cases: Any  # the prepared DataFrame
-    runs: list[dict]
-    tables: dict[str, Any]
-    experiments: list[str]
-    experiment_figures: dict[str, list] = field(default_factory=dict)
-    """Per sweep experiment: the ACOT and completion-rate figures first (shown side by side), then the others."""
-    gaits: list[GaitSection] = field(default_factory=list)
-    gait_problems: list[str] = field(default_factory=list)
-    energetics_figures: list = field(default_factory=list)
-    tracking: list[TrackingSection] = field(default_factory=list)
 
 
 def build_report(store_dir: str | Path, gait: str | None = None, registry: PluginRegistry | None = None,

@@ -5,54 +5,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
-from enum import Enum
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gaitbench.problem.nlp import NLP
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 if TYPE_CHECKING:
     from gaitbench.contracts import Solver
-
-
-class SolverStatus(str, Enum):
-    CONVERGED = "converged"
-    INFEASIBLE = "infeasible"
-    ITERATION_LIMIT = "iteration_limit"
-    TIME_LIMIT = "time_limit"
-    ERROR = "error"
-    NON_FINITE = "non_finite"
-    """The solver claimed convergence at a point or objective that is not finite (:class:`CheckedSolver`)."""
-
-
-@dataclass
-class SolverResult:
-    """The shared result of one NLP solve. A failure is a status with a message, never an exception."""
-
-    status: SolverStatus
-    message: str
-    x: np.ndarray
-    objective: float
-    constraint_violation: float
-    iterations: int
-    wall_time_s: float
-    function_time_s: float
-    evaluations: dict[str, int] = field(default_factory=dict)
-    multipliers: np.ndarray | None = None
-
-    @property
-    def converged(self) -> bool:
-        return self.status is SolverStatus.CONVERGED
-
-    def summary(self) -> dict:
-        """JSON-ready fields (no arrays)."""
-        data = asdict(self)
-        for key in ("x", "multipliers"):
-            data.pop(key)
-        data["status"] = self.status.value
-        return data
 
 
 VARIANT_KINDS = ("continuations", "remedies", "seed_remedies", "last_resorts")

@@ -17,8 +17,8 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.control.dynamics import inverse_dynamics, model_terms
 from gaitbench.control.reference import Reference
-from gaitbench.control.step_info import StepInfo
 from gaitbench.model.mechanics import BipedModel
+from gaitbench.step_info import StepInfo
 
 DEFAULT_KP = 900.0
 """s⁻²: ω_n² with ω_n = 30 rad/s."""

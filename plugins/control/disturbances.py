@@ -11,8 +11,8 @@ import math
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.control.step_info import StepInfo
 from gaitbench.model.experiment import Experiment
+from gaitbench.step_info import StepInfo
 
 
 class NoDisturbance:

@@ -27,8 +27,8 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.control.dynamics import held_foot_acceleration
-from gaitbench.control.step_info import StepInfo
 from gaitbench.model.mechanics import BipedModel
+from gaitbench.step_info import StepInfo
 
 DEFAULT_L = 500.0
 DEFAULT_PHI = 2000.0
