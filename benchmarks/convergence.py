@@ -33,7 +33,7 @@ import numpy as np
 from gaitbench.plugins import load_registry
 from gaitbench.run.provenance import provenance
 from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.walk_types import WalkProblem
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "convergence.json"

@@ -20,7 +20,7 @@ import numpy as np
 
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.walk_types import WalkProblem
 
 OUT = Path(__file__).parent / "results" / "dc_profile"
 

@@ -39,7 +39,7 @@ def measure(transcription: str, strategy: str, n_nodes: int, steps: int = 1) -> 
 
     from gaitbench.plugins import load_registry
     from gaitbench.run.provenance import git_commit
-    from gaitbench.solve.walk import WalkProblem
+    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")

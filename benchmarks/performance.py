@@ -60,7 +60,8 @@ from gaitbench.run.runner import largest_first
 from gaitbench.run.store import load_results
 from gaitbench.run.suite import load_suite
 from gaitbench.solve.solver import prepare
-from gaitbench.solve.walk import WalkProblem, solve_and_verify
+from gaitbench.solve.walk import solve_and_verify
+from gaitbench.walk_types import WalkProblem
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "performance.json"

@@ -4,7 +4,7 @@ The long sweeps (`thesis-all`'s decrease-and-conquer walks at N >= 150 take hour
 session's machine does not outlive it: only what is committed reaches the next one. So the committed store carries,
 beside every finished case, the step checkpoints of the walks in flight. A later run of the same suite on that store
 with ``--resume``, under the same commit (a checkpoint resumes only under the code that saved it,
-:mod:`gaitbench.solve.checkpoint`), goes on from the last saved step instead of step 1.
+:mod:`gaitbench.checkpoint`), goes on from the last saved step instead of step 1.
 
 The database is copied with SQLite's online backup (consistent while runs write to it, WAL included); the copy
 drops the claims, whose runs do not travel with it. Case directories no row names and checkpoints of cases that

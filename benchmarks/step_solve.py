@@ -17,7 +17,7 @@ import numpy as np
 from gaitbench import __version__
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.walk_types import WalkProblem
 
 TRANSCRIPTIONS = ("hermite-simpson", "trapezoidal", "dmoc")
 NODES = (25, 50, 100, 200)

@@ -26,7 +26,7 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions
 from gaitbench.solve.thesis_reading import thesis_push_off_energy, thesis_reading
-from gaitbench.solve.walk import StepOutcome, WalkProblem
+from gaitbench.walk_types import StepOutcome, WalkProblem
 
 
 def read_outcome(problem: WalkProblem, outcome: StepOutcome, model: BipedModel, prefix: str = "") -> dict:

@@ -37,9 +37,9 @@ if TYPE_CHECKING:
     from gaitbench.problem.nlp import NLP
     from gaitbench.problem.transcription import TranscribedStep
     from gaitbench.report_data import ReportData
-    from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult
     from gaitbench.solver_result import SolverResult
     from gaitbench.step_info import StepInfo
+    from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 
 __all__ = ["CONTRACTS", "BipedModel", "Controller", "Disturbance", "Experiment", "Kind", "Objective", "Observer",
            "Reporter", "Solver", "Strategy", "Transcription", "contract_violations"]

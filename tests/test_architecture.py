@@ -27,13 +27,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 LAYERS = ["model", "problem", "contracts", "solve", "control", "run", "reports", "cli"]
 """Bottom to top: each package may import the ones before it, never one after. ``contracts`` is every module at the
-top of ``gaitbench/``: the plugin contracts, the values they name, the registry that builds plugins to them, and the
-option checks; it names the model's and problem's value classes and is what solving and everything above it
-programs against."""
-
-PENDING = {("gaitbench.contracts", "gaitbench.solve.walk")}
-"""Upward imports not yet removed, as (importing module, imported module): the ``strategy`` contract names the walk
-types, which still live in ``solve/``. Each entry must still occur (so the list only shrinks)."""
+top of ``gaitbench/``: the plugin contracts, the values they name (the walk a strategy solves included), the
+registry that builds plugins to them, and the option checks; it names the model's and problem's value classes and
+is what solving and everything above it programs against."""
 
 FACADE = "gaitbench"
 """The package face (``gaitbench/__init__.py``) re-exports for users, so it may reach any layer (lazily)."""
@@ -138,11 +134,6 @@ def _room(module: str) -> str | None:
     return None
 
 
-def _pending(arrow: Arrow) -> bool:
-    return any(arrow.source.name == source and (arrow.target + ".").startswith(target + ".")
-               for source, target in PENDING)
-
-
 def core_imports_plugin(core: list[Module]) -> list[str]:
     return [str(arrow) for module in core for arrow in imports(module) if arrow.target.split(".")[0] == "plugins"]
 
@@ -154,8 +145,6 @@ def upward_imports(core: list[Module]) -> list[str]:
         if source is None:
             continue
         for arrow in imports(module):
-            if _pending(arrow):
-                continue
             layer = _layer(arrow.target)
             if layer is not None and LAYERS.index(layer) > LAYERS.index(source):
                 upward.append(f"{arrow} ({source} -> {layer})")
@@ -182,7 +171,7 @@ def circles(all_modules: list[Module]) -> list[list[str]]:
         graph.setdefault(source, set())
         for arrow in imports(module):
             target = _room(arrow.target)
-            if target is not None and target != source and not _pending(arrow):
+            if target is not None and target != source:
                 graph[source].add(target)
                 graph.setdefault(target, set())
     order: dict[str, int] = {}
@@ -239,13 +228,6 @@ def test_the_core_never_imports_a_plugin(tree):
 def test_each_package_imports_only_the_layers_below_it(tree):
     upward = upward_imports(tree[0])
     assert not upward, upward
-
-
-def test_each_pending_upward_import_still_occurs(tree):
-    arrows = {(arrow.source.name, target) for module in tree[0] for arrow in imports(module)
-              for _, target in PENDING if (arrow.target + ".").startswith(target + ".")}
-    gone = PENDING - arrows
-    assert not gone, f"no longer imported, remove from PENDING: {gone}"
 
 
 def test_no_packages_import_each_other(tree):

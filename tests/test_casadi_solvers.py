@@ -20,7 +20,7 @@ from nlp_problems import (
 )
 
 from gaitbench.problem.nlp import NLP, NLPBuilder
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.casadi_solvers import CasadiMethod, Fatrop, register_solvers
 from plugins.solvers.ipopt import Ipopt
 

@@ -10,14 +10,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from gaitbench.checkpoint import WalkCheckpoint, progress_file
 from gaitbench.plugins import load_registry
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.executors import InProcessExecutor
 from gaitbench.run.provenance import code_fingerprint
 from gaitbench.run.runner import run_suite
 from gaitbench.run.store import ResultStore, checkpoint_file, load_results
-from gaitbench.solve.checkpoint import WalkCheckpoint, progress_file
-from gaitbench.solve.walk import StepOutcome, WalkProblem, walk_step_by_step
+from gaitbench.solve.walk import walk_step_by_step
+from gaitbench.walk_types import StepOutcome, WalkProblem
 
 REGISTRY = load_registry()
 FINGERPRINT = {"case": "test", "code": "test"}
@@ -204,8 +205,8 @@ def test_a_walk_stopped_by_its_time_limit_keeps_its_steps_for_a_run_with_a_large
 
 
 def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) -> None:
+    from gaitbench.checkpoint import remove_checkpoint, saved_progress
     from gaitbench.cli.run_progress import steps_in_flight
-    from gaitbench.solve.checkpoint import remove_checkpoint, saved_progress
 
     step = StepOutcome(1, 1, "converged", "", next_state=np.zeros(4))
     WalkCheckpoint(tmp_path / "a1", FINGERPRINT).save([step, step], set(), 5.0, of=11)

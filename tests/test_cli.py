@@ -226,7 +226,7 @@ def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_si
     from gaitbench.plugins import load_registry
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.one_phase import OnePhase
-    from gaitbench.solve.walk import WalkProblem
+    from gaitbench.walk_types import WalkProblem
     from plugins.solvers.ipopt import Ipopt
     from plugins.transcriptions.hermite_simpson import HermiteSimpson
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from gaitbench.solve.cores import CORES_DIR_ENV, IdleCores
+from gaitbench.cores import CORES_DIR_ENV, IdleCores
 
 
 @pytest.fixture
@@ -49,7 +49,7 @@ def test_a_ledger_that_cannot_be_written_lends_nothing(tmp_path: Path) -> None:
 
 def test_a_holder_that_dies_keeps_no_core(ledger: IdleCores) -> None:
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from gaitbench.solve.cores import IdleCores; "
+        [sys.executable, "-c", "import sys, time; from gaitbench.cores import IdleCores; "
          f"lease = IdleCores({str(ledger.directory)!r}, 3).lease(); print(lease.hold(2), flush=True); "
          "time.sleep(60)"], stdout=subprocess.PIPE, text=True)
     try:

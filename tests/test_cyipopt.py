@@ -22,7 +22,7 @@ from nlp_problems import (
 )
 
 from gaitbench.solve.evaluation import NLPEvaluator
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.cyipopt_solver import CyIpopt, register_solvers
 from plugins.solvers.ipopt import Ipopt
 

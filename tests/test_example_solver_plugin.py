@@ -11,7 +11,7 @@ from gait_steps import FORMER_QUADRATURE, gait_step
 
 from gaitbench.cli.main import main
 from gaitbench.plugins import load_registry
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 
 EXAMPLES = Path(__file__).parents[1] / "examples" / "plugins"
 

@@ -20,7 +20,7 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solve.qp import RetryOrder
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp import FSQP
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import qp_hessian
@@ -288,7 +288,8 @@ def test_qp_subproblem_walks_forward_step_2_dmoc_n50_to_ipopts_cot():
     stop (iteration limit, crawling by ~1.5e-7 of merit per iteration, then a KKT test that never passed). Both
     solvers from the same guess on the same NLP; fsqp's verified COT at most 5 % above IPOPT's."""
     from gaitbench.problem.gait_problem import ProblemOptions
-    from gaitbench.solve.walk import WalkProblem, solve_and_verify
+    from gaitbench.solve.walk import solve_and_verify
+    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     experiment, transcription = registry.create("experiment", "forward"), registry.create("transcription", "dmoc")
@@ -313,7 +314,7 @@ def test_fsqp_walks_three_forward_steps_at_n20_within_5_percent_of_ipopt(transcr
     """The solvers issue's walk: forward, 3 steps, N = 20, default options; fsqp's verified ACOT at most 5 % above
     IPOPT's (measured: DMOC 0.0512 against 0.0566, HS 0.0505 against 0.0501; HS step 3 needs 702 iterations)."""
     from gaitbench.solve.one_phase import OnePhase
-    from gaitbench.solve.walk import WalkProblem
+    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")

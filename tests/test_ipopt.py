@@ -21,7 +21,7 @@ from nlp_problems import (
 )
 
 from gaitbench.plugins import load_registry
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.ipopt import Ipopt
 
 

@@ -16,7 +16,7 @@ from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import nodal_trajectory
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.walk_types import WalkProblem
 from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 
 REGISTRY = load_registry()

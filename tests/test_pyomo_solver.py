@@ -22,7 +22,7 @@ from nlp_problems import (
 import plugins.solvers.pyomo_solver.solver as pyomo_solver
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.pyomo_solver import PyomoSolver, UnsupportedOperationError, translate
 

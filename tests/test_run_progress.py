@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
+from gaitbench.checkpoint import WalkCheckpoint
 from gaitbench.cli.run_progress import CaseProgress, StepsInFlight
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.runner import failed_outcome
-from gaitbench.solve.checkpoint import WalkCheckpoint
-from gaitbench.solve.walk import StepOutcome
+from gaitbench.walk_types import StepOutcome
 
 
 def _case(n_nodes: int) -> Case:

@@ -222,7 +222,7 @@ def test_one_solve_gets_a_quarter_of_the_case_s_time_and_the_next_rung_the_rest(
 def test_a_local_worker_runs_decrease_and_conquer_s_sectional_pool(tmp_path: Path, monkeypatch) -> None:
     """``--jobs`` and the strategy's ``workers`` together: a case worker starts its own pool of sectional workers
     (two, or as many as the idle cores with "auto"), and the walk is the one solved sequentially in this process."""
-    from gaitbench.solve.cores import CORES_DIR_ENV
+    from gaitbench.cores import CORES_DIR_ENV
 
     monkeypatch.setenv(CORES_DIR_ENV, str(tmp_path / "cores"))  # the case worker's ledger: no other walk in it
 
@@ -528,8 +528,7 @@ def test_stop_columns_record_geometry_solver_and_complete_walks(tmp_path: Path) 
 
 
 def _step(index: int, status: str, solved: bool, retries: list | None = None):
-    from gaitbench.solve.verify import StepVerification
-    from gaitbench.solve.walk import StepOutcome
+    from gaitbench.walk_types import StepOutcome, StepVerification
 
     check = StepVerification(1e-12, 1e-6, 1e-6, 1.0, 0.1, 0.02) if solved else None
     return StepOutcome(index, 1, status, status, verification=check,
@@ -542,7 +541,7 @@ def _step(index: int, status: str, solved: bool, retries: list | None = None):
                                                ("converged", "verification"), ("infeasible_geometry", "geometry")])
 def test_stop_cause_of_the_failing_step_and_retries_summed_over_the_walk(status: str, cause: str) -> None:
     from gaitbench.run.runner import walk_metrics
-    from gaitbench.solve.walk import WalkResult
+    from gaitbench.walk_types import WalkResult
 
     retry = {"remedy": "adaptive-mu", "status": "infeasible"}
     walk = WalkResult("forward", "hermite-simpson", "ipopt", "one-phase", 8, "second", requested_steps=3,

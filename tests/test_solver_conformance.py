@@ -13,7 +13,7 @@ from gait_steps import gait_step
 from nlp_problems import STANDARD_PROBLEMS, ReferenceProblem, extended_rosenbrock, hs071
 
 from gaitbench.plugins import load_registry
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 
 REGISTRY = load_registry()
 SOLVERS = REGISTRY.names("solver")

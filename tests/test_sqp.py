@@ -32,8 +32,8 @@ from saved_qps import clarabel_objective, saved_qp
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP, NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
-from gaitbench.solve.solver import SolverStatus
-from gaitbench.solve.walk import WalkProblem
+from gaitbench.solver_result import SolverStatus
+from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
 from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends

@@ -12,8 +12,9 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.one_phase import OnePhase
-from gaitbench.solve.solver import SolverResult, SolverStatus
-from gaitbench.solve.walk import WalkProblem, solve_with_retries
+from gaitbench.solve.walk import solve_with_retries
+from gaitbench.solver_result import SolverResult, SolverStatus
+from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.dmoc import DiscreteMechanics
 from plugins.transcriptions.hermite_simpson import HermiteSimpson

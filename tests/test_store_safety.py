@@ -15,13 +15,13 @@ import pytest
 from test_store import Instant, assert_one_line_error, fake_case, listing, run_cli, suite_of, tiny_suite
 
 import gaitbench
+from gaitbench.checkpoint import CheckpointError, WalkCheckpoint
 from gaitbench.run.executors import LocalPoolExecutor
 from gaitbench.run.runner import run_suite
 from gaitbench.run.store import DATABASE, ResultStore
 from gaitbench.run.store_files import CASE_MARKER
 from gaitbench.run.store_schema import StoreError
 from gaitbench.run.suite import SuiteError, load_suite
-from gaitbench.solve.checkpoint import CheckpointError, WalkCheckpoint
 
 INPROCESS = ("--executor", "inprocess", "--no-report")
 

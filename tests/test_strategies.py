@@ -12,15 +12,16 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.cores import IdleCores
 from gaitbench.plugins import load_registry
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
-from gaitbench.solve.cores import IdleCores
 from gaitbench.solve.parallel import WorkerPool
-from gaitbench.solve.solver import SolverResult, SolverStatus
 from gaitbench.solve.synthesis import complete_sections, relation_holds, synthesize
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import WalkProblem, next_step_state
+from gaitbench.solve.walk import next_step_state
+from gaitbench.solver_result import SolverResult, SolverStatus
+from gaitbench.walk_types import WalkProblem
 from plugins.strategies.decrease_and_conquer import (
     DYNAMICS_TOLERANCE,
     DecreaseAndConquer,
@@ -602,7 +603,8 @@ def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
     """walk_step_by_step's back-up on made-up steps: step 3 is a dead end from the greedy step 2 only; step 5 from
     every step 4, so its back-up fails and the walk stops there, naming the back-up. Each back-up starts from the
     trajectory of the step it replaces."""
-    from gaitbench.solve.walk import StepOutcome, walk_step_by_step
+    from gaitbench.solve.walk import walk_step_by_step
+    from gaitbench.walk_types import StepOutcome
 
     experiment = _short_slope(6)
     problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)
@@ -637,7 +639,8 @@ def test_a_walk_backs_up_once_per_step_and_records_what_it_replaced():
 def test_a_step_that_no_rung_and_no_back_up_solves_is_rescued_from_the_same_state():
     """walk_step_by_step's rescue on made-up steps: it gets the failed step after its back-up has failed, from the
     state the step started at, and a rescued step walks on; a time limit is never rescued."""
-    from gaitbench.solve.walk import StepOutcome, walk_step_by_step
+    from gaitbench.solve.walk import walk_step_by_step
+    from gaitbench.walk_types import StepOutcome
 
     experiment = _short_slope(4)
     problem = WalkProblem(experiment, REGISTRY.create("transcription", "dmoc"), REGISTRY.create("solver", "ipopt"), 8)

@@ -18,8 +18,8 @@ from gaitbench.control.results import SERIES_KEYS
 from gaitbench.control.tracking import track_walk
 from gaitbench.plugins import UnknownPluginError, load_registry
 from gaitbench.solve.one_phase import OnePhase
-from gaitbench.solve.walk import WalkProblem
 from gaitbench.solve.walk_file import WalkFileError, load_walk, write_walk
+from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 

@@ -23,8 +23,9 @@ from nlp_problems import (
 
 from gaitbench.plugins import load_registry
 from gaitbench.solve.evaluation import NLPEvaluator
-from gaitbench.solve.solver import SolverStatus
-from gaitbench.solve.walk import WalkProblem, solve_and_verify
+from gaitbench.solve.walk import solve_and_verify
+from gaitbench.solver_result import SolverStatus
+from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.uno_solver import Uno, gaitbench_status, register_solvers
 

@@ -22,8 +22,9 @@ from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.step_cost import QUADRATURE_RULES, charged
 from gaitbench.problem.trajectory import Interpolant, StepTrajectory
-from gaitbench.solve.verify import OBJECTIVE_RTOL, StepVerification, fine_grid_running_cost, verify_step
-from gaitbench.solve.walk import StepOutcome, WalkResult, next_step_state
+from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost, verify_step
+from gaitbench.solve.walk import next_step_state
+from gaitbench.walk_types import StepOutcome, StepVerification, WalkResult
 from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.dmoc import interval_motion

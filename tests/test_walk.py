@@ -13,7 +13,8 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import WalkProblem, next_step_state
+from gaitbench.solve.walk import next_step_state
+from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 
@@ -198,7 +199,7 @@ class NaNClaimsConvergence:
         self.objective = objective
 
     def solve(self, nlp, parameters, initial_guess):
-        from gaitbench.solve.solver import SolverResult, SolverStatus
+        from gaitbench.solver_result import SolverResult, SolverStatus
 
         x = np.asarray(initial_guess, dtype=float).copy()
         x[::7] = np.nan
@@ -212,7 +213,7 @@ def test_non_finite_output_claiming_convergence_is_its_own_status_at_the_solver_
     """Not SciPy's "y0 must be finite" from the verification after it: the step ends ``non_finite``, naming the
     solver and what was not finite, and the retry ladder's rungs are checked alike."""
     from gaitbench.run.runner import walk_stop
-    from gaitbench.solve.solver import SolverStatus
+    from gaitbench.solver_result import SolverStatus
 
     experiment = REGISTRY.create("experiment", "forward")
     problem = WalkProblem(experiment, HermiteSimpson(), NaNClaimsConvergence(), 8, steps=1)

@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
+from gaitbench.acceptance import Thresholds, step_failures
 from gaitbench.cli.main import main
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
@@ -15,10 +16,9 @@ from gaitbench.problem.trajectory import nodal_trajectory
 from gaitbench.reports.case_frame import NOT_CHECKED, prepare
 from gaitbench.reports.tables import acot_table, unverified_cases
 from gaitbench.run.runner import walk_metrics
-from gaitbench.solve.acceptance import Thresholds, step_failures
-from gaitbench.solve.verify import StepVerification
-from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, next_step_state
+from gaitbench.solve.walk import next_step_state
 from gaitbench.solve.walk_verification import solve_verified, verify_walk
+from gaitbench.walk_types import StepOutcome, StepVerification, WalkProblem, WalkResult
 
 REGISTRY = load_registry()
 

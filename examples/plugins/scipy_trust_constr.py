@@ -14,7 +14,7 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 _STATUSES = {0: SolverStatus.ITERATION_LIMIT, 1: SolverStatus.CONVERGED, 2: SolverStatus.CONVERGED,
              3: SolverStatus.TIME_LIMIT, 4: SolverStatus.INFEASIBLE}

@@ -320,8 +320,8 @@ def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> l
     ``store_dir`` with a progress file: a step of an hour shows as a save time that stays put. A case is named by
     its label in the suite of the store's runs that holds it (the key where no run's suite file can still be
     read)."""
+    from gaitbench.checkpoint import progress_file, saved_progress
     from gaitbench.run.store import CHECKPOINTS_DIR
-    from gaitbench.solve.checkpoint import progress_file, saved_progress
 
     directory = store_dir / CHECKPOINTS_DIR
     progress = saved_progress(directory)

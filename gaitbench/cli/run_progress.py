@@ -27,7 +27,7 @@ class StepsInFlight(ProgressColumn):
         self.text, self.read_at = Text(""), -math.inf
 
     def render(self, task) -> Text:
-        from gaitbench.solve.checkpoint import saved_progress
+        from gaitbench.checkpoint import saved_progress
 
         if time.monotonic() - self.read_at >= 2.0:
             self.read_at = time.monotonic()
@@ -44,7 +44,7 @@ class StepsInFlight(ProgressColumn):
         """``step 3 of 11 saved (forward N=140 D&C-DM), 1.25 h`` for each walk of this suite whose saved steps
         changed since ``seen`` (case key → steps saved, updated here; fewer is a walk started again from step 1,
         its checkpoint from other code discarded): a log's view of the walks in flight."""
-        from gaitbench.solve.checkpoint import saved_progress
+        from gaitbench.checkpoint import saved_progress
 
         lines = []
         for key, saved in sorted(saved_progress(self.directory).items()):

@@ -190,11 +190,11 @@ def solve(
     """
     from dataclasses import replace
 
+    from gaitbench.cores import IdleCores
     from gaitbench.problem.gait_problem import ProblemOptions
-    from gaitbench.solve.cores import IdleCores
-    from gaitbench.solve.walk import WalkProblem
     from gaitbench.solve.walk_file import write_walk
     from gaitbench.solve.walk_verification import solve_verified
+    from gaitbench.walk_types import WalkProblem
 
     overrides = _problem_options(problem_options, absolute_value=absolute_value,
                                  torque_regularization=torque_regularization)

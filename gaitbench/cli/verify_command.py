@@ -11,8 +11,8 @@ from typing import Any
 import click
 from rich.console import Console
 
+from gaitbench.acceptance import ACOT_RTOL
 from gaitbench.cli.common import print_plain
-from gaitbench.solve.acceptance import ACOT_RTOL
 
 
 @click.command("verify")

@@ -21,9 +21,9 @@ from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.trajectory import StepTrajectory
-from gaitbench.solve.walk import WalkResult
 from gaitbench.solve.walk_file import load_walk
 from gaitbench.step_info import StepInfo
+from gaitbench.walk_types import WalkResult
 
 
 class TrackingInputError(ValueError):

@@ -26,7 +26,7 @@ from gaitbench.control.falls import FallCriteria
 from gaitbench.control.reference import load_reference
 from gaitbench.control.results import TrackingResult
 from gaitbench.plugins import PluginRegistry, load_registry
-from gaitbench.solve.walk import WalkResult
+from gaitbench.walk_types import WalkResult
 
 TRACKING_OPTIONS = ("controller", "observer", "disturbance", "sample_rate", "steps", "fall", "rtol", "atol")
 """The keys of :func:`track_walk`'s ``options`` (a suite's ``[tracking].options``)."""

@@ -76,11 +76,11 @@ class Case:
     objective: PluginChoice = DEFAULT_OBJECTIVE
     """What every step minimises and every COT measures."""
     time_limit_s: float | None = None
-    """The walk's deadline: no solve starts after it (:class:`gaitbench.solve.walk.WalkProblem`)."""
+    """The walk's deadline: no solve starts after it (:class:`gaitbench.walk_types.WalkProblem`)."""
     plugin_dirs: tuple[str, ...] = ()
     checkpoint: str | None = None
     """Where the walk saves its solved steps as it goes, so that a run of the case after this one was stopped goes on
-    from them (:mod:`gaitbench.solve.checkpoint`); the runner sets it, in its store, where the worker can write."""
+    from them (:mod:`gaitbench.checkpoint`); the runner sets it, in its store, where the worker can write."""
 
     @property
     def solve_time_limit_s(self) -> float | None:

@@ -7,7 +7,7 @@ machine, the solver versions) and its files, and brings the run that computed it
 uses for another run is given a suffix, as :meth:`ResultStore.start_run` does. A case the destination already
 holds is left alone unless ``replace``; one that a live run there has claimed is always left to that run.
 Checkpoints of walks in flight are not merged: a walk is resumed on the store that holds it
-(:mod:`gaitbench.solve.checkpoint`).
+(:mod:`gaitbench.checkpoint`).
 """
 
 from __future__ import annotations

@@ -89,7 +89,7 @@ def git_commit() -> str | None:
 
 @lru_cache(maxsize=1)
 def code_fingerprint() -> str:
-    """What a walk's steps were solved by, for its checkpoint (:mod:`gaitbench.solve.checkpoint`): gaitbench's
+    """What a walk's steps were solved by, for its checkpoint (:mod:`gaitbench.checkpoint`): gaitbench's
     version, a hash of the source that solves walks (the Python files of the core and of the built-in plugins, as
     they are on disk, committed or not) and the versions of the packages that can change a result.
 

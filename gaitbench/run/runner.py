@@ -20,17 +20,17 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gaitbench.checkpoint import CheckpointError, WalkCheckpoint, remove_checkpoint
+from gaitbench.cores import IdleCores
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import code_fingerprint, provenance
 from gaitbench.run.store import LOCK_TIMEOUT_S, ResultStore, case_file, checkpoint_file
 from gaitbench.run.store_schema import StoreError
-from gaitbench.solve.checkpoint import CheckpointError, WalkCheckpoint, remove_checkpoint
-from gaitbench.solve.cores import IdleCores
 
 if TYPE_CHECKING:
     from gaitbench.plugins import PluginRegistry
-    from gaitbench.solve.walk import WalkResult
+    from gaitbench.walk_types import WalkResult
 
 WALK_FILE = "walk.json"
 TRACK_FILE = "track.json"
@@ -92,8 +92,8 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
 
 def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
     from gaitbench.problem.gait_problem import ProblemOptions
-    from gaitbench.solve.walk import WalkProblem
     from gaitbench.solve.walk_verification import solve_verified
+    from gaitbench.walk_types import WalkProblem
 
     registry = _registry(case)
     experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)

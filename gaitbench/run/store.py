@@ -4,7 +4,7 @@ Layout of a store directory::
 
     results.sqlite          runs (one row per `gaitbench run` session) and cases (one row per case key)
     cases/<case_key>/       walk.json + walk.npz (the WalkResult), track.json + track.npz when tracked, the marker
-    checkpoints/<case_key>  the solved steps of a walk in flight (gaitbench.solve.checkpoint), until its row is in
+    checkpoints/<case_key>  the solved steps of a walk in flight (gaitbench.checkpoint), until its row is in
 
 Only the processes that run suites write: workers return their results and the runner records each one as soon
 as it arrives. A case's files are written to a temporary directory and renamed into place before its row is

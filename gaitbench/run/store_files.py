@@ -5,7 +5,7 @@ A store writes only inside its own directory:
     cases/<case_key>/                a recorded case's files, and the marker ``.gaitbench-case`` naming the case
     .<case_key>-xxxxxxxx/            a case's files being written (staging): the marker first, then the files, then
                                      renamed to ``cases/<case_key>``
-    checkpoints/<case_key>[.json]    a walk in flight's solved steps and its progress (gaitbench.solve.checkpoint)
+    checkpoints/<case_key>[.json]    a walk in flight's solved steps and its progress (gaitbench.checkpoint)
     checkpoints/.<name>.<pid>        a checkpoint file being written by process <pid>, then renamed over <name>
 
 It deletes only what it can prove it wrote (:func:`leftovers`): a case or staging directory whose marker names the
@@ -31,7 +31,7 @@ CASE_MARKER = ".gaitbench-case"
 
 _STAGING = re.compile(r"^\.(?P<key>[0-9a-f]{16})-[A-Za-z0-9_]+$")
 _WRITING = re.compile(r"^\.[0-9a-f]{16}(\.json)?\.(?P<pid>[0-9]+)$")
-"""A checkpoint or progress file being written (gaitbench.solve.checkpoint's ``.<name>.<pid>``)."""
+"""A checkpoint or progress file being written (gaitbench.checkpoint's ``.<name>.<pid>``)."""
 
 
 def case_file(case_key: str, name: str = "") -> str:

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from gaitbench.problem.nlp import NLP
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 
 class NLPEvaluator:

@@ -19,7 +19,7 @@ import casadi as ca
 
 from gaitbench.options import OptionError, describe, unknown_option
 from gaitbench.solve.silence import quiet_stdout
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 
 IPOPT_STATUSES = {
     "Solve_Succeeded": SolverStatus.CONVERGED,

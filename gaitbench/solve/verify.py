@@ -13,8 +13,6 @@ says whether it is within :data:`OBJECTIVE_RTOL` (with the absolute floor :data:
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 
 from gaitbench.model.energetics import cost_of_transport, hip_energy, push_off_work
@@ -24,6 +22,7 @@ from gaitbench.problem.gait_problem import StepData, role_robot_vector
 from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory
 from gaitbench.problem.transcription import TranscribedStep
+from gaitbench.walk_types import StepVerification
 
 SAMPLES_PER_INTERVAL = 16
 INSIDE = 1e-9
@@ -33,22 +32,6 @@ OBJECTIVE_RTOL = 0.05
 OBJECTIVE_ATOL = 1e-3
 """The objective agrees with the verified COT when they differ by at most 5 % of the COT, or by 1e-3 in COT for
 steps that cost almost nothing (where relative differences mean nothing)."""
-
-
-@dataclass(frozen=True)
-class StepVerification:
-    max_defect: float  # largest violation of the transcription's dynamics constraints
-    resim_error: float  # largest state error (angles in rad, rates in rad/s) at the step's end
-    resim_max_error: float  # largest state error at any node along the step
-    hip_energy: float  # J, the objective's running cost on a fine grid of the interpolant (net-power: exact |power|)
-    push_off_energy: float  # J, what the push-off is charged (ProblemOptions.push_off_cost); the COT has its event cost
-    cot: float
-    objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
-    objective_gap: float | None = None  # (cot − objective_cot) / max(cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
-    objective_agrees: bool | None = None  # |objective_gap| ≤ OBJECTIVE_RTOL
-
-    def as_dict(self) -> dict[str, float]:
-        return asdict(self)
 
 
 def verify_step(

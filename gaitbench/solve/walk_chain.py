@@ -25,15 +25,8 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.problem.trajectory import Seed
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import (
-    StepOutcome,
-    WalkProblem,
-    next_step_state,
-    solve_with_retries,
-    solver_remedies,
-    solver_variants,
-    stopped_at,
-)
+from gaitbench.solve.walk import next_step_state, solve_with_retries, solver_remedies, solver_variants, stopped_at
+from gaitbench.walk_types import StepOutcome, WalkProblem
 
 INITIAL_STATE = PARAMETER_LAYOUT["initial_state"]
 

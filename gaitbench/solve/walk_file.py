@@ -39,8 +39,8 @@ from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructu
 from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
-from gaitbench.solve.verify import StepVerification
-from gaitbench.solve.walk import StepOutcome, WalkResult, next_step_state
+from gaitbench.solve.walk import next_step_state
+from gaitbench.walk_types import StepOutcome, StepVerification, WalkResult
 
 WALK_FORMAT_VERSION = 2
 """The version :func:`write_walk` writes; :func:`read_walk` reads it and every older one."""

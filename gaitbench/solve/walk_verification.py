@@ -7,17 +7,16 @@ accuracy. What ties the steps together is the join check: step i must start from
 i − 1 (push-off, then heel strike, applied to its end; for step 1, the walk's start state). The mismatch there, and
 the mechanical energy that appears at the join (energy the robot never paid for), are recorded per step and per
 walk. :func:`verify_walk` is what ``gaitbench solve``, the suite runner and ``gaitbench verify`` all call; the
-thresholds are in :mod:`gaitbench.solve.acceptance`.
+thresholds are in :mod:`gaitbench.acceptance`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
+from gaitbench.acceptance import Thresholds, join_failure, step_failures
 from gaitbench.contracts import Strategy
 from gaitbench.model.energetics import average_cot
 from gaitbench.model.experiment import Experiment
@@ -25,70 +24,10 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.gait_problem import StepData, StepStructure
-from gaitbench.solve.acceptance import Thresholds, join_failure, step_failures
 from gaitbench.solve.thesis_reading import thesis_reading_acot
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult
 from gaitbench.solve.walk_file import WalkFile
-
-
-@dataclass(frozen=True)
-class StepCheck:
-    """One reported step of a walk, as the walk's verification saw it."""
-
-    index: int
-    cot: float
-    max_defect: float
-    resim_error: float
-    objective_gap: float | None
-    join_mismatch: float
-    """Largest |start state − post-impact state of the step before| (rad, rad/s)."""
-    join_energy: float
-    """Mechanical energy (J) at the step's start minus that of the post-impact state it should start from: > 0 is
-    energy that appeared from nowhere."""
-    failures: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class WalkVerification:
-    verified: bool
-    reasons: tuple[str, ...]
-    """Why the walk is not verified (empty when it is), each naming its step."""
-    acot: float | None
-    """The ACOT of the steps the walk reports; None unless the walk is complete."""
-    thresholds: Thresholds
-    steps: tuple[StepCheck, ...] = field(default=())
-
-    @property
-    def reason(self) -> str | None:
-        return "; ".join(self.reasons) if self.reasons else None
-
-    @property
-    def max_join_mismatch(self) -> float | None:
-        return max((step.join_mismatch for step in self.steps), default=None)
-
-    @property
-    def max_resim_error(self) -> float | None:
-        return max((step.resim_error for step in self.steps), default=None)
-
-    @property
-    def max_defect(self) -> float | None:
-        return max((step.max_defect for step in self.steps), default=None)
-
-    @property
-    def join_energy(self) -> float:
-        """Energy (J) that appeared at the walk's joins, summed where it is positive."""
-        return float(sum(max(step.join_energy, 0.0) for step in self.steps))
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"verified": self.verified, "reason": self.reason, "acot": self.acot,
-                "max_join_mismatch": self.max_join_mismatch, "join_energy": self.join_energy,
-                "max_resim_error": self.max_resim_error, "max_defect": self.max_defect,
-                "thresholds": self.thresholds.as_dict(),
-                "steps": [{"index": step.index, "cot": step.cot, "max_defect": step.max_defect,
-                           "resim_error": step.resim_error, "objective_gap": step.objective_gap,
-                           "join_mismatch": step.join_mismatch, "join_energy": step.join_energy,
-                           "failures": list(step.failures)} for step in self.steps]}
+from gaitbench.walk_types import StepCheck, StepOutcome, WalkProblem, WalkResult, WalkVerification
 
 
 def verify_walk(walk: WalkResult, start_state: np.ndarray, robot: RobotParameters) -> WalkVerification:

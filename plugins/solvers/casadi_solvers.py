@@ -37,7 +37,8 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.problem.stagewise import StagewiseForm, stagewise
 from gaitbench.solve.evaluation import Deadline
 from gaitbench.solve.silence import quiet_stderr, quiet_stdout
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
+from gaitbench.solve.solver import options_key
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 
 class CasadiMethod(ABC):

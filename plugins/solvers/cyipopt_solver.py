@@ -22,7 +22,8 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.ipopt import IPOPT_STATUSES, SMALL_MU_INIT, check_ipopt_options
 from gaitbench.solve.silence import quiet_stdout
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key, set_typed_option
+from gaitbench.solve.solver import options_key, set_typed_option
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 _RETURN_STATUSES = {
     0: "Solve_Succeeded",

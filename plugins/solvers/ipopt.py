@@ -19,7 +19,8 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.problem.scaling import SCALINGS, ScaledProblem, nominal_factors
 from gaitbench.solve.ipopt import IPOPT_STATUSES, SMALL_MU_INIT, check_ipopt_options
 from gaitbench.solve.silence import quiet_stdout
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
+from gaitbench.solve.solver import options_key
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 _FUNCTIONS = ("f", "g", "grad_f", "jac_g", "hess_l")
 """The NLP callbacks IPOPT evaluates, named as in :class:`gaitbench.problem.nlp.NLPFunctions`."""

@@ -32,7 +32,8 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.problem.scaling import SCALINGS, nominal_factors
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.silence import quiet_stderr
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key, set_typed_option
+from gaitbench.solve.solver import options_key, set_typed_option
+from gaitbench.solver_result import SolverResult, SolverStatus
 
 PRESETS = ("ipopt", "filtersqp", "funnelsqp", "auto")
 """Uno's presets for NLPs with an exact Hessian (``filterslp`` drops the Hessian and is not offered)."""

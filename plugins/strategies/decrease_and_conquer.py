@@ -37,24 +37,20 @@ from typing import Literal
 import numpy as np
 
 from gaitbench import Registration, hookimpl
+from gaitbench.acceptance import Thresholds, step_failures
 from gaitbench.model.energetics import candidate_cot
 from gaitbench.problem.gait_problem import StepData, role_robot_vector, sectional_structure
 from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
-from gaitbench.solve.acceptance import Thresholds, step_failures
 from gaitbench.solve.parallel import WorkerPool
 from gaitbench.solve.rescue import coarse_grid_rescue
-from gaitbench.solve.solver import SolverResult, prepare
+from gaitbench.solve.solver import prepare
 from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import push_off_charge, verify_step
-from gaitbench.solve.walk import (
-    StepOutcome,
-    WalkProblem,
-    WalkResult,
-    solve_with_retries,
-    walk_step_by_step,
-)
+from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
+from gaitbench.solver_result import SolverResult
+from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 
 FIRST_PHASE = "first phase"
 """``details["failed_in"]`` of a step whose First Phase failed: what the rescue acts on."""
@@ -188,7 +184,7 @@ class DecreaseAndConquer:
 def reported_motion(complete: StepOutcome, polished: StepOutcome | None, n_nodes: int
                     ) -> tuple[StepOutcome, dict]:
     """The motion a step reports and the walk goes on from: the cheaper of the polish and the complete solution
-    among those that pass verification's thresholds (:mod:`gaitbench.solve.acceptance`), else the cheaper of
+    among those that pass verification's thresholds (:mod:`gaitbench.acceptance`), else the cheaper of
     those solved; and why, as ``details["polished"]`` records it (``motion``, ``why``, and the polish's own summary
     when the complete solution stands in for it)."""
     limits = Thresholds.for_nodes(n_nodes)
@@ -220,7 +216,7 @@ class SectionalSolves:
     problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures that do
     not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once rather than
     once per worker. With ``workers = "auto"`` the walk borrows the cores that no other walk holds in its
-    problem's ledger (:mod:`gaitbench.solve.cores`), asked for again as each section ends: while none is free, the
+    problem's ledger (:mod:`gaitbench.cores`), asked for again as each section ends: while none is free, the
     sections are solved here, one by one; then the rest run in the pool, as wide as the cores held, which go back
     to the ledger when the step's last sections no longer need them and at the step's end. Without a ledger (a
     strategy called directly), "auto" is serial. Which process solves a section does not change its result.

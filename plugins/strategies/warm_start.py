@@ -12,7 +12,8 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, solve_with_retries, walk_step_by_step
+from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
+from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 
 
 class WarmStart:

@@ -18,8 +18,9 @@ import numpy as np
 from gaitbench import Registration, hookimpl
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
-from gaitbench.solve.walk import StepOutcome, WalkProblem, WalkResult, next_step_state
+from gaitbench.solve.walk import next_step_state
 from gaitbench.solve.walk_chain import WalkChain
+from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 
 
 class WholeWalk:

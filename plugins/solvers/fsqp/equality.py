@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from gaitbench.solve.evaluation import Deadline
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import BFGS, convexified_hessian
 from plugins.solvers.fsqp.linalg import Factorization, full_row_rank, kkt, least_squares_multipliers, row_norms

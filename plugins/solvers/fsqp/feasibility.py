@@ -14,7 +14,7 @@ import scipy.sparse.linalg as spla
 
 from gaitbench.solve.evaluation import Deadline
 from gaitbench.solve.qp import RetryOrder
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.outcome import Breakdown, Outcome
 from plugins.solvers.fsqp.qp import solve_qp

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 
 ROUNDING = 1e-15
 """The arc search gives up when t‖d‖∞ ≤ this × (1 + ‖x‖∞): the trial no longer differs from x but for rounding."""

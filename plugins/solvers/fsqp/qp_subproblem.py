@@ -11,7 +11,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from gaitbench.solve.evaluation import Deadline
-from gaitbench.solve.solver import SolverStatus
+from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import SHIFT_RANGE, qp_hessian
 from plugins.solvers.fsqp.linalg import row_norms

@@ -7,7 +7,7 @@ import numpy as np
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.qp import RetryOrder
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.fsqp.equality import minimize
 from plugins.solvers.fsqp.feasibility import feasibility, push_inside
 from plugins.solvers.fsqp.form import NLPForm

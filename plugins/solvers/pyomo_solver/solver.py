@@ -18,7 +18,8 @@ from pyomo.opt import TerminationCondition
 
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
-from gaitbench.solve.solver import SolverResult, SolverStatus, options_key
+from gaitbench.solve.solver import options_key
+from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.pyomo_solver.translation import PyomoNLP, translate
 
 _OPTION_NAMES: dict[str, dict[str, str]] = {

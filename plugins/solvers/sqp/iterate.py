@@ -12,7 +12,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, solver_result
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.sqp.backends import QPBackends, QPOutcome
 from plugins.solvers.sqp.hessian import damped_bfgs_update
 from plugins.solvers.sqp.linearization import Linearization

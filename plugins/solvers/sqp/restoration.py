@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from gaitbench.solve.solver import SolverResult
+from gaitbench.solver_result import SolverResult
 from plugins.solvers.sqp.linesearch import ARMIJO, MIN_STEP, LineSearch
 
 _RESTORATION_REDUCTION = 0.9

@@ -7,7 +7,7 @@ import itertools
 
 import numpy as np
 
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.sqp.hessian import Model
 from plugins.solvers.sqp.restoration import Restoration
 

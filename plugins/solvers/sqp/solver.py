@@ -8,7 +8,7 @@ import qpsolvers
 
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
-from gaitbench.solve.solver import SolverResult, SolverStatus
+from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR
 from plugins.solvers.sqp.run import Run
 

@@ -14,8 +14,10 @@ its quadrature). The defect and the join are the solver's and the chain's own ac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from gaitbench.solve.verify import StepVerification
+if TYPE_CHECKING:
+    from gaitbench.walk_types import StepVerification
 
 MAX_DEFECT = 1e-6
 """Largest violation of the transcription's dynamics constraints: the solvers' constraint tolerance."""

@@ -35,7 +35,7 @@ class WalkCheckpoint:
     path: Path
     fingerprint: dict[str, Any]
     steps: list[Any] = field(default_factory=list)
-    """The walk's solved steps (:class:`gaitbench.solve.walk.StepOutcome`), kept whole; this module does not look
+    """The walk's solved steps (:class:`gaitbench.walk_types.StepOutcome`), kept whole; this module does not look
     inside them, so that it stands below the walk that uses it."""
     backed_up: set[int] = field(default_factory=set)
     """Steps solved again after a dead end (each is backed up at most once, resumed or not)."""
