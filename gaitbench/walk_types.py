@@ -183,8 +183,8 @@ class WalkResult:
     objective: str = NET_POWER.name
     """The objective every COT of the walk is measured in (:meth:`gaitbench.problem.objective.Objective.describe`)."""
     experiment_options: dict = field(default_factory=dict)
-    """The options the experiment was built with, so that a saved walk is tracked on the same experiment; set by
-    whoever built the plugins (``gaitbench solve``, the suite runner)."""
+    """The options the experiment was built with, so that a saved walk is tracked on the same experiment; set from
+    the problem's by :func:`gaitbench.solve.walk_verification.solve_verified`."""
     strategy_options: dict = field(default_factory=dict)
     """The options the strategy was built with (set like :attr:`experiment_options`)."""
     objective_options: dict = field(default_factory=dict)
@@ -255,6 +255,10 @@ class WalkResult:
         }
 
 
+class StepsOutOfRange(ValueError):
+    """A walk asked for fewer than one step, or more than its experiment has."""
+
+
 @dataclass(frozen=True)
 class WalkProblem:
     """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
@@ -280,6 +284,10 @@ class WalkProblem:
     checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
     """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
     the walk resumes after them (:func:`walk_step_by_step`)."""
+    experiment_options: dict = field(default_factory=dict, compare=False, repr=False)
+    """The options the experiment was built with, recorded in the walk (:attr:`WalkResult.experiment_options`)."""
+    strategy_options: dict = field(default_factory=dict, compare=False, repr=False)
+    """The options the strategy was built with, recorded in the walk (:attr:`WalkResult.strategy_options`)."""
 
     @property
     def out_of_time(self) -> bool:
@@ -289,8 +297,8 @@ class WalkProblem:
     def __post_init__(self) -> None:
         object.__setattr__(self, "solver", checked(self.solver))  # every solve of the walk: the solver boundary
         if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
-            raise ValueError(f"steps = {self.steps}: the {self.experiment.name} experiment has "
-                             f"{self.experiment.n_steps} steps")
+            raise StepsOutOfRange(f"steps = {self.steps}: the {self.experiment.name} experiment has "
+                                  f"{self.experiment.n_steps} steps")
         if self.options is None:
             object.__setattr__(self, "options", ProblemOptions(limits=self.experiment.limits))
 

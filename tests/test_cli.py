@@ -324,7 +324,7 @@ def test_runs_show_fits_80_columns_with_the_stop_cause(invoke, long_labelled_sto
         (["experiments", "show", "nope"], 2, "unknown experiment 'nope'; available:"),
         (["solve", "-e", "nope"], 2, "unknown experiment 'nope'"),
         (["solve", "-e", "forward", "-t", "hermite"], 2, "unknown transcription 'hermite'"),
-        (["solve", "-e", "forward", "--steps", "99"], 2, "forward has 11 steps"),
+        (["solve", "-e", "forward", "--steps", "99"], 2, "forward experiment has 11 steps"),
         (["solve", "-e", "forward", "-S", "decrease-and-conquer", "-x", "workers=0"], 2, "workers = 0"),
         (["track", "{tmp}/missing.json"], 2, "no such result file"),
         (["track", "{tmp}/walk.json", "--observer", "nope"], 2, None),  # the file is checked first

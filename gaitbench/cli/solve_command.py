@@ -188,36 +188,32 @@ def solve(
     itself. The walk stops at the first step that fails, keeping what was solved. Exit status 1 if the walk is
     incomplete.
     """
-    from dataclasses import replace
-
     from gaitbench.cores import IdleCores
-    from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.run.case import PluginChoice
+    from gaitbench.solve.walk_assembly import assemble_walk
     from gaitbench.solve.walk_file import write_walk
     from gaitbench.solve.walk_verification import solve_verified
-    from gaitbench.walk_types import WalkProblem
+    from gaitbench.walk_types import StepsOutOfRange
 
     overrides = _problem_options(problem_options, absolute_value=absolute_value,
                                  torque_regularization=torque_regularization)
-    built_with = {"experiment": parse_options(experiment_options, "--experiment-option"),
-                  "strategy": parse_options(strategy_options, "--strategy-option")}
-    experiment = create(ctx, "experiment", experiment_name, **built_with["experiment"])
-    transcriber = create(ctx, "transcription", transcription)
-    solver = create(ctx, "solver", solver_name, **parse_options(solver_options, "--solver-option"))
-    strategy = create(ctx, "strategy", strategy_name, **built_with["strategy"])
-    objective = create(ctx, "objective", objective_name,
-                        **parse_options(objective_options, "--objective-option"))
-    if steps is not None and steps > experiment.n_steps:
-        raise click.BadParameter(f"{experiment_name} has {experiment.n_steps} steps", param_hint="--steps")
-    _check_memory(transcription, strategy_name, n_nodes, steps or experiment.n_steps)
-    options = replace(ProblemOptions(limits=experiment.limits), **overrides)
-    console = Console()
-    total = steps or experiment.n_steps
     cores = IdleCores.machine()
+    try:
+        strategy, problem = assemble_walk(
+            lambda kind, name, **options: create(ctx, kind, name, **options), n_nodes,
+            experiment=PluginChoice(experiment_name, parse_options(experiment_options, "--experiment-option")),
+            transcription=PluginChoice(transcription),
+            solver=PluginChoice(solver_name, parse_options(solver_options, "--solver-option")),
+            strategy=PluginChoice(strategy_name, parse_options(strategy_options, "--strategy-option")),
+            objective=PluginChoice(objective_name, parse_options(objective_options, "--objective-option")),
+            steps=steps, problem_options=overrides, cores=cores)
+    except StepsOutOfRange as exc:
+        raise click.BadParameter(str(exc), param_hint="--steps") from None
+    _check_memory(transcription, strategy_name, n_nodes, problem.n_steps)
+    console = Console()
+    total = problem.n_steps
     with console.status(f"solving step 1 of {total}") as status, cores.occupy():
-        problem = WalkProblem(experiment, transcriber, solver, n_nodes, steps=steps, options=options,
-                              objective=objective, cores=cores)
         walk = solve_verified(strategy, problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
-    walk.experiment_options, walk.strategy_options = built_with["experiment"], built_with["strategy"]
     _print_walk(console, walk)
     if out is not None:
         console.print(f"wrote {write_walk(walk, out)}")

@@ -91,30 +91,23 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
 
 
 def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
-    from gaitbench.problem.gait_problem import ProblemOptions
+    from gaitbench.solve.walk_assembly import assemble_walk
     from gaitbench.solve.walk_verification import solve_verified
-    from gaitbench.walk_types import WalkProblem
 
-    registry = _registry(case)
-    experiment = registry.create("experiment", case.experiment.name, **case.experiment.options)
-    transcription = registry.create("transcription", case.transcription.name, **case.transcription.options)
-    solver_options = dict(case.solver.options)
+    solver = case.solver
     if case.time_limit_s is not None:
-        solver_options.setdefault("time_limit_s", case.solve_time_limit_s)
-    solver = registry.create("solver", case.solver.name, **solver_options)
-    strategy = registry.create("strategy", case.strategy.name, **case.strategy.options)
-    objective = registry.create("objective", case.objective.name, **case.objective.options)
-    options = replace(ProblemOptions(limits=experiment.limits), **case.problem_options)
+        solver = replace(solver, options={"time_limit_s": case.solve_time_limit_s, **solver.options})
     checkpoint = None if case.checkpoint is None else \
         WalkCheckpoint.open(case.checkpoint, {"case": case.key, "code": code_fingerprint()})
     earlier = checkpoint.elapsed_s if checkpoint is not None else 0.0  # the time limit is the whole walk's
     deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s - earlier
     cores = IdleCores.machine()
-    problem = WalkProblem(experiment, transcription, solver, case.n_nodes, steps=case.steps, options=options,
-                          objective=objective, builds=builds, deadline=deadline, checkpoint=checkpoint, cores=cores)
+    strategy, problem = assemble_walk(
+        _registry(case).create, case.n_nodes, experiment=case.experiment, transcription=case.transcription,
+        solver=solver, strategy=case.strategy, objective=case.objective, steps=case.steps,
+        problem_options=case.problem_options, builds=builds, deadline=deadline, checkpoint=checkpoint, cores=cores)
     with cores.occupy():  # this case's core; the walk may borrow the idle others
         walk = solve_verified(strategy, problem)
-    walk.experiment_options, walk.strategy_options = dict(case.experiment.options), dict(case.strategy.options)
     if checkpoint is not None and checkpoint.discarded:
         walk.resumed = {**walk.resumed, "discarded": checkpoint.discarded}
     return walk

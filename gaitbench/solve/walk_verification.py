@@ -65,6 +65,7 @@ def solve_verified(strategy: Strategy, problem: WalkProblem,
     """``strategy``'s walk of ``problem``, verified as one motion (its ``verification``): what ``gaitbench solve``
     and the suite runner both run."""
     walk = strategy.solve(problem, on_step=on_step)
+    walk.experiment_options, walk.strategy_options = dict(problem.experiment_options), dict(problem.strategy_options)
     walk.verification = verify_walk(walk, problem.start_state(), problem.experiment.robot)
     walk.thesis_reading_acot = thesis_reading_of(walk, problem.experiment)
     return walk
