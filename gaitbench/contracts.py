@@ -24,10 +24,11 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
+from gaitbench.plugins import Kind
 from gaitbench.problem.objective import Objective
 
 if TYPE_CHECKING:
@@ -44,9 +45,6 @@ if TYPE_CHECKING:
 __all__ = ["CONTRACTS", "BipedModel", "Controller", "Disturbance", "Experiment", "Kind", "Objective", "Observer",
            "Reporter", "Solver", "Strategy", "Transcription", "contract_violations"]
 
-Kind = Literal["experiment", "model", "transcription", "objective", "solver", "strategy", "controller", "observer",
-               "disturbance", "reporter"]
-"""Every plugin kind (the keys of :data:`gaitbench.plugins.KINDS`)."""
 
 
 @runtime_checkable
@@ -179,7 +177,7 @@ class Reporter(Protocol):
         Returns the files written."""
 
 
-CONTRACTS: dict[str, type] = {
+CONTRACTS: dict[Kind, type] = {
     "experiment": Experiment,
     "model": BipedModel,
     "transcription": Transcription,

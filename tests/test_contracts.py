@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import inspect
+import re
 from pathlib import Path
-from typing import get_args
+from typing import get_args, get_overloads
 
 import numpy as np
 import pytest
 
+import gaitbench.hookspecs as hookspecs
 from gaitbench.contracts import CONTRACTS, Kind, Observer, contract_violations
-from gaitbench.plugins import KINDS, LoadedPlugin, load_registry
+from gaitbench.plugins import KINDS, LoadedPlugin, PluginRegistry, load_registry
 
 REGISTRY = load_registry()
 EXAMPLES = load_registry([Path(__file__).resolve().parents[1] / "examples" / "plugins"], use_entry_points=False)
@@ -25,7 +28,24 @@ def _built(plugin: LoadedPlugin) -> object:
 
 
 def test_every_kind_has_a_contract():
-    assert set(CONTRACTS) == set(KINDS) == set(get_args(Kind))
+    assert list(CONTRACTS) == list(KINDS) == list(get_args(Kind))
+
+
+def test_every_kind_has_its_hook_and_no_hook_lacks_a_kind():
+    declared = {name for name, hook in vars(hookspecs).items() if hasattr(hook, "gaitbench_spec")}
+    assert declared == set(KINDS.values())
+    assert len(declared) == len(KINDS)
+
+
+def test_create_is_typed_with_each_kind_s_contract():
+    """The typed overloads of ``PluginRegistry.create`` (written out for type checkers) return each kind's
+    contract, for every kind."""
+    typed = {}
+    for overload in get_overloads(PluginRegistry.create):
+        annotations = inspect.get_annotations(overload)
+        if literal := re.fullmatch(r"Literal\[[\"'](\w+)[\"']\]", annotations["kind"]):
+            typed[literal[1]] = annotations["return"]
+    assert typed == {kind: contract.__name__ for kind, contract in CONTRACTS.items()}
 
 
 @pytest.mark.parametrize("plugin", REGISTRY.plugins() + EXAMPLES.plugins(),
