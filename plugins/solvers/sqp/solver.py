@@ -3,6 +3,9 @@ failure as a status."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+from typing import ClassVar
+
 import numpy as np
 import qpsolvers
 
@@ -20,6 +23,7 @@ LONG_BUDGET = 10_000
 """The iteration budget of the ``more-iterations`` last resort (:meth:`SQP.last_resorts`)."""
 
 
+@dataclass(frozen=True, eq=False)
 class SQP:
     """Line-search SQP with QP subproblems solved through ``qpsolvers``; see the package docstring for the method.
 
@@ -57,46 +61,47 @@ class SQP:
     A bad option value raises ValueError at construction (the CLI reports it).
     """
 
-    name = "sqp"
+    name: ClassVar[str] = "sqp"
 
-    def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, qp_solver: str = "piqp", qp_tolerance: float = 1e-10,
-                 hessian: str = "exact", merit: str = "l1", second_order_correction: bool = True,
-                 acceptable_tolerance: float = 1e-6, fallback_qp_solver: str | None = "clarabel",
-                 crawl_shift_floor: float = SHIFT_FLOOR) -> None:
-        if qp_solver not in qpsolvers.available_solvers:
-            raise ValueError(f"unknown QP solver {qp_solver!r}; available: "
+    max_iterations: int = 3000
+    time_limit_s: float | None = None
+    tolerance: float = 1e-8
+    print_level: int = 0
+    qp_solver: str = "piqp"
+    qp_tolerance: float = 1e-10
+    hessian: str = "exact"
+    merit: str = "l1"
+    second_order_correction: bool = True
+    acceptable_tolerance: float = 1e-6
+    fallback_qp_solver: str | None = "clarabel"
+    crawl_shift_floor: float = SHIFT_FLOOR
+
+    def __post_init__(self) -> None:
+        if self.qp_solver not in qpsolvers.available_solvers:
+            raise ValueError(f"unknown QP solver {self.qp_solver!r}; available: "
                              f"{', '.join(sorted(qpsolvers.available_solvers))}")
-        fallback_qp_solver = None if fallback_qp_solver in (None, "none") else fallback_qp_solver
-        if fallback_qp_solver is not None and fallback_qp_solver not in qpsolvers.available_solvers:
-            raise ValueError(f"unknown fallback QP solver {fallback_qp_solver!r}; available: "
+        fallback = None if self.fallback_qp_solver in (None, "none") else self.fallback_qp_solver
+        if fallback is not None and fallback not in qpsolvers.available_solvers:
+            raise ValueError(f"unknown fallback QP solver {fallback!r}; available: "
                              f"{', '.join(sorted(qpsolvers.available_solvers))}")
-        if hessian not in _HESSIANS:
-            raise ValueError(f"unknown hessian {hessian!r}; choose one of {', '.join(_HESSIANS)}")
-        if merit not in _MERITS:
-            raise ValueError(f"unknown merit {merit!r}; choose one of {', '.join(_MERITS)}")
-        if max_iterations < 0 or min(tolerance, qp_tolerance, acceptable_tolerance) <= 0:
+        if self.hessian not in _HESSIANS:
+            raise ValueError(f"unknown hessian {self.hessian!r}; choose one of {', '.join(_HESSIANS)}")
+        if self.merit not in _MERITS:
+            raise ValueError(f"unknown merit {self.merit!r}; choose one of {', '.join(_MERITS)}")
+        if self.max_iterations < 0 or min(self.tolerance, self.qp_tolerance, self.acceptable_tolerance) <= 0:
             raise ValueError("max_iterations must be ≥ 0, the tolerances > 0")
-        if not 0 < crawl_shift_floor <= SHIFT_FLOOR:
+        if not 0 < self.crawl_shift_floor <= SHIFT_FLOOR:
             raise ValueError(f"crawl_shift_floor must be in (0, {SHIFT_FLOOR:g}]: the crawl floor is the usual one "
                              f"or lower")
-        self.max_iterations = int(max_iterations)
-        self.time_limit_s = time_limit_s
-        self.tolerance = float(tolerance)
-        self.print_level = int(print_level)
-        self.qp_solver = qp_solver
-        self.fallback_qp_solver = fallback_qp_solver
-        self.qp_tolerance = float(qp_tolerance)
-        self.hessian = hessian
-        self.merit = merit
-        self.second_order_correction = bool(second_order_correction)
-        self.acceptable_tolerance = max(float(acceptable_tolerance), self.tolerance)
-        self.crawl_shift_floor = float(crawl_shift_floor)
-        self._arguments = {"max_iterations": max_iterations, "time_limit_s": time_limit_s, "tolerance": tolerance,
-                           "print_level": print_level, "qp_solver": qp_solver, "qp_tolerance": qp_tolerance,
-                           "hessian": hessian, "merit": merit, "second_order_correction": second_order_correction,
-                           "acceptable_tolerance": acceptable_tolerance, "fallback_qp_solver": fallback_qp_solver,
-                           "crawl_shift_floor": crawl_shift_floor}
+        tolerance = float(self.tolerance)
+        normalized = {"max_iterations": int(self.max_iterations), "tolerance": tolerance,
+                      "print_level": int(self.print_level), "fallback_qp_solver": fallback,
+                      "qp_tolerance": float(self.qp_tolerance),
+                      "second_order_correction": bool(self.second_order_correction),
+                      "acceptable_tolerance": max(float(self.acceptable_tolerance), tolerance),
+                      "crawl_shift_floor": float(self.crawl_shift_floor)}
+        for field_name, value in normalized.items():
+            object.__setattr__(self, field_name, value)
 
     def continuations(self) -> list[tuple[str, SQP]]:
         """After a solve that ran out of iterations, the same solver again from its last iterate, with the crawl
@@ -109,7 +114,7 @@ class SQP:
         drops, and the continuation is the same solve on ("The crawl floor continues")."""
         if self.crawl_shift_floor <= CRAWL_SHIFT_FLOOR:
             return [("continue", self)]
-        return [("continue-crawl-floor", SQP(**{**self._arguments, "crawl_shift_floor": CRAWL_SHIFT_FLOOR}))]
+        return [("continue-crawl-floor", replace(self, crawl_shift_floor=CRAWL_SHIFT_FLOOR))]
 
     def remedies(self) -> list[tuple[str, SQP]]:
         """Variants for the walk's retry ladder from any start: Clarabel's QPs instead of PIQP's. From the first
@@ -117,7 +122,7 @@ class SQP:
         steps it was tried on (docs/solvers.md, "Retries")."""
         if self.qp_solver == "clarabel":
             return []
-        return [("clarabel", SQP(**{**self._arguments, "qp_solver": "clarabel", "fallback_qp_solver": self.qp_solver}))]
+        return [("clarabel", replace(self, qp_solver="clarabel", fallback_qp_solver=self.qp_solver))]
 
     def seed_remedies(self) -> list[tuple[str, SQP]]:
         """Variants for retries started from a trajectory (the First-Phase seed, a coarse grid's solution, a back-up
@@ -128,7 +133,7 @@ class SQP:
         "Retries")."""
         if self.merit == "filter":
             return []
-        return [("filter", SQP(**{**self._arguments, "merit": "filter"}))]
+        return [("filter", replace(self, merit="filter"))]
 
     def last_resorts(self) -> list[tuple[str, SQP]]:
         """After the walk's other rungs, the crawl's two remedies, cheaper first. ``crawl-floor``: the shift's floor
@@ -141,9 +146,9 @@ class SQP:
         the other rungs leave as it was."""
         resorts = []
         if self.crawl_shift_floor > CRAWL_SHIFT_FLOOR:
-            resorts.append(("crawl-floor", SQP(**{**self._arguments, "crawl_shift_floor": CRAWL_SHIFT_FLOOR})))
+            resorts.append(("crawl-floor", replace(self, crawl_shift_floor=CRAWL_SHIFT_FLOOR)))
         if self.max_iterations < LONG_BUDGET:
-            resorts.append(("more-iterations", SQP(**{**self._arguments, "max_iterations": LONG_BUDGET})))
+            resorts.append(("more-iterations", replace(self, max_iterations=LONG_BUDGET)))
         return resorts
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
