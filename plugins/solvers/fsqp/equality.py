@@ -8,7 +8,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from gaitbench.solve.evaluation import Deadline
 from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import BFGS, convexified_hessian
@@ -16,17 +15,18 @@ from plugins.solvers.fsqp.linalg import Factorization, full_row_rank, kkt, least
 from plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
 
 if TYPE_CHECKING:
+    from plugins.solvers.fsqp.progress import Progress
     from plugins.solvers.fsqp.solver import FSQP
 
 
-def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, iteration: int) -> Outcome:
+def minimize(options: FSQP, progress: Progress, form: NLPForm, x: np.ndarray, iteration: int) -> Outcome:
     """Steps 1–5 from a point x whose inequality rows are ≤ 0, counting iterations from ``iteration``."""
     n, m, n_ineq, equalities = form.n, form.m, form.n_inequalities, form.equalities
     f, c = form.objective(x), form.constraints(x)
     if not (np.isfinite(f) and np.all(np.isfinite(c))):
         return Outcome(SolverStatus.ERROR, "NaN or infinite f or g at the starting point", x, iteration, None)
-    bfgs = BFGS(n, solver.h0_scaling) if solver.hessian == "bfgs" else None
-    penalty, shift, d0_norm, u = solver.rho, 0.0, np.inf, None
+    bfgs = BFGS(n, options.h0_scaling) if options.hessian == "bfgs" else None
+    penalty, shift, d0_norm, u = options.rho, 0.0, np.inf, None
     blocking = np.zeros(0, dtype=int)
     x_old = lagrangian_gradient = None  # the last iterate and ∇f + Jᵀu there, for the BFGS update
 
@@ -38,12 +38,12 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
         return Outcome(status, message, x, iteration, u)
 
     def record(step: float, active: int, direction: str) -> None:
-        solver.record("main", iteration, merit(f, c), d0_norm, step, penalty, active, form.max_violation(c),
+        progress.record("main", iteration, merit(f, c), d0_norm, step, penalty, active, form.max_violation(c),
                      direction, x)
 
     try:
         while True:
-            if limit := solver.limit_reached(deadline, iteration):
+            if limit := progress.limit_reached(iteration):
                 return outcome(*limit)
             gradient, jacobian = form.gradient(x), form.jacobian(x)
             if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
@@ -56,13 +56,13 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
             # Step 1 (11.7), with deviations 1 and 7.
             near = c.copy()
             inside = -c[:n_ineq]
-            leaving = (np.abs(pi[:n_ineq]) < inside) | ((pi[:n_ineq] < 0) & (inside > solver.tolerance))
+            leaving = (np.abs(pi[:n_ineq]) < inside) | ((pi[:n_ineq] < 0) & (inside > options.tolerance))
             near[:n_ineq][leaving] = -np.inf
-            active = active_set(solver, jacobian, near, n_ineq, min(solver.epsilon0, d0_norm), blocking)
+            active = active_set(options, jacobian, near, n_ineq, min(options.epsilon0, d0_norm), blocking)
             # Step 2: penalty update (11.9), then ∇F_c.
             largest = np.max(np.abs(pi[equalities]), initial=0.0)
-            if penalty < largest + solver.rho:
-                penalty = max(largest + solver.rho, penalty + solver.epsilon)
+            if penalty < largest + options.rho:
+                penalty = max(largest + options.rho, penalty + options.epsilon)
             merit_gradient = gradient - penalty * np.asarray(jacobian[equalities].sum(axis=0)).ravel()
             rows, c_active, is_equality = jacobian[active], c[active], active >= n_ineq
             if bfgs is not None:
@@ -81,16 +81,16 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
             u[active] = u_active
             u[equalities] -= penalty  # the original problem's multipliers: ũ_j − c on the equalities
             d0_norm = float(np.linalg.norm(d0))
-            if d0_norm <= solver.tolerance and np.max(np.abs(c[equalities]), initial=0.0) <= solver.tolerance:
+            if d0_norm <= options.tolerance and np.max(np.abs(c[equalities]), initial=0.0) <= options.tolerance:
                 record(np.nan, active.size, "-")
-                return outcome(SolverStatus.CONVERGED, f"‖d0‖ = {d0_norm:.2e} ≤ {solver.tolerance:g} after "
+                return outcome(SolverStatus.CONVERGED, f"‖d0‖ = {d0_norm:.2e} ≤ {options.tolerance:g} after "
                                f"{iteration} iterations")
 
             # Step 3.2: d1 (11.12)-(11.13), else the d2/d3 combination (11.14)-(11.17); deviations 2-4.
-            d1 = k0.solve(-np.concatenate([merit_gradient, a + margins(solver, d0_norm, solver.nu, c_active,
+            d1 = k0.solve(-np.concatenate([merit_gradient, a + margins(options, d0_norm, options.nu, c_active,
                                                                              is_equality)]))[:n]
             slope1 = merit_gradient @ d1
-            if slope1 < 0 and slope1 <= -solver.xi * _power(float(np.linalg.norm(d1)), solver.delta):
+            if slope1 < 0 and slope1 <= -options.xi * _power(float(np.linalg.norm(d1)), options.delta):
                 d, direction = d1, "d1"
             else:
                 k1 = Factorization(kkt(hessian, rows, c_active))
@@ -102,7 +102,7 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
                 if slope3 >= 0:
                     raise Breakdown(f"no feasible descent direction (∇F_cᵀd3 = {slope3:.2e} ≥ 0) at iteration "
                                      f"{iteration} although ‖d0‖ = {d0_norm:.2e}")
-                weight = 1.0 if slope1 <= solver.theta * slope3 else (1 - solver.theta) * slope3 / (slope3 - slope1)
+                weight = 1.0 if slope1 <= options.theta * slope3 else (1 - options.theta) * slope3 / (slope3 - slope1)
                 d, direction = min(-slope3, 1.0) * ((1 - weight) * d3 + weight * d1), "d3"
 
             # Step 3.3: second-order correction d̃ (11.18), dropped if longer than d or not computable.
@@ -110,7 +110,7 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
             correction = np.zeros(n)
             c_ahead = form.constraints(x + d)[active]
             if np.all(np.isfinite(c_ahead)):
-                target = c_ahead + (a - c_active) + margins(solver, d_norm, solver.tau, c_active, is_equality)
+                target = c_ahead + (a - c_active) + margins(options, d_norm, options.tau, c_active, is_equality)
                 correction = k0.solve(-np.concatenate([merit_gradient + hessian @ d, target]))[:n]
                 if np.linalg.norm(correction) > d_norm:
                     correction = np.zeros(n)
@@ -118,19 +118,18 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
             # Step 4: arc search on x + t d + t² d̃ (11.19)-(11.20): inequality rows ≤ 0, Armijo on F_c.
             current, slope, step = merit(f, c), merit_gradient @ d, 1.0
             while True:
-                if deadline.expired():
-                    return outcome(SolverStatus.TIME_LIMIT,
-                                   f"time limit of {solver.time_limit_s} s reached in the arc search")
+                if progress.deadline.expired():
+                    return outcome(*progress.out_of_time(" in the arc search"))
                 trial = x + step * d + step ** 2 * correction
                 if form.admissible(trial):
                     c_trial = form.constraints(trial)
                     # NaN compares False, so a trial where g is undefined is rejected like an infeasible one.
                     if np.all(c_trial[:n_ineq] <= 0) and np.all(np.isfinite(c_trial)):
                         f_trial = form.objective(trial)
-                        if merit(f_trial, c_trial) <= current + solver.alpha * step * slope:
+                        if merit(f_trial, c_trial) <= current + options.alpha * step * slope:
                             break
                 rejected = trial
-                step *= solver.beta
+                step *= options.beta
                 if step * np.max(np.abs(d)) <= ROUNDING * (1 + np.max(np.abs(x))):
                     raise Breakdown(f"arc search found no acceptable step at iteration {iteration} "
                                      f"(‖d0‖ = {d0_norm:.2e}, ∇F_cᵀd = {slope:.2e})")
@@ -156,28 +155,28 @@ def minimize(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, ite
         return outcome(SolverStatus.ERROR, str(breakdown))
 
 
-def margins(solver: FSQP, norm: float, power: float, c_active: np.ndarray, equality: np.ndarray) -> np.ndarray:
+def margins(options: FSQP, norm: float, power: float, c_active: np.ndarray, equality: np.ndarray) -> np.ndarray:
     """The interior margin ‖·‖^power of d1 and d̃ per active row (deviation 4)."""
     margin = _power(norm, power)
-    return np.where(equality, np.minimum(margin, solver.equality_margin * np.abs(c_active)), margin)
+    return np.where(equality, np.minimum(margin, options.equality_margin * np.abs(c_active)), margin)
 
 
-def active_set(solver: FSQP, jacobian: sp.csr_matrix, near: np.ndarray, n_ineq: int, epsilon: float,
+def active_set(options: FSQP, jacobian: sp.csr_matrix, near: np.ndarray, n_ineq: int, epsilon: float,
                 blocking: np.ndarray) -> np.ndarray:
     """Step 1: J = {j ∈ I: near_j ≥ −ε} ∪ blocking ∪ E, ε halved until the gradients are independent; the
     blocking rows are dropped again if even the smallest ε leaves J dependent."""
     equalities = np.arange(n_ineq, near.size)
     for forced in (blocking, blocking[:0]):
         eps = epsilon
-        for _ in range(solver.max_halvings + 1):
+        for _ in range(options.max_halvings + 1):
             active = np.concatenate([np.union1d(np.flatnonzero(near[:n_ineq] >= -eps), forced), equalities])
-            if full_row_rank(jacobian[active], solver.rank_tolerance):
+            if full_row_rank(jacobian[active], options.rank_tolerance):
                 return active
             eps /= 2
         if not forced.size:
             break
     raise Breakdown(f"the gradients of the active constraints are linearly dependent (LICQ fails) after "
-                     f"{solver.max_halvings} halvings of ε")
+                     f"{options.max_halvings} halvings of ε")
 
 
 def _power(norm: float, power: float) -> float:

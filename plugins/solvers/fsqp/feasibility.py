@@ -12,7 +12,6 @@ import qpsolvers
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from gaitbench.solve.evaluation import Deadline
 from gaitbench.solve.qp import RetryOrder
 from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
@@ -20,7 +19,7 @@ from plugins.solvers.fsqp.outcome import Breakdown, Outcome
 from plugins.solvers.fsqp.qp import solve_qp
 
 if TYPE_CHECKING:
-    from plugins.solvers.fsqp.solver import FSQP
+    from plugins.solvers.fsqp.progress import Progress
 
 _PUSH = 1e-8
 """The start is pushed this far (relative) inside its bounds: a start exactly on several bounds at once (HS071's
@@ -51,12 +50,11 @@ def push_inside(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarr
     return np.clip(np.clip(x, low, high), lower, upper)
 
 
-def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) -> Outcome:
+def feasibility(progress: Progress, form: NLPForm, x: np.ndarray, with_equalities: bool) -> Outcome:
     """Phase 1: damped Gauss–Newton on ½‖max(c_I, 0)‖² until every inequality row holds (see the FSQP class); with
     the ``qp`` subproblem on ½‖max(c_I, 0)‖² + ½‖c_E‖², until the equalities are within ``_EQUALITY_START``
-    too, so that the first QP's linearisation is consistent."""
+    too, so that the first QP's linearisation is consistent (``with_equalities``)."""
     n_ineq = form.n_inequalities
-    with_equalities = solver.subproblem == "qp"
 
     def violation_of(c_all: np.ndarray) -> float:
         value = 0.5 * np.sum(np.maximum(c_all[:n_ineq], 0.0) ** 2)
@@ -70,7 +68,7 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
     iteration = 0
     while np.all(np.isfinite(c_all)) and unfinished(c_all):
         c = c_all[:n_ineq]
-        if limit := solver.limit_reached(deadline, iteration):
+        if limit := progress.limit_reached(iteration):
             return Outcome(*limit, x, iteration, None)
         violation = violation_of(c_all)
         rows = np.flatnonzero(c > -_FEASIBILITY_MARGIN)
@@ -92,9 +90,9 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
             direction = None
             if with_equalities:
                 linearised = _LinearisedRows.at(form, x, c_all, full_jacobian)
-                direction = projection(form, linearised, solver.qp_order)
+                direction = projection(form, linearised, progress.qp_order)
                 if direction is None:
-                    direction = elastic_projection(form, linearised, solver.qp_order)
+                    direction = elastic_projection(form, linearised, progress.qp_order)
             if direction is None:
                 normal = (jacobian @ jacobian.T).tocsc()
                 normal += sp.eye(rows.size, format="csc") * 1e-10 * max(1.0, float(normal.diagonal().max()))
@@ -113,7 +111,7 @@ def feasibility(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline) 
             if np.all(c <= 0):  # only the equalities are left: the main phase drives them to 0
                 break
             return infeasible(form, x, c, iteration, stalled)
-        solver.record("feasibility", iteration, violation, float(np.linalg.norm(direction)), step, np.nan,
+        progress.record("feasibility", iteration, violation, float(np.linalg.norm(direction)), step, np.nan,
                      rows.size, form.max_violation(c_all), "gn", x)
         x, c_all = trial, c_trial
         iteration += 1

@@ -10,7 +10,6 @@ import qpsolvers
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from gaitbench.solve.evaluation import Deadline
 from gaitbench.solver_result import SolverStatus
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.hessian import SHIFT_RANGE, qp_hessian
@@ -19,6 +18,7 @@ from plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
 from plugins.solvers.fsqp.qp import bend, solve_qp
 
 if TYPE_CHECKING:
+    from plugins.solvers.fsqp.progress import Progress
     from plugins.solvers.fsqp.solver import FSQP
 
 _ACTIVE = 1e-6
@@ -32,7 +32,7 @@ _ACCEPTABLE_ITERATIONS = 15
 converged; on the flat valleys of the thesis cost the last digits of the tolerance cost hundreds of iterations."""
 
 
-def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, iteration: int) -> Outcome:
+def minimize_qp(options: FSQP, progress: Progress, form: NLPForm, x: np.ndarray, iteration: int) -> Outcome:
     """FSQP with the ``qp`` subproblem (see the class docstring), from x with every inequality row ≤ 0."""
     n, m, n_ineq = form.n, form.m, form.n_inequalities
     general, equal = np.arange(form.n_general), n_ineq + np.arange(form.n_equal_g)
@@ -50,12 +50,12 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
         return Outcome(status, message, x, iteration, u)
 
     def record(step: float, direction: str) -> None:
-        solver.record("main", iteration, merit(f, c), d_norm, step, np.max(weights, initial=0.0), working.size,
+        progress.record("main", iteration, merit(f, c), d_norm, step, np.max(weights, initial=0.0), working.size,
                      form.max_violation(c), direction, x)
 
     try:
         while True:
-            if limit := solver.limit_reached(deadline, iteration):
+            if limit := progress.limit_reached(iteration):
                 return outcome(*limit)
             gradient, jacobian = form.gradient(x), form.jacobian(x)
             if not (np.all(np.isfinite(gradient)) and np.all(np.isfinite(jacobian.data))):
@@ -74,7 +74,7 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
                                        rows_e.tocsc() if equal.size else None, -c[equal] if equal.size else None,
                                        lower, upper)
                 try:
-                    solution = solve_qp(qp, solver.qp_order)
+                    solution = solve_qp(qp, progress.qp_order)
                 except Breakdown:
                     # A QP the backends cannot solve is ill-conditioned (augmentation/shift up to ~1e12 on the
                     # flat valleys): solve it again with H shifted 100× more, up to 1e-2·max|∇²L|.
@@ -118,18 +118,18 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
             scale = max(1.0, (np.sum(np.abs(u)) + np.sum(np.abs(bound_multipliers))) / (100 * (m + n)))
             violation = max(np.max(c[general], initial=0.0), np.max(np.abs(c[equal]), initial=0.0))
             error = max(stationarity / scale, complementarity / scale, violation)
-            if error > solver.tolerance:  # the same test with least-squares multipliers at x (see _refined_error)
+            if error > options.tolerance:  # the same test with least-squares multipliers at x (see _refined_error)
                 error = min(error, max(_refined_error(form, x, c, jacobian, linear, u, bound_multipliers, -curvature)
                                        / scale, violation))
             streak = streak + 1 if error <= _ACCEPTABLE_TOLERANCE else 0
-            if solver.print_level >= 2:
+            if options.print_level >= 2:
                 print(f"      KKT {error:.2e}: stationarity {stationarity / scale:.2e}, complementarity "
                       f"{complementarity / scale:.2e}, violation {violation:.2e}; H: augmentation {augmentation:.2e}, "
                       f"shift {_shift(form, x, multipliers, base):.2e}, "
                       f"{loose.size} working rows left")
-            if error <= solver.tolerance or (d_norm <= solver.tolerance and violation <= solver.tolerance):
+            if error <= options.tolerance or (d_norm <= options.tolerance and violation <= options.tolerance):
                 record(np.nan, "-")
-                return outcome(SolverStatus.CONVERGED, f"KKT error {error:.2e} ≤ {solver.tolerance:g} after "
+                return outcome(SolverStatus.CONVERGED, f"KKT error {error:.2e} ≤ {options.tolerance:g} after "
                                f"{iteration} iterations")
             if streak >= _ACCEPTABLE_ITERATIONS:
                 record(np.nan, "-")
@@ -137,23 +137,22 @@ def minimize_qp(solver: FSQP, form: NLPForm, x: np.ndarray, deadline: Deadline, 
                                f"{streak} iterations")
 
             # Second-order correction against the Maratos effect (the equalities' curvature).
-            correction = bend(form, x, d, qp, general, equal, d_norm, solver.qp_order)
+            correction = bend(form, x, d, qp, general, equal, d_norm, progress.qp_order)
 
             # Arc search on x + t d + t² d̃: inequality rows stay ≤ tolerance, Armijo on the ℓ1 merit.
             current = merit(f, c)
             slope = gradient @ d - weights @ np.abs(c[equal])
             step = 1.0
             while True:
-                if deadline.expired():
-                    return outcome(SolverStatus.TIME_LIMIT,
-                                   f"time limit of {solver.time_limit_s} s reached in the arc search")
+                if progress.deadline.expired():
+                    return outcome(*progress.out_of_time(" in the arc search"))
                 trial = np.clip(x + step * d + step ** 2 * correction, form.lbx, form.ubx)
                 c_trial = form.constraints(trial)
-                if np.all(np.isfinite(c_trial)) and np.all(c_trial[:n_ineq] <= solver.tolerance):
+                if np.all(np.isfinite(c_trial)) and np.all(c_trial[:n_ineq] <= options.tolerance):
                     f_trial = form.objective(trial)
-                    if merit(f_trial, c_trial) <= current + solver.alpha * step * min(slope, 0.0):
+                    if merit(f_trial, c_trial) <= current + options.alpha * step * min(slope, 0.0):
                         break
-                step *= solver.beta
+                step *= options.beta
                 if step * np.max(np.abs(d)) <= ROUNDING * (1 + np.max(np.abs(x))):
                     if error <= _ACCEPTABLE_TOLERANCE:
                         return outcome(SolverStatus.CONVERGED, f"acceptable level: KKT error {error:.2e}, no "

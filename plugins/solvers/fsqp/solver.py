@@ -2,19 +2,23 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+from typing import ClassVar
+
 import numpy as np
 
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
-from gaitbench.solve.qp import RetryOrder
 from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.fsqp.equality import minimize
 from plugins.solvers.fsqp.feasibility import feasibility, push_inside
 from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.outcome import IterationRecord
+from plugins.solvers.fsqp.progress import Progress
 from plugins.solvers.fsqp.qp_subproblem import minimize_qp
 
 
+@dataclass(frozen=True, eq=False)
 class FSQP:
     """Feasible SQP after the thesis's Appendix D, with damped BFGS or the convexified exact Hessian.
 
@@ -124,90 +128,78 @@ class FSQP:
     NaN at an iterate is an ERROR; at an arc-search trial it only rejects the trial.
     """
 
-    name = "fsqp"
+    name: ClassVar[str] = "fsqp"
 
-    def __init__(self, max_iterations: int = 3000, time_limit_s: float | None = None, tolerance: float = 1e-8,
-                 print_level: int = 0, hessian: str = "exact", alpha: float = 0.1, beta: float = 0.5,
-                 nu: float = 2.5, delta: float = 2.2, tau: float = 2.5, theta: float = 0.8, xi: float = 1e-3,
-                 epsilon0: float = 1.0, epsilon: float = 1.0, rho: float = 1.0, max_halvings: int = 50,
-                 rank_tolerance: float = 1e-6, equality_margin: float = 0.1, h0_scaling: str | float = "auto",
-                 scaling: str = "gradient", subproblem: str = "qp") -> None:
-        if subproblem not in ("qp", "equality"):
-            raise ValueError(f"subproblem must be 'qp' or 'equality', not {subproblem!r}")
-        if hessian not in ("bfgs", "exact"):
-            raise ValueError(f"hessian must be 'bfgs' or 'exact', not {hessian!r}")
-        if subproblem == "qp" and hessian != "exact":
+    max_iterations: int = 3000
+    time_limit_s: float | None = None
+    tolerance: float = 1e-8
+    print_level: int = 0
+    hessian: str = "exact"
+    alpha: float = 0.1
+    beta: float = 0.5
+    nu: float = 2.5
+    delta: float = 2.2
+    tau: float = 2.5
+    theta: float = 0.8
+    xi: float = 1e-3
+    epsilon0: float = 1.0
+    epsilon: float = 1.0
+    rho: float = 1.0
+    max_halvings: int = 50
+    rank_tolerance: float = 1e-6
+    equality_margin: float = 0.1
+    h0_scaling: str | float = "auto"
+    scaling: str = "gradient"
+    subproblem: str = "qp"
+    log: list[IterationRecord] = field(default_factory=list, init=False, repr=False)
+    """The iterates of the last solve, both phases, in order (refilled by each solve)."""
+
+    def __post_init__(self) -> None:
+        if self.subproblem not in ("qp", "equality"):
+            raise ValueError(f"subproblem must be 'qp' or 'equality', not {self.subproblem!r}")
+        if self.hessian not in ("bfgs", "exact"):
+            raise ValueError(f"hessian must be 'bfgs' or 'exact', not {self.hessian!r}")
+        if self.subproblem == "qp" and self.hessian != "exact":
             raise ValueError("the 'qp' subproblem takes the exact Hessian; BFGS needs subproblem='equality'")
-        if scaling not in ("gradient", "none"):
-            raise ValueError(f"scaling must be 'gradient' or 'none', not {scaling!r}")
-        if h0_scaling != "auto" and not (isinstance(h0_scaling, int | float) and h0_scaling > 0):
-            raise ValueError(f"h0_scaling must be 'auto' or a positive number, not {h0_scaling!r}")
-        if not (0 < alpha < 0.5 and 0 < beta < 1 and nu > 2 and 2 < delta < nu and 2 < tau < 3 and 0 < theta < 1
-                and xi > 0 and epsilon0 > 0 and epsilon > 0 and rho > 0 and equality_margin > 0):
+        if self.scaling not in ("gradient", "none"):
+            raise ValueError(f"scaling must be 'gradient' or 'none', not {self.scaling!r}")
+        h0 = self.h0_scaling
+        if h0 != "auto" and not (isinstance(h0, int | float) and h0 > 0):
+            raise ValueError(f"h0_scaling must be 'auto' or a positive number, not {h0!r}")
+        if not (0 < self.alpha < 0.5 and 0 < self.beta < 1 and self.nu > 2 and 2 < self.delta < self.nu
+                and 2 < self.tau < 3 and 0 < self.theta < 1 and self.xi > 0 and self.epsilon0 > 0
+                and self.epsilon > 0 and self.rho > 0 and self.equality_margin > 0):
             raise ValueError("FSQP needs α ∈ (0, ½), β, θ ∈ (0, 1), ν > 2, δ ∈ (2, ν), τ ∈ (2, 3) and positive ξ, "
                              "ε0, ε, ρ and equality_margin")
-        self.max_iterations = int(max_iterations)
-        self.time_limit_s = time_limit_s
-        self.tolerance = float(tolerance)
-        self.print_level = int(print_level)
-        self.hessian = hessian
-        self.alpha, self.beta, self.nu, self.delta, self.tau = alpha, beta, nu, delta, tau
-        self.theta, self.xi, self.epsilon0, self.epsilon, self.rho = theta, xi, epsilon0, epsilon, rho
-        self.max_halvings = int(max_halvings)
-        self.rank_tolerance = float(rank_tolerance)
-        self.equality_margin = float(equality_margin)
-        self.h0_scaling = h0_scaling
-        self.scaling = scaling
-        self.subproblem = subproblem
-        self.log: list[IterationRecord] = []
-        """The iterates of the last solve, both phases, in order."""
-        self.qp_order = RetryOrder()
-        """Which settings each QP backend tries first, in the current solve (``qp.solve_qp``)."""
+        normalized = {"max_iterations": int(self.max_iterations), "tolerance": float(self.tolerance),
+                      "print_level": int(self.print_level), "max_halvings": int(self.max_halvings),
+                      "rank_tolerance": float(self.rank_tolerance), "equality_margin": float(self.equality_margin)}
+        for name, value in normalized.items():
+            object.__setattr__(self, name, value)
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Phase 1 if the start violates an inequality, then FSQP; every failure becomes a status."""
         deadline = Deadline(self.time_limit_s)
         x0 = np.asarray(initial_guess, dtype=float).ravel()
-        self.log = []
-        self.qp_order = RetryOrder()
+        self.log.clear()
+        progress = Progress(self.max_iterations, self.time_limit_s, deadline, self.print_level, self.log)
         try:
             evaluator = NLPEvaluator(nlp, parameters)
             if x0.size != nlp.n_variables:
                 raise ValueError(f"the initial guess has {x0.size} values, the NLP {nlp.n_variables} variables")
-            return self._solve(evaluator, push_inside(x0, nlp.lbx, nlp.ubx), deadline)
+            return self._solve(evaluator, push_inside(x0, nlp.lbx, nlp.ubx), progress)
         except Exception as error:  # the Solver protocol reports failures, it never raises them
             return error_result(error, x0, deadline)
 
-    def _solve(self, evaluator: NLPEvaluator, x: np.ndarray, deadline: Deadline) -> SolverResult:
+    def _solve(self, evaluator: NLPEvaluator, x: np.ndarray, progress: Progress) -> SolverResult:
         form = NLPForm(evaluator, x, self.scaling)
-        outcome = feasibility(self, form, x, deadline)
+        outcome = feasibility(progress, form, x, with_equalities=self.subproblem == "qp")
         if outcome.status is not SolverStatus.CONVERGED:
             return solver_result(outcome.status, f"FSQP feasibility phase: {outcome.message}", outcome.x, evaluator,
-                                 outcome.iterations, deadline)
+                                 outcome.iterations, progress.deadline)
         form.orient(outcome.x)
         phase = minimize_qp if self.subproblem == "qp" else minimize
-        outcome = phase(self, form, outcome.x, deadline, outcome.iterations)
+        outcome = phase(self, progress, form, outcome.x, outcome.iterations)
         multipliers = None if outcome.multipliers is None else form.nlp_multipliers(outcome.multipliers)
         return solver_result(outcome.status, f"FSQP: {outcome.message}", outcome.x, evaluator, outcome.iterations,
-                             deadline, multipliers)
-
-    def limit_reached(self, deadline: Deadline, iteration: int) -> tuple[SolverStatus, str] | None:
-        """The time or iteration limit with its message, once reached: checked first by every loop of the method."""
-        if deadline.expired():
-            return SolverStatus.TIME_LIMIT, f"time limit of {self.time_limit_s} s reached"
-        if iteration >= self.max_iterations:
-            return SolverStatus.ITERATION_LIMIT, f"iteration limit of {self.max_iterations} reached"
-        return None
-
-    def record(self, phase: str, iteration: int, merit: float, d0_norm: float, step: float, penalty: float,
-               active: int, max_violation: float, direction: str, x: np.ndarray) -> None:
-        """Log iteration ``iteration`` of ``phase`` in :attr:`log`, and print it at ``print_level ≥ 1``."""
-        if self.print_level >= 1:
-            if not self.log or self.log[-1].phase != phase:
-                print(f"FSQP {phase} phase")
-                label = "F_c" if phase == "main" else "½|c_I+|²"
-                print(f"{'iter':>5} {label:>13} {'|d0|':>9} {'step':>9} {'c_k':>9} {'|J|':>5} {'max viol':>9}  dir")
-            print(f"{iteration:>5} {merit:>13.6e} {d0_norm:>9.2e} {step:>9.2e} {penalty:>9.2e} {active:>5} "
-                  f"{max_violation:>9.2e}  {direction}")
-        self.log.append(IterationRecord(phase, iteration, merit, d0_norm, step, penalty, active, max_violation,
-                                        direction, x.copy()))
+                             progress.deadline, multipliers)
