@@ -81,8 +81,9 @@ def inconsistent_keys(store_dir: Path, band: tuple[int, int] | None, tolerance: 
                    "change to gaitbench that may take them further, or with a larger time limit (a walk stopped by "
                    "its limit goes on from the steps it solved). The new row replaces the old.")
 @click.option("--retry-unverified", is_flag=True,
-              help="With --resume, run again the complete walks that have no verified ACOT (a decrease-and-conquer "
-                   "step whose polish failed): after a change to gaitbench that may verify them.")
+              help="With --resume, run again the complete walks that failed verification (the store's verified "
+                   "flag is 0: `gaitbench verify --store` sets it for rows stored before it existed) or have no "
+                   "ACOT: after a change to gaitbench that may verify them.")
 @click.option("--retry-inconsistent", is_flag=True,
               help="With --resume, run again the complete walks whose ACOT fails the report's consistency check: "
                    "a finer N more than --tolerance from the method's median over --band (`gaitbench runs show "

@@ -348,12 +348,13 @@ class ResultStore:
     def finished_keys(self, retry_failed: bool = False, retry_incomplete: bool = False,
                       retry_unverified: bool = False) -> set[str]:
         """Keys of cases that need no new run: all stored ones, less the run's failures with ``retry_failed``, the
-        walks that stopped with ``retry_incomplete``, and the complete walks without a verified ACOT (a
-        decrease-and-conquer polish that failed) with ``retry_unverified``."""
+        walks that stopped with ``retry_incomplete``, and with ``retry_unverified`` the complete walks that failed
+        the whole-walk verification (``verified`` 0) or have no ACOT; rows never checked (``verified`` null) are
+        not run again: `gaitbench verify --store` checks them."""
         again = (RETRYABLE_STATUSES if retry_failed else ()) + (("incomplete",) if retry_incomplete else ())
         query = f"SELECT case_key FROM cases WHERE status NOT IN ({', '.join('?' * len(again))})"
         if retry_unverified:
-            query += " AND NOT (status = 'solved' AND acot IS NULL)"
+            query += " AND NOT (status = 'solved' AND (acot IS NULL OR COALESCE(verified, 1) = 0))"
         with self._failing("read the cases"):
             return {key for (key,) in self._db.execute(query, again)}
 
