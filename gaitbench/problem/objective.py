@@ -16,7 +16,7 @@ order (:func:`gaitbench.problem.gait_problem.role_robot_vector`: masses at 0–2
 
 Objectives are frozen dataclasses: a step's built NLP is cached under a structure that includes its objective, so
 equal objectives must compare (and hash) equal. ``net-power`` lives here because it is the core's default
-(DECISIONS §5); the other built-in objectives are plugins (``plugins/objectives/energy_costs.py``).
+(docs/model.md §5); the other built-in objectives are plugins (``plugins/objectives/energy_costs.py``).
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ def relation_holds(candidate: np.ndarray, previous: np.ndarray, reference: np.nd
                    tolerance: float = 1e-9) -> bool:
     """Whether every variable changes from ``previous`` to ``candidate`` in the direction the reference changes.
 
-    The thesis's "typical value relation" (L10054–10089) is not defined further; this is the reading of ch3b
+    The thesis's "typical value relation" (§3.7) is not defined further; this is the reading of ch3b
     §6.4: the signs of the increments agree, with changes within ``tolerance`` counting as "equal".
     """
     return bool(relations_hold(candidate[None], previous, _direction(reference - reference_previous, tolerance),

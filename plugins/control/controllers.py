@@ -1,8 +1,8 @@
-"""Tracking controllers of the thesis's Chapter 4 (ch4-control.md §1–3; DECISIONS §9), and a PD baseline.
+"""Tracking controllers of the thesis's Chapter 4 (ch4-control.md §1–3; docs/model.md §9), and a PD baseline.
 
 Each is built as ``factory(model, reference, **options)`` and tracks :class:`gaitbench.control.reference.Reference`.
 
-Gains (DECISIONS §8: the thesis's values were lost). The model-based laws impose ë + K_v ė + K_p e = 0 on each
+Gains (docs/model.md §8: the thesis's values were lost). The model-based laws impose ë + K_v ė + K_p e = 0 on each
 leg; the defaults K_p = 900 s⁻², K_v = 60 s⁻¹ make it critically damped at ω_n = 30 rad/s (4.8 Hz): well above the
 gait's content (a 0.73 s step, 1.4 Hz), so the reference is followed closely, and a decade below what a 1 kHz
 servo loop or the observers' fast poles (l = 500 s⁻¹) can support, so sampling and estimation stay out of the way.
@@ -40,7 +40,7 @@ class ComputedTorque:
     τ = [M(q) v + C(q, q̂̇) q̂̇ + G(q)]₁,₂ + d̂ with v = (q̈_d − K_v(q̂̇ − q̇_d) − K_p(q − q_d), 0, 0): the fully actuated
     model of the push-off phase with the foot's rows left to the ground reaction. Push-off: the thesis's fully
     actuated law in impulse form asks for the generalized impulse M(q)(q̇_d⁺ − q̂̇⁻); the only actuator is the scalar
-    impulse along the stance leg (DECISIONS §3), so its M⁻¹-weighted projection on that axis is applied,
+    impulse along the stance leg (docs/model.md §3), so its M⁻¹-weighted projection on that axis is applied,
     F = (J M⁻¹ Jᵀ)⁻¹ J (q̇_d⁺ − q̂̇⁻) (ch4 §9 item 15). On the reference it is exactly the planned impulse.
     """
 
@@ -75,7 +75,7 @@ class PartialFeedbackLinearization:
     (default) is the exact held-foot force M21 v_a + C21 q̂̇_a + C22 q̂̇_na + G2, which linearizes q̈_a = v_a exactly
     (and makes the law coincide with computed torque, ch4 §3.4.1); ``"thesis"`` is the closed form (3.39),
     C21 q̇_a + G2, which drops M21 q̈_a and leaves q̈_a = M11⁻¹ M_a v_a — kept to show the thesis's error.
-    Heel strike is an instantaneous plastic impact here (DECISIONS §3), on which finite hip torques do no work, so
+    Heel strike is an instantaneous plastic impact here (docs/model.md §3), on which finite hip torques do no work, so
     the heel-strike PFL is this same law acting from the first instant of the next step. The push-off is not PFL's
     (it is fully actuated): this controller applies the planned impulse.
     """

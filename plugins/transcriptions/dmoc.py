@@ -2,7 +2,7 @@
 
 The configuration is discretized, not the state: positions q_k at the nodes, the midpoint discrete Lagrangian
 L_d(q_k, q_{k+1}) = h L((q_k + q_{k+1})/2, (q_{k+1} − q_k)/h) on each interval, and one constant torque τ_k per
-interval whose discrete forces are f_k^± = (h/2) τ_k (DECISIONS §6; digest ch2 §4.6, App. A §2.3–2.5 with the
+interval whose discrete forces are f_k^± = (h/2) τ_k (docs/model.md §6; digest ch2 §4.6, App. A §2.3–2.5 with the
 corrected "+" sign of (8.49)). The dynamics are a momentum balance at every node: the momentum arriving from the
 interval before (the forced discrete Legendre transform p_k⁺ = D2 L_d(q_{k−1}, q_k) + (h/2) τ_{k−1}) equals the
 momentum leaving into the interval after (p_k⁻ = −D1 L_d(q_k, q_{k+1}) − (h/2) τ_k). At the two ends the
@@ -19,7 +19,7 @@ power is a quadratic in time, so the rule integrates it exactly: its signed sum 
 τ_k·(q_k+1 − q_k) = h τ_k·v_k, what the midpoint discrete Lagrangian accounts for, and its |P| is the energy
 wherever the power keeps its sign in the interval.
 
-Why not the discrete Lagrangian's midpoint rule Σ h |τ_k·v_k| (``quadrature="midpoint"``, DECISIONS §5 read
+Why not the discrete Lagrangian's midpoint rule Σ h |τ_k·v_k| (``quadrature="midpoint"``, docs/model.md §5 read
 literally)? It measures that net work, |∫P|, not ∫|P|. The net-power cost is blind to torques orthogonal to the
 velocity, and the optimizer used the difference to accelerate the legs for free: on the forward walk's step 2 at
 N = 20, torques up to 2700 N·m whose power is −4900 W at one end of an interval, +5050 W at the other and zero at its
