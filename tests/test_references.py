@@ -2,9 +2,9 @@
 
 Scans the tracked text files (code, docs, suites, report templates) for repository paths that do not exist, for
 anchors into Markdown files that have no such heading, and for citations of material the repository does not hold:
-the shared specification (``spec/``), its decision list ("DECISIONS §n") and line numbers of a thesis text file
-("L1234"). The thesis is cited by its own sections, equations and figures; the project's modelling decisions are in
-docs/model.md.
+the shared specification (``spec/``), its decision list ("DECISIONS §n"), its chapter digests ("ch4 §5.3") and
+line numbers of a thesis text file ("L1234"). The thesis is cited by its own sections, equations and figures; the
+project's modelling decisions are in docs/model.md. This file, which must name the patterns, is not scanned.
 """
 
 from __future__ import annotations
@@ -36,16 +36,18 @@ _OUTSIDE = (
     (re.compile(r"seed/thesis|thesis\.txt"), "points to a thesis text file, which is not in the repository"),
     (re.compile(r"(?<![\w-])L\d{3,5}(?:\s*[–-]\s*L?\d{3,5})?\b"),
      "cites a line of a thesis text file (cite the thesis's section, equation or figure)"),
+    (re.compile(r"\bch[2-5][ab]?(?:-[a-z-]+\.md)? §|\bdigest ch|\(digest\b|\bdigest's\b"),
+     "cites a chapter digest, which is not in the repository (cite the thesis's own section)"),
     (re.compile(r"/work/|\.\./shared"), "points to a path outside the repository"),
 )
 
 
 def tracked_text_files(root: Path = ROOT) -> list[Path]:
-    """The tracked files with a scanned suffix (committed results under benchmarks/results/ excluded)."""
+    """The tracked files with a scanned suffix (committed results under benchmarks/results/ and this file excluded)."""
     names = subprocess.run(["git", "ls-files"], cwd=root, check=True, capture_output=True, text=True).stdout
     return [root / name for name in names.splitlines()
             if Path(name).suffix in SCANNED_SUFFIXES and not name.startswith("benchmarks/results/")
-            and (root / name).is_file()]
+            and (root / name).is_file() and (root / name) != Path(__file__).resolve()]
 
 
 def _slug(heading: str) -> str:
@@ -142,6 +144,7 @@ def test_every_reference_leads_inside_the_repository():
     ("as DECISIONS §4 settles", "DECISIONS"),
     ("the digest `spec/thesis/ch2.md`", "spec/"),
     ("read seed/thesis.txt", "thesis text file"),
+    ("the observer diverges (ch4 §5.3)", "chapter digest"),
     ("the weights (L9350–9366)", "line of a thesis"),
 ])
 def test_a_planted_bad_reference_fails(tmp_path, text, reason):

@@ -51,7 +51,8 @@ class ProblemOptions:
     # as the passive-walking literature allows it).
     clearance: str = "terrain"
     # Swing-foot height over l above that ground at interior nodes. The legs must cross, and at the crossing the
-    # height is exactly 0 (digest ch2 C1), so any positive margin makes fine grids infeasible.
+    # height is exactly 0 (docs/deviations.md, "Swing-foot clearance"), so any positive margin makes fine grids
+    # infeasible.
     clearance_margin: float = 0.0
     # The old stance foot leaves the ground at push-off: its velocity after heel strike along the normal of the
     # step's chord is at least this (l/s; docs/model.md §3). ``lift_off = False`` is the thesis's literal problem.

@@ -1,7 +1,7 @@
 """Disturbances for closed-loop tracking: the thesis's actuator friction, none, and an external push.
 
 Each is built as ``factory(experiment, **options)`` and returns generalized forces on the left-hand side of
-M q̈ + C q̇ + G + d = B τ + Sᵀ f (the sign the thesis's "+ d̂" in its laws implies, ch4-control.md §5.2).
+M q̈ + C q̇ + G + d = B τ + Sᵀ f (the sign the thesis's "+ d̂" in its laws implies, thesis §4.3).
 """
 
 from __future__ import annotations
