@@ -53,8 +53,8 @@ class FSQP:
     - ``scaling`` = "gradient": every row (and f) whose gradient max-norm at the start exceeds 100 is scaled down to
       100, as IPOPT does; "none" keeps the NLP's units. The DMOC dynamics rows have gradients of ~7e3.
 
-    Deviations from the literal thesis, each found necessary during development (the examples name the test problem
-    that failed without it, measured with the version of the time):
+    Deviations from the literal thesis, each necessary for convergence (the examples name the test problem that
+    failed without it):
 
     1. Step 1: ε_{k,0} = min(ε0, ‖d0^{k−1}‖), and an inequality row is not near-active if its multiplier estimate
        is smaller than its distance (|π_j| < −c_j), or negative while the row is more than ``tolerance`` inside.

@@ -108,15 +108,12 @@ change φ by no more than its rounding for 15 consecutive iterations cannot prog
 of the acceptable level (the walk's retry ladder takes over), instead of taking such steps until its iteration
 limit.
 
-QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as failed.
-PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to 5e4 at DMOC,
-N = 50; many QPs of the later walk steps). It first tries such a QP again without its Ruiz equilibration, which
-solves most of them, more accurately than Clarabel, which often reaches only its reduced accuracy on them
-(``gaitbench.solve.qp.RETRY_SETTINGS``); once the late-step crawl shows, where PIQP fails QPs in runs, the setting
-that solved the last such QP goes first. Its proximal regularisation is kept at or above 1e-10 (its own fine-tuning
-goes to 1e-13, from where its iterates diverge on these QPs), and its limit is 100 iterations, not its own 250: the
-QPs it solves take at most 95, and the ones it fails it fails whatever the limit (``backends._BACKEND_OPTIONS``,
-``gaitbench.solve.qp.BACKEND_SETTINGS``).
+QP failures: PIQP, the default, stops at its iteration limit on some of the ill-conditioned convexified gait QPs.
+Such a QP is tried again by PIQP without its Ruiz equilibration (``gaitbench.solve.qp.RETRY_SETTINGS``), then by
+``fallback_qp_solver`` (Clarabel), before it counts as failed; once the late-step crawl shows, where PIQP fails QPs in
+runs, the setting that solved the last such QP goes first. PIQP's proximal regularisation is kept at or above 1e-10,
+below which its iterates diverge on these QPs, and its limit is 100 iterations (``backends._BACKEND_OPTIONS``,
+``gaitbench.solve.qp.BACKEND_SETTINGS``; docs/decisions/0002-qp-backends.md).
 
 Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
 interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords),
