@@ -68,7 +68,7 @@ def _frame(rows):
 
 def test_savings_formula_and_minimum_marking():
     assert tables.savings_percent(0.5, 0.1) == pytest.approx(80.0)
-    # The thesis's forward D&C-DC vs OP-DC maximum: 85.41 % from 0.0695 against 0.4764 (ch5 §2.3, derived table).
+    # The thesis's forward D&C-DC vs OP-DC maximum: 85.41 % from 0.0695 against 0.4764 (thesis §5.2–5.5, derived table).
     assert tables.savings_percent(0.4764, 0.0695) == pytest.approx(85.41, abs=0.01)
     rows = []
     sweep = ((10, 0.40, 0.20, 0.10, 0.30), (20, 0.30, 0.15, 0.05, 0.25), (30, 0.30, 0.18, 0.09, None))

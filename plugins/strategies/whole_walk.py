@@ -23,7 +23,7 @@ from gaitbench.solve.walk_chain import WalkChain
 
 
 class WholeWalk:
-    """Options: ``guess`` ("blended", the default: every step from the blended guess of DECISIONS §7, the
+    """Options: ``guess`` ("blended", the default: every step from the blended guess of docs/model.md §7, the
     experiment's initial state mirrored for Leg-2 stance steps; "one-phase": start from the One Phase walk, a
     feasible point of this NLP, so the optimizer improves on it)."""
 
