@@ -42,10 +42,12 @@ from gaitbench.run.store_files import (
     CHECKPOINTS_DIR,
     case_file,
     checkpoint_file,
+    holds_anything,
     leftovers,
     place_case,
     process_alive,
     remove,
+    umask,
 )
 from gaitbench.run.store_schema import (
     CASE_COLUMNS,
@@ -108,7 +110,7 @@ class ResultStore:
         """
         directory = Path(directory)
         database = directory / DATABASE
-        if directory.is_dir() and not database.exists() and _holds_anything(directory):
+        if directory.is_dir() and not database.exists() and holds_anything(directory):
             raise StoreError(f"{directory}: not a gaitbench results store (a directory with other files and no "
                              f"{DATABASE}); nothing was changed; choose a new or empty directory, or a store")
         try:
@@ -379,7 +381,7 @@ class ResultStore:
                                           (key,)).fetchone()
                 named = stored is not None and any(
                     isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored)
-                place_case(self.directory, key, files, 0o777 & ~_umask(), replaceable=named)
+                place_case(self.directory, key, files, 0o777 & ~umask(), replaceable=named)
         with self._write(f"record case {key}"):
             self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
             self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
@@ -479,26 +481,6 @@ def run_alive(run: Mapping[str, Any]) -> bool:
     except (TypeError, ValueError):
         return False
     return age < LEASE_S
-
-
-def _umask() -> int:
-    """This process's umask, read without changing it where Linux tells it (changing it races other threads)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _holds_anything(directory: Path) -> bool:
-    try:
-        return next(directory.iterdir(), None) is not None
-    except OSError:  # unreadable: mkdir and SQLite say what is wrong
-        return False
 
 
 def _now() -> str:
