@@ -145,8 +145,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
 
 def _suite_results(suite, store_dir: Path) -> Table:
     """What the suite's walks came to, from the store (cases of earlier runs too, so a resumed run shows them all):
-    per experiment and method, how many walks are complete, the lowest verified ACOT over those and its N, and why
-    the others stopped."""
+    per experiment and method, how many walks are complete and how many of those passed verification, the lowest
+    ACOT over the verified ones and its N, and why the others stopped."""
     from gaitbench.run.store import ResultStore
 
     keys = {case.key for case in suite.cases}
@@ -156,22 +156,23 @@ def _suite_results(suite, store_dir: Path) -> Table:
     groups: dict[tuple[str, str], list[dict]] = {}
     for row in sorted(rows, key=lambda row: order[row["case_key"]]):
         groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
-    table = Table(title=f"{suite.name}: lowest verified ACOT over complete walks",
+    table = Table(title=f"{suite.name}: lowest ACOT over verified walks",
                   box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
     longest = max((len(method) for _, method in groups), default=0)
-    for column in ("experiment", "method", "complete", "ACOT", "at N", "incomplete"):
-        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left",
-                         overflow="fold", no_wrap=column in ("complete", "ACOT", "at N"),
+    for column in ("experiment", "method", "complete", "verified", "ACOT", "at N", "incomplete"):
+        numeric = column in ("complete", "verified", "ACOT", "at N")
+        table.add_column(column, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric,
                          min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
     for (experiment, method), group in groups.items():
         complete = [row for row in group if row["status"] == "solved"]
-        best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
+        verified = [row for row in complete if row.get("verified") and row["acot"] is not None]
+        best = min(verified, key=lambda row: row["acot"], default=None)
         causes: dict[str, int] = {}
         for row in group:
             if row not in complete:
                 cause = row["stop_cause"] or row["status"]
                 causes[cause] = causes.get(cause, 0) + 1
-        table.add_row(experiment, method, f"{len(complete)} of {len(group)}",
+        table.add_row(experiment, method, f"{len(complete)} of {len(group)}", str(len(verified)),
                       _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
                       ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
     return table
