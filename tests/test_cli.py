@@ -379,3 +379,31 @@ def test_bad_plugin_options_are_refused_before_solving(invoke, args, expected):
     assert result.exit_code == 2
     assert expected in " ".join(result.stderr.split()), result.stderr
     assert "Traceback" not in result.output and "ACOT" not in result.stdout
+
+
+# wording: counts in the right number, no separator left dangling
+
+
+def test_the_solve_summary_ends_on_its_verdict_and_counts_one_step_in_the_singular():
+    from gaitbench.cli.solve_command import _print_walk
+
+    def walk(verification):
+        step = types.SimpleNamespace(index=1, stance=1, status="converged")
+        step.verified = step  # no claim: the step reports its own motion
+        step.as_dict = lambda: {"cot": 0.25, "solve_time_s": 1.5, "iterations": 40, "max_defect": 1e-9,
+                                "resim_error": 1e-5}
+        return types.SimpleNamespace(experiment="forward", strategy="one-phase", transcription="dmoc", solver="ipopt",
+                                     N=10, objective="net-power", claimed_acot=None, steps=[step], complete=True,
+                                     acot=0.25, wall_time_s=2.0, verification=verification,
+                                     verified=bool(verification and verification.verified))
+
+    def summary(verification) -> str:
+        console = Console(width=200, record=True)
+        _print_walk(console, walk(verification))
+        return next(line for line in console.export_text().splitlines() if line.startswith("verified ACOT"))
+
+    assert summary(None) == "verified ACOT = 0.2500 over 1 step (2.0 s)"
+    passed = types.SimpleNamespace(verified=True, reason="", steps=())
+    assert summary(passed) == "verified ACOT = 0.2500 over 1 step (2.0 s); verified"
+    failed = types.SimpleNamespace(verified=False, reason="step 1: defect 1e-2 above 1e-6", steps=())
+    assert summary(failed).endswith("; NOT verified: step 1: defect 1e-2 above 1e-6")

@@ -283,7 +283,7 @@ def test_a_run_whose_output_is_no_terminal_logs_each_case_and_each_saved_step_wi
                      "--no-report")
     assert result.code == 0, result.output
     stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d "
-    assert re.search(stamp + r"1 cases to run", result.output)
+    assert re.search(stamp + r"1 case to run", result.output)
     assert re.search(stamp + r"\[1/1\] solved: forward N=6 .*: ACOT \d\.\d{4}, \d+ s", result.output)
 
     case, = load_suite(suite).cases

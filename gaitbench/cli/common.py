@@ -69,5 +69,10 @@ def create(ctx: click.Context, kind: str, name: str, *args, **options):
                                  param_hint=OPTION_OF_KIND.get(kind)) from None
 
 
+def count(n: int, noun: str, plural: str | None = None) -> str:
+    """``1 case``, ``2 cases``: a number with its noun in the right number."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
 def fmt(value, spec: str) -> str:
     return "—" if value is None else format(value, spec)

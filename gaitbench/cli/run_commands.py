@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from gaitbench.cli.common import count
 from gaitbench.cli.run_progress import CaseProgress, StepsInFlight
 from gaitbench.plugins import PLUGINS_DIR_ENV
 from gaitbench.run.executors import EXECUTORS
@@ -244,7 +245,7 @@ def _jobs_that_help(jobs: int, suite, console: Console) -> int:
 
     if jobs > len(suite.cases) > 0:
         console.print(Text(f"warning: --jobs {jobs} lowered to {len(suite.cases)}: the suite has "
-                           f"{len(suite.cases)} cases", style="yellow"), soft_wrap=True)
+                           f"{count(len(suite.cases), 'case')}", style="yellow"), soft_wrap=True)
         jobs = len(suite.cases)
     fitting, why = jobs_that_fit([suite.memory_mb[case.key] for case in suite.cases if case.key in suite.memory_mb],
                                  jobs)
@@ -464,7 +465,7 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     except OSError as error:  # e.g. the default, inside a store in a read-only place
         raise click.ClickException(f"{out}: cannot write the export ({error.strerror or error}); "
                                    "choose another file with --out") from None
-    Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
+    Console(stderr=True).print(f"wrote {count(len(frame), 'case')} to {out}")
 
 
 @runs.command("merge")

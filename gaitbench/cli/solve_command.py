@@ -10,7 +10,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from gaitbench.cli.common import create, fmt, parse_options, print_plain
+from gaitbench.cli.common import count, create, fmt, parse_options, print_plain
 
 
 def _check_memory(transcription: str, strategy: str, n_nodes: int, steps: int) -> None:
@@ -255,9 +255,10 @@ def _print_walk(console: Console, walk) -> None:
     console.print(table)
     verification = walk.verification
     if walk.complete:
-        verdict = "verified" if walk.verified else f"NOT verified: {verification.reason}" if verification else ""
-        console.print(f"verified ACOT = {walk.acot:.4f} over {len(walk.steps)} steps ({walk.wall_time_s:.1f} s); "
-                      f"{verdict}")
+        summary = f"verified ACOT = {walk.acot:.4f} over {count(len(walk.steps), 'step')} ({walk.wall_time_s:.1f} s)"
+        if verification is not None:
+            summary += "; verified" if walk.verified else f"; NOT verified: {verification.reason}"
+        console.print(summary)
     else:
         print_plain(console, f"incomplete walk: {walk.failure}", "red")
     if verification is not None and verification.steps:
