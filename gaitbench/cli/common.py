@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import click
 from rich.console import Console
+from rich.table import Table
 from rich.text import Text
 
 from gaitbench.plugins import PluginConflictError, UnknownPluginError
@@ -74,5 +75,15 @@ def count(n: int, noun: str, plural: str | None = None) -> str:
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
-def fmt(value, spec: str) -> str:
-    return "—" if value is None else format(value, spec)
+def fmt(value, spec: str, missing: str = "—") -> str:
+    """``value`` formatted by ``spec``, or ``missing`` for None."""
+    return missing if value is None else format(value, spec)
+
+
+def print_table(console: Console, table: Table, wide: bool = False) -> None:
+    """Print ``table`` in the console's width, or with ``wide`` every column at its natural width: long lines rather
+    than squeezed cells (what a command's ``--wide`` asks for)."""
+    if wide:
+        natural = console.measure(table, options=console.options.update(max_width=100_000)).maximum
+        console = Console(file=console.file, width=max(console.width, natural))
+    console.print(table)

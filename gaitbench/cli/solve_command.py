@@ -240,10 +240,10 @@ def _print_walk(console: Console, walk) -> None:
     Columns: stance leg, solve time, iterations, largest dynamics defect, re-simulation error at the step's end."""
     claims = walk.claimed_acot is not None or any(step.verified is not step for step in walk.steps)
     table = Table(title=f"{walk.experiment}: {walk.strategy}, {walk.transcription} + {walk.solver}, N = {walk.N}, "
-                        f"objective {walk.objective}", box=box.SIMPLE_HEAD, pad_edge=False)
+                        f"objective {walk.objective}", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     columns = ["step", "leg", "status", "COT", *(["claimed"] if claims else []), "time s", "iter", "defect", "resim"]
-    for column in columns:
-        table.add_column(column, justify="left" if column == "status" else "right", no_wrap=True)
+    for column in columns:  # 75 columns with the longest status (iteration_limit) and the claim
+        table.add_column(column, justify="left" if column == "status" else "right", no_wrap=True, overflow="fold")
     for step in walk.steps:
         motion = step.verified
         row = motion.as_dict()
