@@ -326,6 +326,25 @@ def test_report_command(store, tmp_path):
     assert result.exit_code != 0 and "no results store" in result.output
 
 
+def test_the_report_command_runs_a_reporter_from_a_plugin_directory(store, tmp_path):
+    """`--plugins-dir` reaches `gaitbench report` as it reaches every other command."""
+    from click.testing import CliRunner
+
+    from gaitbench.cli.main import main
+
+    plugins = tmp_path / "plugins"
+    plugins.mkdir()
+    (plugins / "count_reporter.py").write_text(
+        "from pathlib import Path\n\nfrom gaitbench import Registration, hookimpl\n\n\n"
+        "class Count:\n    def write(self, report, out_dir):\n        path = Path(out_dir) / 'count.txt'\n"
+        "        path.write_text(str(len(report.cases)))\n        return [path]\n\n\n"
+        "@hookimpl\ndef register_reporters():\n    return [Registration('count', 'cases', Count)]\n")
+    result = CliRunner().invoke(main, ["--plugins-dir", str(plugins), "report", str(store), "--out",
+                                       str(tmp_path / "r"), "--reporter", "count"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "r" / "count.txt").read_text() == str(len(build_report(store).cases))
+
+
 def test_writing_a_report_tells_its_progress(store, tmp_path):
     """Each part as it starts (the store, each experiment's figures, each gait, each reporter), then the end."""
     calls = []
