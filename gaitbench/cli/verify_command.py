@@ -11,7 +11,7 @@ from typing import Any
 import click
 from rich.console import Console
 
-from gaitbench.cli.common import print_plain
+from gaitbench.cli.common import count, print_plain
 from gaitbench.solve.acceptance import ACOT_RTOL
 
 
@@ -72,7 +72,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
         except StoreError as exc:
             raise click.ClickException(str(exc)) from None
         if not as_json:
-            console.print(f"recorded the verdicts of {len(updates)} walks in {store}")
+            console.print(f"recorded the verdicts of {count(len(updates), 'walk')} in {store}")
     if failed:
         ctx.exit(1)
 

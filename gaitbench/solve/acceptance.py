@@ -8,7 +8,8 @@ reasons :func:`step_failures` and :func:`join_failure` give.
 The re-simulation error and the objective gap are discretization errors, so their limits shrink with the grid:
 every built-in transcription is at least first-order accurate, so a step whose re-simulation error exceeds a limit
 proportional to h = 1/N is off for another reason than the grid's coarseness; the gap's limit has a floor, the
-largest consistent difference between a transcription's cost and its interpolant's. The defect and the join are the solver's and the chain's own accuracy, independent of N.
+largest consistent difference between a transcription's cost and its interpolant's. The defect and the join are the
+solver's and the chain's own accuracy, independent of N.
 """
 
 from __future__ import annotations
