@@ -7,8 +7,8 @@ INSTALLED := $(VENV)/.installed
 
 .PHONY: run test lint mutation
 
-# The main job: the demo suite (the four terrains walked whole at N = 20, OP-DC and OP-DM: 8 walks solved and
-# verified), its result table and the path of its HTML report, in about a minute on 2 cores. The store is
+# The main job: the demo suite (suites/demo.toml: the four terrains walked whole at N = 30, OP-DC and OP-DM: 8 walks
+# solved and verified), its result table and the path of its HTML report, in about a minute on 2 cores. The store is
 # results/demo and the report reports/demo/, both ignored by git; --resume makes a second `make run` reuse the
 # stored walks and write the report again.
 run: $(INSTALLED)

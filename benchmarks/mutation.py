@@ -57,7 +57,7 @@ MUTANTS = (
     Mutant("verify: COT without the push-off energy", "gaitbench/solve/verify.py",
            "energy + objective.event_cost(push_off_energy)", "energy"),
     Mutant("verify: push-off only in 2 DOF", "gaitbench/solve/verify.py",
-           "    if model.dof == 4:\n        foot = np.zeros(2)", "    if model.dof == 2:\n        foot = np.zeros(2)"),
+           "        if model.dof == 4 else 0.0", "        if model.dof == 2 else 0.0"),
     Mutant("verify: resim_error at the first node", "gaitbench/solve/verify.py",
            "resim_error=float(errors[-1])", "resim_error=float(errors[0])"),
     Mutant("verify: resim_max_error at the last node", "gaitbench/solve/verify.py",
@@ -76,7 +76,8 @@ MUTANTS = (
            "np.linspace(0.0, 1.0, samples_per_interval + 1), INSIDE",
            "np.linspace(0.0, 1.0, samples_per_interval), INSIDE"),
     Mutant("verify: push-off from the step's start state", "gaitbench/solve/verify.py",
-           "q_end, dq_end = trajectory.q[-1], trajectory.dq[-1]", "q_end, dq_end = trajectory.q[0], trajectory.dq[0]"),
+           "np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot]",
+           "np.r_[trajectory.q[0], foot], np.r_[trajectory.dq[0], foot]"),
     Mutant("verify: re-simulation from the second node", "gaitbench/solve/verify.py",
            "q0, dq0 = trajectory.q[0], trajectory.dq[0]", "q0, dq0 = trajectory.q[1], trajectory.dq[1]"),
     # objectives (gaitbench/problem/objective.py, plugins/objectives/energy_costs.py)
@@ -140,8 +141,8 @@ MUTANTS = (
            "vector[[5, 6]] = vector[[6, 5]]", "vector[[5, 6]] = vector[[5, 6]]"),
     # walks (gaitbench/solve/walk.py, gaitbench/model/energetics.py)
     Mutant("walk: ACOT over a partial walk's solved steps", "gaitbench/solve/walk.py",
-           "return average_cot([step.verification.cot for step in self.steps]) if self.complete else None",
-           "solved = [step.verification.cot for step in self.steps if step.solved]\n"
+           "return average_cot([step.verified.verification.cot for step in self.steps]) if self.complete else None",
+           "solved = [step.verified.verification.cot for step in self.steps if step.solved]\n"
            "        return average_cot(solved) if solved else None"),
     Mutant("walk: complete without its requested steps", "gaitbench/solve/walk.py",
            "return len(self.steps) == self.requested_steps and all(", "return len(self.steps) > 0 and all("),

@@ -75,7 +75,7 @@ SCALING_STEP_NODES = (50, 100)
 SCALING_SECTION_NODES = 50
 CONTACT_STEP_NODES = (50, 100)
 FRICTION_COEFFICIENT = 0.8
-"""μ of the friction cone in the ``contact`` part (DECISIONS §2 leaves it a parameter)."""
+"""μ of the friction cone in the ``contact`` part (docs/model.md §2 leaves it a parameter)."""
 OBJECTIVE_SCALING = {"nlp_scaling_obj_target_gradient": 1.0}
 """IPOPT scales the objective so that its gradient at the starting point has max-norm 1. The step costs are COTs
 of 1e-8 … 0.5, their gradients as small, so unscaled the barrier and the constraints steer IPOPT's path."""

@@ -10,7 +10,7 @@ The database is copied with SQLite's online backup (consistent while runs write 
 drops the claims, whose runs do not travel with it. Case directories no row names and checkpoints of cases that
 have a row are left out, as the runner would remove them.
 
-    python benchmarks/snapshot_store.py /work/stores/thesis-all benchmarks/results/stores/thesis-all
+    python benchmarks/snapshot_store.py ~/stores/thesis-all benchmarks/results/stores/thesis-all
 """
 
 from __future__ import annotations

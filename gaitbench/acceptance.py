@@ -6,9 +6,10 @@ what the report quotes (the objective gap). Reports rank verified walks only; th
 reasons :func:`step_failures` and :func:`join_failure` give.
 
 The re-simulation error and the objective gap are discretization errors, so their limits shrink with the grid:
-every built-in transcription is at least first-order accurate, so a step whose error exceeds a limit proportional
-to h = 1/N is off for another reason than the grid's coarseness (an under-resolved impact, an optimizer exploiting
-its quadrature). The defect and the join are the solver's and the chain's own accuracy, independent of N.
+every built-in transcription is at least first-order accurate, so a step whose re-simulation error exceeds a limit
+proportional to h = 1/N is off for another reason than the grid's coarseness; the gap's limit has a floor, the
+largest consistent difference between a transcription's cost and its interpolant's. The defect and the join are the
+solver's and the chain's own accuracy, independent of N.
 """
 
 from __future__ import annotations
@@ -33,10 +34,12 @@ step 1, the walk's start state): a walk's steps are solved from that state, so a
 ACOT_RTOL = 0.01
 """A stored ACOT that its walk's trajectories, verified again, do not reproduce within 1 % is not trusted."""
 
-OBJECTIVE_GAP = 0.05
+OBJECTIVE_GAP = 0.10
 OBJECTIVE_GAP_AT_N = 2.0
 """|objective gap| (:func:`gaitbench.solve.verify.objective_gap`) may be at most ``max(OBJECTIVE_GAP,
-OBJECTIVE_GAP_AT_N / N)``: 5 % from N = 40, 10 % at N = 20, 20 % at N = 10."""
+OBJECTIVE_GAP_AT_N / N)``: 10 % from N = 20, 20 % at N = 10. DMOC's discrete cost differs from its interpolant's
+by up to 7.6 % at every N (docs/decisions/verification-thresholds.md): a gap beyond 10 % is the optimizer exploiting
+its quadrature, not a transcription's own consistent error."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +72,7 @@ def step_failures(check: StepVerification, limits: Thresholds) -> list[str]:
         reasons.append(f"re-simulation error {check.resim_error:.2g} > {limits.max_resim_error:.2g}")
     gap = check.objective_gap
     if gap is not None and not abs(gap) <= limits.max_objective_gap:
-        reasons.append(f"objective gap {gap:+.1%} beyond ±{limits.max_objective_gap:.0%}")
+        reasons.append(f"objective gap {gap:+.1%} beyond ±{limits.max_objective_gap:.1%}")
     return reasons
 
 

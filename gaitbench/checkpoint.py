@@ -3,7 +3,7 @@
 A decrease-and-conquer walk at N = 200 takes hours. When its process is killed (a crashed worker, a machine
 shut down, the end of a session), every step it had solved was lost, and the case started again from step 1. With a
 checkpoint, the walk saves its solved steps after each one, and a later run of the same case continues from there.
-Since each step depends only on the state the step before it left (DECISIONS §7), the resumed walk is the walk that
+Since each step depends only on the state the step before it left (docs/model.md §7), the resumed walk is the walk that
 was not stopped.
 
 The steps are kept as they are in memory (their solver results, verifications and trajectories with their

@@ -131,7 +131,7 @@ class Observer(Protocol):
     ``factory(model, **options)``).
 
     The estimates live on the actuated coordinates (q1, q2): during swing the stance foot is held, so its rates are
-    known to be zero and any disturbance on it is absorbed by the ground reaction (ch4 §5.2). ``q`` and ``dq`` are
+    known to be zero and any disturbance on it is absorbed by the ground reaction (thesis §4.3). ``q`` and ``dq`` are
     the full model state; ``dq`` is the true velocity, which only observers that model a velocity sensor may use.
     """
 

@@ -16,6 +16,6 @@ class StepInfo:
     stance: int
     slope: float
     chord: float
-    time_step: float  # h of the reference grid: the friction of the linear joints scales with it (ch4 §7)
+    time_step: float  # h of the reference grid: the friction of the linear joints scales with it (thesis §5.1)
     duration: float
     start_time: float  # global time at the step's start (after the previous heel strike)

@@ -145,7 +145,8 @@ def test_the_published_comparison_flags_figures_below_the_bound(registry):
     assert not bounds["forward"].useful and 0.54 < bounds["upward-slope"].impulse < 0.60
     assert bounds["upward-slope"].thesis_push_off < bounds["upward-slope"].impulse
     minima = pd.DataFrame([{"experiment": experiment, "method": method, "thesis_method": method, "min_acot": 0.5,
-                            "N_at_min": 40, "claimed_acot_at_min": math.nan, "N_values": "40", "N_solved": "40"}
+                            "N_at_min": 40, "claimed_acot_at_min": math.nan, "thesis_reading_at_min": math.nan,
+                            "N_values": "40", "N_solved": "40"}
                            for experiment in ("forward", "upward-slope", "stairs") for method in ("OP-DC", "D&C-DC")])
     bounds["stairs"] = ExperimentBounds(impulse=0.1, thesis_push_off=0.045)
     table = tables.published_comparison(minima, bounds).set_index(["experiment", "thesis_method"])

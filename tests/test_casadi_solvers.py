@@ -222,7 +222,7 @@ def test_registers_each_method_under_its_name():
 @pytest.mark.parametrize("method", METHODS, ids=lambda method: method.name)
 def test_solves_the_forward_gait_step_to_ipopts_optimum(method: type[CasadiMethod], transcription: str):
     """Forward step 1 (4-DOF, N = 10, torque tie-break) from the transcription's standard guess; ``f_star`` is
-    IPOPT's optimum from the same guess. Measured: within 4e-4 of it (docs/solvers.md)."""
+    IPOPT's optimum from the same guess. Measured: within 4e-4 of it (docs/decisions/0005-casadi-solvers.md)."""
     problem = gait_step(transcription, 10, "forward")
     result = _solve(method, problem)
     assert result.status is SolverStatus.CONVERGED, result.message

@@ -8,6 +8,7 @@ import types
 
 import pytest
 from click.testing import CliRunner
+from rich.cells import cell_len
 from rich.console import Console
 
 from gaitbench import __version__
@@ -60,14 +61,16 @@ def test_plugins_kind_filters(invoke, fake_entry_points, experiment_plugin):
     assert [row["name"] for row in experiments] == ["flat"]
 
 
-def test_plugins_table_shows_name_module_and_description(invoke, fake_entry_points, experiment_plugin):
+def test_plugins_table_shows_name_and_description_and_wide_the_module(invoke, fake_entry_points, experiment_plugin):
     fake_entry_points("ep_walks", experiment_plugin("flat"))
 
     result = invoke("plugins")
+    wide = invoke("plugins", "--wide")
 
-    assert result.exit_code == 0, result.output
-    for text in ("experiment", "flat", "ep_walks", "test experiment flat"):
-        assert text in result.stdout
+    assert result.exit_code == wide.exit_code == 0, result.output
+    for text in ("experiment", "flat", "test experiment flat"):
+        assert text in result.stdout and text in wide.stdout
+    assert "ep_walks" not in result.stdout and "ep_walks" in wide.stdout  # the module: --wide's
 
 
 def test_missing_plugins_dir_is_a_usage_error_naming_it(invoke, fake_entry_points, tmp_path):
@@ -315,6 +318,116 @@ def test_runs_show_fits_80_columns_with_the_stop_cause(invoke, long_labelled_sto
     assert "0000000000000001" in wide.stdout and "dynamics residual 3.2e-01" in wide.stdout
 
 
+# every table fits 80 columns without cutting a name
+
+
+def fits_80_columns(output: str) -> None:
+    assert max(cell_len(line.rstrip()) for line in output.splitlines()) <= 80, output  # terminal cells
+    assert "…" not in output, output  # nothing cut short
+
+
+def test_plugins_fit_80_columns_without_cutting_a_name(invoke, monkeypatch):
+    """The built-in plugins, as a user sees them: "decrease-and-conquer" used to show as "decrease-and-conq…"."""
+    monkeypatch.setenv("COLUMNS", "80")
+    listed = json.loads(invoke("plugins", "--json").stdout)
+    assert "decrease-and-conquer" in {plugin["name"] for plugin in listed}
+    result = invoke("plugins")
+    assert result.exit_code == 0, result.output
+    fits_80_columns(result.stdout)
+    tokens = set(result.stdout.split())
+    assert {plugin["name"] for plugin in listed} <= tokens and {plugin["kind"] for plugin in listed} <= tokens
+    assert "module" not in result.stdout.splitlines()[0]  # --wide's
+
+    wide = invoke("plugins", "--wide")
+    assert wide.exit_code == 0, wide.output
+    assert "…" not in wide.stdout
+    for plugin in listed:
+        assert any(plugin["name"] in line and plugin["module"] in line and plugin["description"] in line
+                   for line in wide.stdout.splitlines()), plugin
+
+
+@pytest.fixture
+def store_with_runs(tmp_path):
+    """Runs as `gaitbench run` names them (time stamp and suite), one whose id does not end with its suite, one
+    stopped, and a walk in flight."""
+    from gaitbench.run.store import ResultStore
+
+    runs = [("20261203-112256-energetics-sample", "energetics-sample", "2026-12-03T11:48:48+00:00"),
+            ("20261202-122118-survey-small-n", "survey-small-n", "2026-12-02T12:44:36+00:00"),
+            ("20261205-192450-thesis-all", "thesis-all", None),
+            ("merged-by-hand", "thesis-all", "2026-12-06T09:26:21+00:00")]
+    with ResultStore.create(tmp_path / "store") as store:
+        for run_id, suite, finished in runs:
+            started = store.start_run({"run_id": run_id, "suite": suite, "executor": "local", "jobs": 2,
+                                       "cases_total": 160, "cases_skipped": 52, "started_at": "2026-12-01T00:00:00"})
+            store.finish_run(started, finished) if finished else store.forget_run(started)
+    checkpoints = tmp_path / "store" / "checkpoints"
+    checkpoints.mkdir()
+    (checkpoints / "0123456789abcdef.json").write_text('{"saved": 7, "of": 11, "elapsed_s": 720.0}')
+    return tmp_path / "store"
+
+
+def test_runs_list_fits_80_columns_without_cutting_a_name(invoke, store_with_runs, monkeypatch):
+    """Every cell used to be cut at 80 columns ("resu…", "2026…")."""
+    monkeypatch.setenv("COLUMNS", "80")
+    result = invoke("runs", "list", str(store_with_runs))
+    assert result.exit_code == 0, result.output
+    fits_80_columns(result.stdout)
+    lines = result.stdout.splitlines()
+    for run_id in ("20261203-112256-energetics-sample", "20261202-122118-survey-small-n", "merged-by-hand"):
+        assert any(line.startswith(run_id + " ") for line in lines), run_id  # whole, on one line
+    assert any(line.startswith("suite thesis-all ") for line in lines)  # under the id that does not name it
+    assert sum("thesis-all" in line for line in lines) == 2  # the other id names its suite
+    assert str(store_with_runs) in " ".join(result.stdout.split())
+    finished = next(line for line in lines if line.startswith("20261203-112256-energetics-sample"))
+    assert finished.split()[1:] == ["160", "0", "0", "52", "2026-12-03", "11:48"]
+    assert "not finished" in result.stdout and "fail, skip:" in result.stdout  # the legend of the short headers
+    assert "0123456789abcdef" in result.stdout and "7 of 11" in result.stdout and "resumable" in result.stdout
+
+    wide = invoke("runs", "list", "--wide", str(store_with_runs))
+    assert wide.exit_code == 0, wide.output
+    assert "…" not in wide.stdout
+    header = next(line for line in wide.stdout.splitlines() if line.startswith("store"))
+    assert header.split() == ["store", "run", "suite", "executor", "jobs", "cases", "done", "failed", "skipped",
+                              "finished"]
+    assert "2026-12-03T11:48:48+00:00" in wide.stdout
+
+
+def test_the_solve_table_fits_80_columns_with_the_longest_status_and_the_claim():
+    """Decrease and conquer's table has a column more; it used to cut "converg…" and "iterati…"."""
+    from gaitbench.cli.solve_command import _print_walk
+
+    steps = []
+    for index, status in enumerate(("iteration_limit", "converged", "infeasible"), start=1):
+        motion = types.SimpleNamespace(status=status, as_dict=lambda: {
+            "cot": 1.2345, "solve_time_s": 1234.56, "iterations": 12345, "max_defect": 1.5e-10, "resim_error": 2e-3})
+        steps.append(types.SimpleNamespace(index=index, stance=1 + index % 2, verified=motion,
+                                           as_dict=lambda: {"cot": 0.0123}))
+    walk = types.SimpleNamespace(experiment="downward-slope", strategy="decrease-and-conquer",
+                                 transcription="hermite-simpson", solver="ipopt", N=200, objective="actuator-work",
+                                 claimed_acot=0.0123, steps=steps, complete=False, failure="step 3: infeasible",
+                                 verification=None, strategy_details={})
+    console = Console(width=80, record=True)
+    _print_walk(console, walk)
+    output = console.export_text()
+    fits_80_columns(output)
+    for word in ("iteration_limit", "converged", "infeasible", "claimed", "12345", "1234.56", "decrease-and-conquer"):
+        assert word in output, word
+
+
+def test_the_run_summary_fits_80_columns(long_labelled_store):
+    from gaitbench.cli.run_commands import _suite_results
+
+    suite = types.SimpleNamespace(name="s", cases=[types.SimpleNamespace(key=f"{i:016x}") for i in range(3)])
+    console = Console(width=80, record=True)
+    console.print(_suite_results(suite, long_labelled_store))
+    output = console.export_text()
+    fits_80_columns(output)
+    for word in ("downward-slope", "upward-slope", "decrease-and-conquer", "0.1235", "verification (1)",
+                 "time_limit (1)"):
+        assert word in output, word
+
+
 # errors: one style, documented exit codes
 
 
@@ -379,3 +492,31 @@ def test_bad_plugin_options_are_refused_before_solving(invoke, args, expected):
     assert result.exit_code == 2
     assert expected in " ".join(result.stderr.split()), result.stderr
     assert "Traceback" not in result.output and "ACOT" not in result.stdout
+
+
+# wording: counts in the right number, no separator left dangling
+
+
+def test_the_solve_summary_ends_on_its_verdict_and_counts_one_step_in_the_singular():
+    from gaitbench.cli.solve_command import _print_walk
+
+    def walk(verification):
+        step = types.SimpleNamespace(index=1, stance=1, status="converged")
+        step.verified = step  # no claim: the step reports its own motion
+        step.as_dict = lambda: {"cot": 0.25, "solve_time_s": 1.5, "iterations": 40, "max_defect": 1e-9,
+                                "resim_error": 1e-5}
+        return types.SimpleNamespace(experiment="forward", strategy="one-phase", transcription="dmoc", solver="ipopt",
+                                     N=10, objective="net-power", claimed_acot=None, steps=[step], complete=True,
+                                     acot=0.25, wall_time_s=2.0, verification=verification,
+                                     verified=bool(verification and verification.verified))
+
+    def summary(verification) -> str:
+        console = Console(width=200, record=True)
+        _print_walk(console, walk(verification))
+        return next(line for line in console.export_text().splitlines() if line.startswith("verified ACOT"))
+
+    assert summary(None) == "verified ACOT = 0.2500 over 1 step (2.0 s)"
+    passed = types.SimpleNamespace(verified=True, reason="", steps=())
+    assert summary(passed) == "verified ACOT = 0.2500 over 1 step (2.0 s); verified"
+    failed = types.SimpleNamespace(verified=False, reason="step 1: defect 1e-2 above 1e-6", steps=())
+    assert summary(failed).endswith("; NOT verified: step 1: defect 1e-2 above 1e-6")

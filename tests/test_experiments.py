@@ -44,7 +44,7 @@ def test_every_thesis_experiment_builds_with_the_common_parameters(name):
     np.testing.assert_array_equal(experiment.initial_state[[2, 3, 6, 7]], 0.0)
     assert experiment.friction is not None and experiment.friction.n == 2
     assert experiment.limits == Limits.sized_for(experiment.robot)
-    assert "L1" in experiment.source  # thesis line references
+    assert experiment.source.startswith("thesis §5.")  # the thesis section its parameters come from
 
 
 def test_forward_parameters():

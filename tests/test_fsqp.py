@@ -347,7 +347,7 @@ def _recorded_qp_calls(monkeypatch) -> list[tuple[str, int | None, bool]]:
 def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before_clarabel(monkeypatch):
     """The saved forward-step QP that PIQP, equilibrated, ends at its iteration limit: the ``qp`` subproblem's
     second turn, PIQP without the equilibration, solves it to Clarabel's objective, and Clarabel is not called
-    (docs/solvers.md, "PIQP without its equilibration")."""
+    (docs/decisions/0002-qp-backends.md)."""
     problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
     calls = _recorded_qp_calls(monkeypatch)
     solution = fsqp_qp.solve_qp(problem, RetryOrder())
@@ -357,7 +357,7 @@ def test_a_gait_qp_piqp_fails_is_solved_by_piqp_without_its_equilibration_before
 
 
 def test_after_the_retry_settings_solve_a_qp_piqp_failed_they_go_first_on_the_next_qps_of_the_solve(monkeypatch):
-    """PIQP fails the gait QPs in runs (docs/solvers.md, the ``fsqp`` section's "The retry settings first"): once
+    """PIQP fails the gait QPs in runs (docs/decisions/0002-qp-backends.md): once
     the unequilibrated PIQP has solved the saved QP the equilibrated one fails, the solve's next QP (here the same
     one) goes to the unequilibrated PIQP first: one call, not two. A new solve starts from PIQP's own settings."""
     problem = saved_qp("sqp_gait_qp_piqp_preconditioner")

@@ -109,4 +109,4 @@ def test_running_a_suite_twice_leaves_tracked_files_alone(tmp_path, monkeypatch)
         status = subprocess.run([*git, "status", "--porcelain", "--untracked-files=all"], capture_output=True,
                                 text=True, check=True).stdout
         assert status == "", f"{attempt} run changed the checkout:\n{status}"
-    assert "1 cases already in the store are skipped" in result.stderr
+    assert "1 case already in the store is skipped" in result.stderr

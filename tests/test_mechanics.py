@@ -121,8 +121,9 @@ def test_two_dof_angular_momentum_map_equals_four_dof_impact(robot, stance):
         np.testing.assert_allclose(strike2.impulse, strike4.impulse, rtol=1e-8, atol=1e-8)
 
 
-def test_two_dof_impact_map_matches_the_digest_hand_check():
-    """ch2 digest §2.3: a = b = 0.5, l = 1, m = 20, M = 40, I = 20/12 at q = (−0.2187, 0.2187)."""
+def test_two_dof_impact_map_matches_a_hand_check():
+    """A hand check of the impact map (2.24)–(2.26): a = b = 0.5, l = 1, m = 20, M = 40, I = 20/12 at
+    q = (−0.2187, 0.2187)."""
     model = BipedModel(THESIS_FORWARD, 2)
     q = np.array([-0.2187, 0.2187])
     matrix = np.column_stack([model.heel_strike(q, e, 1).dq for e in np.eye(2)])

@@ -76,7 +76,7 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
         assert row[column] == pytest.approx(10.0), column
     # Minimum against minimum: D&C's 0.36 at N = 10 against OP-DC's 0.30 at N = 30, a loss.
     assert row["min_vs_min_percent"] == pytest.approx(100 * (0.30 - 0.36) / 0.30)
-    # The thesis's forward minima: D&C-DC 0.0695 against OP-DC 0.3615 (ch5 §2.3).
+    # The thesis's forward minima: D&C-DC 0.0695 against OP-DC 0.3615 (thesis §5.2–5.5).
     assert row["published_min_vs_min_percent"] == pytest.approx(100 * (0.3615 - 0.0695) / 0.3615)
     # Beside the thesis's quoted range: its forward D&C-DC vs OP-DC row gets the same figures.
     published = statistics.with_paired_savings(tables.published_savings(savings, info), paired, info)

@@ -68,7 +68,7 @@ def _frame(rows):
 
 def test_savings_formula_and_minimum_marking():
     assert tables.savings_percent(0.5, 0.1) == pytest.approx(80.0)
-    # The thesis's forward D&C-DC vs OP-DC maximum: 85.41 % from 0.0695 against 0.4764 (ch5 §2.3, derived table).
+    # The thesis's forward D&C-DC vs OP-DC maximum: 85.41 % from 0.0695 against 0.4764 (thesis §5.2–5.5, derived table).
     assert tables.savings_percent(0.4764, 0.0695) == pytest.approx(85.41, abs=0.01)
     rows = []
     sweep = ((10, 0.40, 0.20, 0.10, 0.30), (20, 0.30, 0.15, 0.05, 0.25), (30, 0.30, 0.18, 0.09, None))
@@ -326,6 +326,25 @@ def test_report_command(store, tmp_path):
     assert result.exit_code != 0 and "no results store" in result.output
 
 
+def test_the_report_command_runs_a_reporter_from_a_plugin_directory(store, tmp_path):
+    """`--plugins-dir` reaches `gaitbench report` as it reaches every other command."""
+    from click.testing import CliRunner
+
+    from gaitbench.cli.main import main
+
+    plugins = tmp_path / "plugins"
+    plugins.mkdir()
+    (plugins / "count_reporter.py").write_text(
+        "from pathlib import Path\n\nfrom gaitbench import Registration, hookimpl\n\n\n"
+        "class Count:\n    def write(self, report, out_dir):\n        path = Path(out_dir) / 'count.txt'\n"
+        "        path.write_text(str(len(report.cases)))\n        return [path]\n\n\n"
+        "@hookimpl\ndef register_reporters():\n    return [Registration('count', 'cases', Count)]\n")
+    result = CliRunner().invoke(main, ["--plugins-dir", str(plugins), "report", str(store), "--out",
+                                       str(tmp_path / "r"), "--reporter", "count"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "r" / "count.txt").read_text() == str(len(build_report(store).cases))
+
+
 def test_writing_a_report_tells_its_progress(store, tmp_path):
     """Each part as it starts (the store, each experiment's figures, each gait, each reporter), then the end."""
     calls = []
@@ -498,6 +517,39 @@ def test_wide_tables_wrap_within_the_page(report_dir, tmp_path, width):
     assert evaluate_in_chromium(report_dir / "index.html", tmp_path, width, OVERFLOWING_TABLES) == []
     assert evaluate_in_chromium(report_dir / "index.html", tmp_path, width,
                                 "document.documentElement.scrollWidth <= document.documentElement.clientWidth")
+
+
+def test_html_headers_are_words_and_the_csv_keeps_the_column_names(report_dir):
+    """Headers read "claimed ACOT at min", not claimed_acot_at_min; each names its CSV column in its tooltip, and
+    the CSV files keep the names docs/reports.md documents."""
+    import re
+
+    from gaitbench.reports.html import header
+
+    assert header("claimed_acot_at_min") == "claimed ACOT at min"
+    assert header("wall_time_s") == "wall time (s)" and header("min_vs_min_percent") == "min vs min (%)"
+    assert header("is_minimum") == "minimum" and header("thesis_push_off_bound_acot") == "thesis push-off bound ACOT"
+    html = (report_dir / "index.html").read_text()
+    headers = re.findall(r'<th title="([^"]*)">([^<]*)</th>', html)
+    assert ("claimed_acot_at_min", "claimed ACOT at min") in headers
+    assert all(text == header(column) and "_" not in text for column, text in headers)
+    assert "claimed_acot_at_min" in pd.read_csv(report_dir / "acot_minima.csv").columns
+    assert not re.search(r"<th>[^<]*_", html)  # the step tables written in the template too
+
+
+def test_empty_tables_say_why(store, report_dir, tmp_path):
+    """The demo's four savings tables used to read "(no rows)": a store without decrease and conquer says so."""
+    html = (report_dir / "index.html").read_text()
+    assert "(no rows)" not in html and "No rows." not in html  # every empty table of this store has its reason
+    assert "Nothing to check: no method has both a verified walk at N = 40–90" in html  # N = 8 and 10 only
+    copy = tmp_path / "no-dc"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        db.execute("DELETE FROM cases WHERE strategy = 'decrease-and-conquer'")
+    page = write_report(copy, tmp_path / "no-dc-report").read_text()
+    reason = "No decrease-and-conquer method in this store for this experiment"
+    assert page.count(reason) == 2  # the paired savings and the savings at each N
+    assert 'id="tbl-savings-forward">' + reason in page
 
 
 def test_empty_cells_show_a_dash(report_dir):

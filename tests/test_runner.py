@@ -136,15 +136,17 @@ def test_a_stopped_walk_is_run_again_only_when_asked(tmp_path: Path) -> None:
         assert store.finished_keys(retry_incomplete=True) == set()
 
 
-def test_a_complete_walk_without_a_verified_acot_is_run_again_only_when_asked(tmp_path: Path) -> None:
-    unverified, verified = walk_case(8), walk_case(10)
+def test_a_complete_walk_that_is_not_verified_is_run_again_only_when_asked(tmp_path: Path) -> None:
+    no_acot, failed, verified, unchecked = walk_case(8), walk_case(10), walk_case(12), walk_case(14)
     with ResultStore.create(tmp_path) as store:
         store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
-        for case, acot in ((unverified, None), (verified, 0.3)):
-            store.record_case(case_row(CaseOutcome(case, "solved", "", 1.0, {"acot": acot}), "s", "r1"),
+        for case, metrics in ((no_acot, {"acot": None}), (failed, {"acot": 0.3, "verified": False}),
+                              (verified, {"acot": 0.3, "verified": True}), (unchecked, {"acot": 0.3})):
+            store.record_case(case_row(CaseOutcome(case, "solved", "", 1.0, metrics), "s", "r1"),
                               {"walk.json": b"{}"})
-        assert store.finished_keys(retry_incomplete=True) == {unverified.key, verified.key}
-        assert store.finished_keys(retry_unverified=True) == {verified.key}
+        everything = {no_acot.key, failed.key, verified.key, unchecked.key}
+        assert store.finished_keys(retry_incomplete=True) == everything
+        assert store.finished_keys(retry_unverified=True) == {verified.key, unchecked.key}
 
 
 def test_store_round_trip_and_messages(tmp_path: Path) -> None:

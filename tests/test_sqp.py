@@ -401,7 +401,7 @@ def test_elastic_steps_that_move_the_merit_only_by_rounding_end_the_solve_after_
 
 @pytest.mark.slow
 def test_forward_dmoc_step_at_n_100_stops_where_the_qp_accuracy_is_spent():
-    """433 iterations before the non-descent test (270 of them at f = 1.366059e-4), 147 with it (docs/solvers.md)."""
+    """433 iterations before the non-descent test (270 of them at f = 1.366059e-4), 147 with it."""
     registry = load_registry()
     problem = WalkProblem(registry.create("experiment", "forward"), registry.create("transcription", "dmoc"),
                           Ipopt(), 100)
@@ -421,7 +421,7 @@ def test_a_stationary_infeasible_iterate_is_projected_onto_the_constraints():
     iteration ~200 the iterate is stationary (KKT residual ~1e-8) and the full steps that slide along the continuum
     of optima lower the violation by only 2 % each. Projected only below the acceptable level, it reached the
     500-iteration limit at violation 7e-5 (converged at 667 with a limit of 3000); projected at any violation,
-    it converges at iteration 209 (docs/solvers.md, "Full forward walks")."""
+    it converges at iteration 209."""
     registry = load_registry()
     problem = WalkProblem(registry.create("experiment", "forward"), registry.create("transcription", "hermite-simpson"),
                           Ipopt(), 50)
@@ -525,7 +525,7 @@ def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
     """A QP of `sqp`'s forward HS N = 50 walk (step 2; n = 695, a convexification shift of ~1e-10·max|H|). PIQP
     with its own settings reaches its solution by iteration ~20, lowers its regularisation to 1e-13 to meet the
     1e-10 tolerance, diverges and ends at its limit; with the backends' floor of 1e-10 it solves it, to the
-    objective Clarabel finds to five digits (docs/solvers.md, "PIQP's regularisation floor")."""
+    objective Clarabel finds to five digits (docs/decisions/0002-qp-backends.md)."""
     problem = saved_qp("sqp_gait_qp_piqp_finetune")
     evaluator = SimpleNamespace(evaluations={"qp": 0})  # the one part of an NLPEvaluator the backends use
     backends = QPBackends("piqp", None, 1e-10, Deadline(None), evaluator)
@@ -542,7 +542,7 @@ def test_piqp_solves_a_gait_qp_on_which_its_finer_regularisation_diverges():
 def test_piqp_solves_again_without_its_equilibration_a_gait_qp_it_fails_with_it():
     """A QP of `sqp`'s forward step 2 at HS N = 50 (n = 695) that PIQP, equilibrated, ends at its iteration limit.
     The backends try it again without the equilibration, before any fallback, and solve it to Clarabel's objective
-    (docs/solvers.md, "PIQP without its equilibration")."""
+    (docs/decisions/0002-qp-backends.md)."""
     problem = saved_qp("sqp_gait_qp_piqp_preconditioner")
     evaluator = SimpleNamespace(evaluations={"qp": 0})
     log = {"flags": "", "qp_time": 0.0}
@@ -614,7 +614,7 @@ def test_registered_as_a_solver_plugin(tmp_path: Path):
 
 def test_print_level_two_names_the_blocks_that_hold_the_violation_and_the_step(capsys):
     """Below each iteration's line: the violated constraint blocks with their part of the ℓ1 merit, and the variable
-    blocks the last step moved (how the late-step crawl was read, docs/solvers.md)."""
+    blocks the last step moved (how the late-step crawl was read, docs/decisions/0003-sqp-late-step-crawl.md)."""
     start = np.array([2.0, 0.0])  # off the unit circle by x² + y² − 1 = 3
     result = SQP(print_level=2).solve(_maratos(), [], start)
     assert result.converged, result.message
@@ -680,7 +680,7 @@ def test_the_crawl_floor_lowers_the_shift_floor_once_the_shift_sits_at_its_floor
 
 
 def test_a_row_whose_gradient_vanishes_brings_a_capped_multiplier_into_the_hessian(monkeypatch):
-    """The crossing's clearance (docs/solvers.md, "The clearance's saddle where the legs cross"): the product
+    """The crossing's clearance (docs/decisions/0006-sqp-clearance-saddle.md): the product
     c = u₀u₁ ≥ 0 at u₀ = 0 is active with a gradient of norm |u₁|, here 1e-4. Its multiplier enters the Hessian
     capped at DEGENERATE_MULTIPLIER_CAP, with its sign; a row with an O(1) gradient keeps its multiplier, and so
     do the iterate's multipliers (the QP, the merit's weights and the KKT test use them)."""
@@ -865,11 +865,11 @@ def test_a_slack_reset_that_would_raise_the_merit_or_comes_before_the_crawl_is_n
 
 
 def test_a_row_the_qp_keeps_off_its_bound_leaves_the_working_set():
-    """Rows near their bound (docs/solvers.md): x₀ = ½ ties down the Hessian's negative curvature, so P needs the
-    augmentation, and the row x₁ ≤ 1 starts 9e-7 below its bound with the cost pushing it there at 1e-5. In the
-    working set by nearness alone, its term max|H|·d₁² = 1e4·d₁² held each step to 1e-9, and the solve ended after
-    14 iterations by the stall rule, the KKT residual at 1e-5; once five QP steps have left it inside, it leaves
-    the working set, the next step reaches its bound and gives it the cost's push as its multiplier."""
+    """Rows near their bound (docs/decisions/0003-sqp-late-step-crawl.md): x₀ = ½ ties down the Hessian's negative
+    curvature, so P needs the augmentation, and the row x₁ ≤ 1 starts 9e-7 below its bound with the cost pushing it
+    there at 1e-5. In the working set by nearness alone, its term max|H|·d₁² = 1e4·d₁² held each step to 1e-9, and the
+    solve ended after 14 iterations by the stall rule, the KKT residual at 1e-5; once five QP steps have left it inside,
+    it leaves the working set, the next step reaches its bound and gives it the cost's push as its multiplier."""
     from plugins.solvers.sqp.subproblems import _INSIDE_STEPS
 
     b = NLPBuilder()

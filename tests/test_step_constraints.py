@@ -1,4 +1,4 @@
-"""The step constraints DECISIONS §3–§4 ask for: lift-off at push-off, clearance above the terrain, physical leg
+"""The step constraints docs/model.md §3–§4 ask for: lift-off at push-off, clearance above the terrain, physical leg
 angles; and the retry ladder that a failed step solve climbs before a walk stops."""
 
 from dataclasses import replace

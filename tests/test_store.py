@@ -218,7 +218,7 @@ def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
 def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Path, monkeypatch) -> None:
     """A case whose checkpoint holds steps is named by its suite's label, with the steps saved, the hours spent, when
     the last was saved and whether a live run holds it; one whose suite can no longer be read keeps its key."""
-    from gaitbench.cli.run_commands import walks_in_flight
+    from gaitbench.cli.runs_commands import walks_in_flight
     from gaitbench.run.suite import load_suite
 
     suite = tiny_suite(tmp_path / "tiny.toml", "tiny", [6, 7], ["hermite-simpson"])
@@ -252,7 +252,7 @@ def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Pa
 def test_walks_in_flight_are_named_from_the_suite_text_a_run_recorded_when_its_file_is_gone(tmp_path: Path) -> None:
     """Runs recorded before suite paths were made absolute hold `suites/thesis-all.toml`, unreadable from another
     directory; the suite's text, recorded with the run, still names their walks."""
-    from gaitbench.cli.run_commands import walks_in_flight
+    from gaitbench.cli.runs_commands import walks_in_flight
     from gaitbench.run.suite import load_suite
 
     suite = tiny_suite(tmp_path / "tiny.toml", "tiny", [6], ["hermite-simpson"])
@@ -283,7 +283,7 @@ def test_a_run_whose_output_is_no_terminal_logs_each_case_and_each_saved_step_wi
                      "--no-report")
     assert result.code == 0, result.output
     stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d "
-    assert re.search(stamp + r"1 cases to run", result.output)
+    assert re.search(stamp + r"1 case to run", result.output)
     assert re.search(stamp + r"\[1/1\] solved: forward N=6 .*: ACOT \d\.\d{4}, \d+ s", result.output)
 
     case, = load_suite(suite).cases

@@ -123,7 +123,7 @@ def test_feasibility_checks_the_swing_leg_against_the_upper_bound():
 
 
 def test_physical_angle_limits_accept_the_downward_slope_and_the_stairs():
-    """DECISIONS §4: −1.88 rad on a −0.677 rad slope is 18° below horizontal where the ground falls at 39°."""
+    """docs/model.md §4: −1.88 rad on a −0.677 rad slope is 18° below horizontal where the ground falls at 39°."""
     assert all(check.ok for check in check_feasibility(DOWNWARD, 1.5))
     assert all(check.ok for check in check_feasibility(STAIRS, 1.0))
     assert [c.step for c in check_feasibility(STAIRS, 1.0, THESIS_ANGLE_BOUNDS) if not c.ok] == [7]

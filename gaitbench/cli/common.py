@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import click
 from rich.console import Console
+from rich.table import Table
 from rich.text import Text
 
 from gaitbench.plugins import PluginConflictError, UnknownPluginError
@@ -69,5 +70,20 @@ def create(ctx: click.Context, kind: str, name: str, *args, **options):
                                  param_hint=OPTION_OF_KIND.get(kind)) from None
 
 
-def fmt(value, spec: str) -> str:
-    return "—" if value is None else format(value, spec)
+def count(n: int, noun: str, plural: str | None = None) -> str:
+    """``1 case``, ``2 cases``: a number with its noun in the right number."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def fmt(value, spec: str, missing: str = "—") -> str:
+    """``value`` formatted by ``spec``, or ``missing`` for None."""
+    return missing if value is None else format(value, spec)
+
+
+def print_table(console: Console, table: Table, wide: bool = False) -> None:
+    """Print ``table`` in the console's width, or with ``wide`` every column at its natural width: long lines rather
+    than squeezed cells (what a command's ``--wide`` asks for)."""
+    if wide:
+        natural = console.measure(table, options=console.options.update(max_width=100_000)).maximum
+        console = Console(file=console.file, width=max(console.width, natural))
+    console.print(table)

@@ -12,12 +12,13 @@ import json
 from pathlib import Path
 
 import click
+from rich import box
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
 from gaitbench._version import __version__
-from gaitbench.cli.common import print_plain
+from gaitbench.cli.common import print_plain, print_table
 from gaitbench.plugins import (
     KINDS,
     PLUGINS_DIR_ENV,
@@ -85,9 +86,11 @@ def main(ctx: click.Context, plugin_dirs: tuple[Path, ...]) -> None:
 @main.command("plugins")
 @click.option("--kind", type=click.Choice(sorted(KINDS)), help="Only list plugins of this kind.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list (kind, name, module, description).")
+@click.option("--wide", is_flag=True, help="Add the module or file each plugin comes from (lines longer than 80 "
+              "columns).")
 @click.pass_obj
-def plugins_command(state: _State, kind: str | None, as_json: bool) -> None:
-    """List the loaded plugins and the module or file each comes from.
+def plugins_command(state: _State, kind: str | None, as_json: bool, wide: bool) -> None:
+    """List the loaded plugins by kind, with their descriptions; --wide adds the module or file each comes from.
 
     Plugins that failed to load, and names registered twice, are reported as warnings on stderr.
     """
@@ -100,9 +103,12 @@ def plugins_command(state: _State, kind: str | None, as_json: bool) -> None:
     if not found:
         print_plain(console, "No plugins found.", "")
         return
-    table = Table("kind", "name")
-    table.add_column("module", overflow="fold")  # a path cut short with an ellipsis would be useless
-    table.add_column("description")
+    table = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False, collapse_padding=True)
+    table.add_column("kind", no_wrap=True)
+    table.add_column("name", no_wrap=True, min_width=max(len(plugin.name) for plugin in found))  # never cut short
+    if wide:
+        table.add_column("module", no_wrap=True)  # a path cut short would be useless
+    table.add_column("description", overflow="fold")
     for index, plugin in enumerate(found):
         first_of_kind = index == 0 or found[index - 1].kind != plugin.kind
         if first_of_kind and index:
@@ -110,10 +116,10 @@ def plugins_command(state: _State, kind: str | None, as_json: bool) -> None:
         table.add_row(
             Text(plugin.kind if first_of_kind else "", style="bold"),
             Text(plugin.name, style="cyan"),
-            Text(plugin.module),
+            *([Text(plugin.module)] if wide else []),
             Text(plugin.description),
         )
-    console.print(table)
+    print_table(console, table, wide)
 
 
 @main.group()
@@ -159,7 +165,8 @@ def _add_commands() -> None:
     """The commands that live in their own modules; registered here so `gaitbench --help` lists them."""
     from gaitbench.cli.bound_command import bound
     from gaitbench.cli.report_command import report
-    from gaitbench.cli.run_commands import run, runs
+    from gaitbench.cli.run_commands import run
+    from gaitbench.cli.runs_commands import runs
     from gaitbench.cli.solve_command import solve
     from gaitbench.cli.track_command import track
     from gaitbench.cli.verify_command import verify

@@ -44,7 +44,8 @@ def write_with_progress(store: str | Path, out_dir: Path, console: Console, **op
 @click.option("--reporter", "reporters", multiple=True, metavar="NAME",
               help="Reporter plugin to run (repeatable; default: csv and html). `gaitbench plugins --kind reporter` "
                    "lists them.")
-def report(store: Path, out_dir: Path | None, gait: str | None, reporters: tuple[str, ...]) -> None:
+@click.pass_obj
+def report(state, store: Path, out_dir: Path | None, gait: str | None, reporters: tuple[str, ...]) -> None:
     """Write the report of STORE (the directory given to `gaitbench run --store`): index.html with the thesis's
     figures regenerated, a CSV file per table (columns in docs/reports.md) and the figures as SVG."""
     import time
@@ -56,7 +57,7 @@ def report(store: Path, out_dir: Path | None, gait: str | None, reporters: tuple
     started = time.perf_counter()
     try:
         written = write_with_progress(store, out_dir, Console(stderr=True), gait=gait,
-                                      reporters=reporters or DEFAULT_REPORTERS)
+                                      reporters=reporters or DEFAULT_REPORTERS, registry=state.registry)
     except (UnknownPluginError, PluginConflictError) as error:
         raise click.BadParameter(str(error), param_hint="'--reporter'") from None
     except GaitNotFound as error:

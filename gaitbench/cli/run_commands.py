@@ -5,8 +5,7 @@ from __future__ import annotations
 import os
 import signal
 from collections.abc import Iterator
-from contextlib import ExitStack, contextmanager
-from datetime import datetime, timezone
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
@@ -15,48 +14,12 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from gaitbench.cli.common import count, fmt
+from gaitbench.cli.consistency_options import consistency_options, inconsistent_keys
 from gaitbench.cli.run_progress import CaseProgress, StepsInFlight
 from gaitbench.plugins import PLUGINS_DIR_ENV
 from gaitbench.run.executors import EXECUTORS
 from gaitbench.run.store import LOCK_TIMEOUT_S
-
-
-def _band(ctx, param, value: str | None) -> tuple[int, int] | None:
-    """``--band LOW-HIGH`` as (LOW, HIGH); None for the report's default."""
-    if value is None:
-        return None
-    low, sep, high = value.partition("-")
-    try:
-        band = (int(low), int(high))
-    except ValueError:
-        band = None
-    if not sep or band is None or band[0] > band[1]:
-        raise click.BadParameter(f"{value!r} is not LOW-HIGH with LOW <= HIGH, e.g. 40-90")
-    return band
-
-
-def consistency_options(command):
-    """``--band`` and ``--tolerance``: the consistency check's parameters (gaitbench.reports.statistics), whose
-    defaults are the report's; resolved there, so that this module does not import pandas for ``--help``."""
-    command = click.option("--tolerance", type=click.FloatRange(min=0, min_open=True), default=None,
-                           show_default="0.15",
-                           help="Consistency check: the largest relative distance of a finer N's ACOT from the "
-                                "reference median.")(command)
-    return click.option("--band", metavar="LOW-HIGH", callback=_band, default=None,
-                        show_default="40-90",
-                        help="Consistency check: the coarser N whose median ACOT is each experiment and method's "
-                             "reference; every N above HIGH is checked.")(command)
-
-
-def inconsistent_keys(store_dir: Path, band: tuple[int, int] | None, tolerance: float | None) -> set[str]:
-    """The keys of the complete walks that fail the report's consistency check (``consistency.csv``)."""
-    from gaitbench.reports import case_frame, statistics, tables
-    from gaitbench.run.store import load_results
-
-    band = band or statistics.CONSISTENCY_BAND
-    tolerance = statistics.CONSISTENCY_TOLERANCE if tolerance is None else tolerance
-    df = case_frame.prepare(load_results(store_dir))
-    return statistics.inconsistent_keys(df, tables.acot_table(df), band=band, tolerance=tolerance)
 
 
 @click.command("run")
@@ -81,8 +44,9 @@ def inconsistent_keys(store_dir: Path, band: tuple[int, int] | None, tolerance: 
                    "change to gaitbench that may take them further, or with a larger time limit (a walk stopped by "
                    "its limit goes on from the steps it solved). The new row replaces the old.")
 @click.option("--retry-unverified", is_flag=True,
-              help="With --resume, run again the complete walks that have no verified ACOT (a decrease-and-conquer "
-                   "step whose polish failed): after a change to gaitbench that may verify them.")
+              help="With --resume, run again the complete walks that failed verification (the store's verified "
+                   "flag is 0: `gaitbench verify --store` sets it for rows stored before it existed) or have no "
+                   "ACOT: after a change to gaitbench that may verify them.")
 @click.option("--retry-inconsistent", is_flag=True,
               help="With --resume, run again the complete walks whose ACOT fails the report's consistency check: "
                    "a finer N more than --tolerance from the method's median over --band (`gaitbench runs show "
@@ -181,8 +145,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
 
 def _suite_results(suite, store_dir: Path) -> Table:
     """What the suite's walks came to, from the store (cases of earlier runs too, so a resumed run shows them all):
-    per experiment and method, how many walks are complete, the lowest verified ACOT over those and its N, and why
-    the others stopped."""
+    per experiment and method, how many walks are complete and how many of those passed verification, the lowest
+    ACOT over the verified ones and its N, and why the others stopped."""
     from gaitbench.run.store import ResultStore
 
     keys = {case.key for case in suite.cases}
@@ -192,24 +156,25 @@ def _suite_results(suite, store_dir: Path) -> Table:
     groups: dict[tuple[str, str], list[dict]] = {}
     for row in sorted(rows, key=lambda row: order[row["case_key"]]):
         groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
-    table = Table(title=f"{suite.name}: lowest verified ACOT over complete walks",
-                  box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+    table = Table(title=f"{suite.name}: lowest ACOT over verified walks",
+                  box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False, collapse_padding=True)
     longest = max((len(method) for _, method in groups), default=0)
-    for column in ("experiment", "method", "complete", "ACOT", "at N", "incomplete"):
-        table.add_column(column, justify="right" if column in ("complete", "ACOT", "at N") else "left",
-                         overflow="fold", no_wrap=column in ("complete", "ACOT", "at N"),
+    for column in ("experiment", "method", "complete", "verified", "ACOT", "at N", "incomplete"):
+        numeric = column in ("complete", "verified", "ACOT", "at N")
+        table.add_column(column, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric,
                          min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
     for (experiment, method), group in groups.items():
         complete = [row for row in group if row["status"] == "solved"]
-        best = min((row for row in complete if row["acot"] is not None), key=lambda row: row["acot"], default=None)
+        verified = [row for row in complete if row.get("verified") and row["acot"] is not None]
+        best = min(verified, key=lambda row: row["acot"], default=None)
         causes: dict[str, int] = {}
         for row in group:
             if row not in complete:
                 cause = row["stop_cause"] or row["status"]
                 causes[cause] = causes.get(cause, 0) + 1
-        table.add_row(experiment, method, f"{len(complete)} of {len(group)}",
-                      _number(best["acot"] if best else None, ".4f") or "—", str(best["N"]) if best else "—",
-                      ", ".join(f"{cause} ({count})" for cause, count in causes.items()) or "—")
+        table.add_row(experiment, method, f"{len(complete)} of {len(group)}", str(len(verified)),
+                      fmt(best["acot"] if best else None, ".4f"), str(best["N"]) if best else "—",
+                      ", ".join(f"{cause} ({n})" for cause, n in causes.items()) or "—")
     return table
 
 
@@ -244,7 +209,7 @@ def _jobs_that_help(jobs: int, suite, console: Console) -> int:
 
     if jobs > len(suite.cases) > 0:
         console.print(Text(f"warning: --jobs {jobs} lowered to {len(suite.cases)}: the suite has "
-                           f"{len(suite.cases)} cases", style="yellow"), soft_wrap=True)
+                           f"{count(len(suite.cases), 'case')}", style="yellow"), soft_wrap=True)
         jobs = len(suite.cases)
     fitting, why = jobs_that_fit([suite.memory_mb[case.key] for case in suite.cases if case.key in suite.memory_mb],
                                  jobs)
@@ -273,234 +238,3 @@ def _executor(name: str, jobs: int, scheduler: str | None):
     if name == "inprocess":
         return InProcessExecutor()
     return LocalPoolExecutor(jobs)
-
-
-@click.group("runs")
-def runs() -> None:
-    """Look at results stores: their runs, their cases, exports for other tools, and merging stores."""
-
-
-@runs.command("list")
-@click.argument("stores", nargs=-1, type=click.Path(path_type=Path))
-def runs_list(stores: tuple[Path, ...]) -> None:
-    """List the runs of each STORE (default: every store under ./results), then the walks in flight: each case
-    whose checkpoint holds solved steps, how many, the time spent on it, and whether a live run is solving it now
-    or `gaitbench run --resume` would take it up from there."""
-    from gaitbench.run.store import DATABASE, ResultStore, run_alive
-    from gaitbench.run.store_schema import StoreError
-
-    paths = list(stores) or sorted(path.parent for path in Path("results").glob(f"*/{DATABASE}"))
-    if not paths:
-        raise click.ClickException("no results stores under ./results; name a store directory")
-    table = Table(title="runs")
-    for column in ("store", "run", "suite", "executor", "jobs", "cases", "done", "failed", "skipped", "finished"):
-        table.add_column(column)
-    in_flight = Table(title="walks in flight")
-    for column in ("store", "case", "steps saved", "time (h)", "last saved (UTC)", "now"):
-        in_flight.add_column(column)
-    for path in paths:
-        try:
-            with ResultStore.open(path) as store:
-                runs_rows = store.runs()
-                for row in runs_rows:
-                    table.add_row(str(path), row["run_id"], row["suite"], row["executor"], str(row["jobs"]),
-                                  str(row["cases_total"]), str(row["cases_done"]), str(row["cases_failed"] or 0),
-                                  str(row["cases_skipped"]), row["finished_at"] or _unfinished(row, run_alive))
-                for cells in walks_in_flight(path, runs_rows, store.live_claims()):
-                    in_flight.add_row(str(path), *cells)
-        except StoreError as error:
-            raise click.ClickException(str(error)) from None
-    Console().print(table)
-    if in_flight.row_count:
-        Console().print(in_flight)
-
-
-def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> list[tuple[str, ...]]:
-    """(case, steps saved, hours spent, when the last step was saved, solving or resumable) for each checkpoint of
-    ``store_dir`` with a progress file: a step of an hour shows as a save time that stays put. A case is named by
-    its label in the suite of the store's runs that holds it (the key where no run's suite file can still be
-    read)."""
-    from gaitbench.checkpoint import progress_file, saved_progress
-    from gaitbench.run.store import CHECKPOINTS_DIR
-
-    directory = store_dir / CHECKPOINTS_DIR
-    progress = saved_progress(directory)
-    if not progress:
-        return []
-    labels = _case_labels({(row["suite_path"], row.get("suite_text")) for row in runs_rows if row.get("suite_path")})
-    return [(labels.get(key, key), f"{saved.get('saved', '?')} of {saved.get('of') or '?'}",
-             _number(saved.get("elapsed_s", 0.0) / 3600, ".2f"), _saved_at(progress_file(directory / key)),
-             "solving" if key in live else "resumable")
-            for key, saved in sorted(progress.items())]
-
-
-def _saved_at(path: Path) -> str:
-    """The time a progress file was last written, to the minute, in UTC; blank when it is gone."""
-    try:
-        return datetime.fromtimestamp(path.stat().st_mtime, timezone.utc).strftime("%Y-%m-%d %H:%M")
-    except OSError:
-        return ""
-
-
-def _case_labels(suites: set[tuple[str, str | None]]) -> dict[str, str]:
-    """Case key → label over the runs' suites, (path, text as the run recorded it): the recorded text names the
-    cases that run had, wherever the file has gone since (a run recorded without it reads the file). A suite that
-    cannot be read or expanded is skipped, not an error."""
-    from gaitbench.run.suite import load_suite
-    from gaitbench.run.suite_spec import SuiteError
-
-    labels = {}
-    for suite_path, text in sorted(suites, key=lambda suite: (suite[0], suite[1] or "")):
-        try:
-            labels.update({case.key: case.label for case in load_suite(suite_path, text=text).cases})
-        except SuiteError:  # a suite whose plugins are gone only costs the label
-            continue
-    return labels
-
-
-SHOW_COLUMNS = ("experiment", "N", "method", "status", "stop cause", "ACOT")
-"""What `runs show` prints by default: readable at 80 columns. `--wide` adds :data:`WIDE_COLUMNS`."""
-
-WIDE_COLUMNS = ("case", "experiment", "N", "method", "status", "stop cause", "stop step", "stop status", "ACOT",
-                "claimed", "COT min", "COT max", "retries", "time (s)", "iterations", "message")
-TEXT_COLUMNS = ("case", "experiment", "method", "status", "stop cause", "stop status", "message")
-
-
-def _show_cells(row: dict) -> dict[str, str]:
-    """One store row as the cells of every `runs show` column."""
-    cells = {"case": row["case_key"], "experiment": row["experiment"], "N": str(row["N"]),
-             "method": row["method"] or row["strategy"], "status": row["status"],
-             "stop cause": row["stop_cause"] or "—", "stop step": _number(row["stop_step"], "d"),
-             "stop status": row["stop_status"] or "", "retries": _number(row["retries"], "d"),
-             "time (s)": _number(row["wall_time_s"], ".1f"), "iterations": _number(row["iterations"], "d"),
-             "message": row["message"] or ""}
-    for column, key in (("ACOT", "acot"), ("claimed", "claimed_acot"), ("COT min", "cot_min"), ("COT max", "cot_max")):
-        cells[column] = _number(row[key], ".4f")
-    return cells
-
-
-@runs.command("show")
-@click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
-@click.argument("run_id", metavar="[RUN]", required=False)
-@click.option("--wide", is_flag=True, help="Every column: case key, where and why each walk stopped, the claimed "
-              "ACOT, per-step COT bounds, retries, time, iterations and the message (lines longer than 80 columns).")
-@click.option("--experiment", "experiments", multiple=True, metavar="NAME",
-              help="Only this experiment's cases (repeatable).")
-@click.option("--method", "methods", multiple=True, metavar="LABEL",
-              help="Only this method's cases: its suite label, or its strategy where it has none (repeatable).")
-@click.option("--status", "statuses", multiple=True, metavar="STATUS",
-              help="Only cases with this status: solved, incomplete, error, timeout, crashed (repeatable).")
-@click.option("--inconsistent", is_flag=True,
-              help="Only the complete walks that fail the report's consistency check (consistency.csv): a finer N "
-                   "whose ACOT lies more than --tolerance from the method's median over --band. `gaitbench run "
-                   "SUITE --resume --retry-inconsistent` solves them again.")
-@consistency_options
-def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tuple[str, ...],
-              methods: tuple[str, ...], statuses: tuple[str, ...], inconsistent: bool, band: tuple[int, int] | None,
-              tolerance: float | None) -> None:
-    """Show the cases of STORE as a table: all of them, or those one RUN (an id or its prefix) computed, narrowed
-    by --experiment, --method and --status.
-
-    By default the table fits 80 columns: experiment, N, method, status, why the walk stopped (stop cause:
-    complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
-    everything else.
-    """
-    from gaitbench.run.store import ResultStore
-    from gaitbench.run.store_schema import StoreError
-
-    try:
-        with ResultStore.open(store_dir) as store:
-            rows = store.cases(store.resolve_run(run_id) if run_id else None)
-        flagged = inconsistent_keys(store_dir, band, tolerance) if inconsistent else None
-    except StoreError as error:
-        raise click.ClickException(str(error)) from None
-    rows = [row for row in rows if (flagged is None or row["case_key"] in flagged)
-            and (not experiments or row["experiment"] in experiments)
-            and (not methods or (row["method"] or row["strategy"]) in methods)
-            and (not statuses or row["status"] in statuses)]
-    columns = WIDE_COLUMNS if wide else SHOW_COLUMNS
-    table = Table(title=f"{store_dir}" + (f" run {run_id}" if run_id else ""), box=box.SIMPLE_HEAD,
-                  title_justify="left", show_edge=False, pad_edge=False)
-    widths = {"method": 20, "ACOT": 6, "N": 3}  # "decrease-and-conquer" on one line, numbers whole
-    for column in columns:
-        table.add_column(column, justify="left" if column in TEXT_COLUMNS else "right", overflow="fold",
-                         no_wrap=column in ("case", "N", "ACOT"), min_width=None if wide else widths.get(column))
-    for row in rows:
-        cells = _show_cells(row)
-        table.add_row(*(cells[column] for column in columns))
-    console = Console()
-    if wide:  # every column at its natural width: long lines rather than squeezed cells
-        console = Console(width=max(console.width, 240))
-    console.print(table)
-
-
-@runs.command("export")
-@click.argument("store_dir", metavar="STORE", type=click.Path(path_type=Path))
-@click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True)
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
-              help="Output file [default: STORE/cases.csv or STORE/cases.parquet].")
-def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
-    """Export every case of STORE, one row per case (JSON columns as JSON text in CSV; text a spreadsheet would take
-    for a formula, such as a label beginning with =, escaped with a leading ')."""
-    import json
-
-    from gaitbench.run.store import load_results
-    from gaitbench.run.store_schema import JSON_COLUMNS, StoreError
-
-    try:
-        frame = load_results(store_dir)
-    except StoreError as error:
-        raise click.ClickException(str(error)) from None
-    for column in JSON_COLUMNS:  # nested values as JSON text: one flat, typed table for CSV and Parquet alike
-        frame[column] = frame[column].map(lambda value: None if value is None else json.dumps(value))
-    out = out or Path(store_dir) / f"cases.{fmt}"
-    try:
-        if fmt == "csv":
-            from gaitbench.reports.tables import spreadsheet_safe
-
-            spreadsheet_safe(frame).to_csv(out, index=False)
-        else:
-            frame.to_parquet(out, index=False)
-    except OSError as error:  # e.g. the default, inside a store in a read-only place
-        raise click.ClickException(f"{out}: cannot write the export ({error.strerror or error}); "
-                                   "choose another file with --out") from None
-    Console(stderr=True).print(f"wrote {len(frame)} cases to {out}")
-
-
-@runs.command("merge")
-@click.argument("sources", metavar="SOURCE...", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--into", "destination", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="The store to merge into (created if it does not exist).")
-@click.option("--replace", is_flag=True, help="Where a case is in both stores with other results, take the "
-              "source's (default: keep the destination's and list the case).")
-def runs_merge(sources: tuple[Path, ...], destination: Path, replace: bool) -> None:
-    """Copy the cases of each SOURCE store into the store --into, with their files and the runs that computed them.
-
-    For a sweep run a part at a time on several machines or in several sessions (a suite's `--method` columns,
-    say): merged, one `gaitbench report` covers it all. A case is the same walk in every store (its key), so a case
-    the destination holds already is left alone; each copied case keeps its provenance (commit, machine, solver
-    versions). Cases a live run on the destination is solving are left to it, and checkpoints of walks in flight
-    are not copied: resume those on the store that holds them. The destination may be in use by `gaitbench run`.
-    """
-    from gaitbench.run.merge import describe, merge_store
-    from gaitbench.run.store import ResultStore
-    from gaitbench.run.store_schema import StoreError
-
-    try:
-        with ExitStack() as stack:
-            opened = [stack.enter_context(ResultStore.open(source)) for source in sources]  # all, before writing
-            into = stack.enter_context(ResultStore.create(destination))
-            for source, store in zip(sources, opened, strict=True):
-                click.echo(describe(merge_store(into, store, replace=replace), source, destination), err=True)
-    except StoreError as error:
-        raise click.ClickException(str(error)) from None
-
-
-def _unfinished(run: dict, alive) -> str:
-    if alive(run):
-        return f"running (pid {run['pid']} on {run['host']})"
-    return "not finished"
-
-
-def _number(value, spec: str) -> str:
-    return "" if value is None else format(value, spec)

@@ -13,6 +13,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.text import Text
 
+from gaitbench.cli.common import count
+
 
 class StepsInFlight(ProgressColumn):
     """The suite's walks in flight and the steps each has saved (their checkpoints' progress files), read at most
@@ -108,10 +110,11 @@ class CaseProgress:
         """Show the bar once the run has started, so that an error before it (the store) stays one line."""
         self.progress.__enter__()
         if skipped:
-            self.console.print(f"{skipped} cases already in the store are skipped")
+            self.console.print(f"{count(skipped, 'case')} already in the store {'is' if skipped == 1 else 'are'} "
+                               "skipped")
         self.task = self.progress.add_task("cases", total=to_run, done=0, failed=0, left=to_run)
         if self.logging:
-            self.log(f"{to_run} cases to run")
+            self.log(f"{count(to_run, 'case')} to run")
             self._watcher = threading.Thread(target=self._log_steps, name="steps-in-flight", daemon=True)
             self._watcher.start()
 

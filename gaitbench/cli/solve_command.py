@@ -10,7 +10,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from gaitbench.cli.common import create, fmt, parse_options, print_plain
+from gaitbench.cli.common import count, create, fmt, parse_options, print_plain
 
 
 def _check_memory(transcription: str, strategy: str, n_nodes: int, steps: int) -> None:
@@ -236,10 +236,10 @@ def _print_walk(console: Console, walk) -> None:
     Columns: stance leg, solve time, iterations, largest dynamics defect, re-simulation error at the step's end."""
     claims = walk.claimed_acot is not None or any(step.verified is not step for step in walk.steps)
     table = Table(title=f"{walk.experiment}: {walk.strategy}, {walk.transcription} + {walk.solver}, N = {walk.N}, "
-                        f"objective {walk.objective}", box=box.SIMPLE_HEAD, pad_edge=False)
+                        f"objective {walk.objective}", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     columns = ["step", "leg", "status", "COT", *(["claimed"] if claims else []), "time s", "iter", "defect", "resim"]
-    for column in columns:
-        table.add_column(column, justify="left" if column == "status" else "right", no_wrap=True)
+    for column in columns:  # 75 columns with the longest status (iteration_limit) and the claim
+        table.add_column(column, justify="left" if column == "status" else "right", no_wrap=True, overflow="fold")
     for step in walk.steps:
         motion = step.verified
         row = motion.as_dict()
@@ -251,9 +251,10 @@ def _print_walk(console: Console, walk) -> None:
     console.print(table)
     verification = walk.verification
     if walk.complete:
-        verdict = "verified" if walk.verified else f"NOT verified: {verification.reason}" if verification else ""
-        console.print(f"verified ACOT = {walk.acot:.4f} over {len(walk.steps)} steps ({walk.wall_time_s:.1f} s); "
-                      f"{verdict}")
+        summary = f"verified ACOT = {walk.acot:.4f} over {count(len(walk.steps), 'step')} ({walk.wall_time_s:.1f} s)"
+        if verification is not None:
+            summary += "; verified" if walk.verified else f"; NOT verified: {verification.reason}"
+        console.print(summary)
     else:
         print_plain(console, f"incomplete walk: {walk.failure}", "red")
     if verification is not None and verification.steps:

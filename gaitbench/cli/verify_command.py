@@ -12,7 +12,7 @@ import click
 from rich.console import Console
 
 from gaitbench.acceptance import ACOT_RTOL
-from gaitbench.cli.common import print_plain
+from gaitbench.cli.common import count, print_plain
 
 
 @click.command("verify")
@@ -42,49 +42,51 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     if not walks and store is None:
         raise click.UsageError("name walk files, or a store with --store")
     targets: list[tuple[Path, str | None, float | None]] = [(path, None, None) for path in walks]
-    results_store = None
     if store is not None:
-        results_store, stored = _stored_walks(store)
-        targets += stored
+        targets += _stored_walks(store)
     console, failed, updates = Console(), 0, {}
     for path, case_key, stored_acot in targets:
         try:
             walk_file = read_walk(path)
             walk = reverify(walk_file, ctx.obj.registry)
         except WalkFileError as exc:
-            raise click.BadParameter(str(exc), param_hint="WALKS") from None
-        stored_acot = walk_file.header.get("acot") if stored_acot is None else stored_acot
-        report = _report(path, walk, stored_acot)
+            if case_key is None:
+                raise click.BadParameter(str(exc), param_hint="WALKS") from None
+            report = _unreadable(path, exc)  # one broken file of a store is that walk's verdict, not the end
+        else:
+            stored_acot = walk_file.header.get("acot") if stored_acot is None else stored_acot
+            report = _report(path, walk, stored_acot)
         failed += not report["verified"]
         if case_key is not None:
-            updates[case_key] = _columns(walk)
+            updates[case_key] = _columns(report)
         if as_json:
             click.echo(json.dumps(report))
         else:
             _print(console, report)
-    if results_store is not None:
-        from gaitbench.run.store import StoreError
+    if store is not None:
+        from gaitbench.run.store import ResultStore, StoreError
 
         try:
-            results_store.update_cases(updates)
+            with ResultStore.create(store) as writable:
+                writable.update_cases(updates)
         except StoreError as exc:
             raise click.ClickException(str(exc)) from None
         if not as_json:
-            console.print(f"recorded the verdicts of {len(updates)} walks in {store}")
+            console.print(f"recorded the verdicts of {count(len(updates), 'walk')} in {store}")
     if failed:
         ctx.exit(1)
 
 
-def _stored_walks(store: Path):
-    """The store, opened for writing, and its walks as (walk file, case key, stored ACOT)."""
+def _stored_walks(store: Path) -> list[tuple[Path, str, Any]]:
+    """The store's walks as (walk file, case key, stored ACOT)."""
     from gaitbench.run.store import ResultStore, StoreError
 
     try:
-        results = ResultStore.open(store)
+        with ResultStore.open(store) as results:
+            rows = [row for row in results.cases() if row.get("walk_path")]
     except StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    rows = [row for row in results.cases() if row.get("walk_path")]
-    return results, [(store / row["walk_path"], row["case_key"], row.get("acot")) for row in rows]
+    return [(store / row["walk_path"], row["case_key"], row.get("acot")) for row in rows]
 
 
 def _report(path: Path, walk, stored_acot: Any) -> dict[str, Any]:
@@ -104,13 +106,20 @@ def _report(path: Path, walk, stored_acot: Any) -> dict[str, Any]:
                if key not in ("verified", "reason", "acot")}}
 
 
-def _columns(walk) -> dict[str, Any]:
-    """The store columns a walk's verdict fills: the flag, its reason, and the maxima of the steps it reports."""
-    verification = walk.verification
-    return {"verified": verification.verified, "verification_failure": verification.reason,
-            "thesis_reading_acot": walk.thesis_reading_acot,
-            "max_join_mismatch": verification.max_join_mismatch, "join_energy": verification.join_energy,
-            "max_defect": verification.max_defect, "max_resim_error": verification.max_resim_error}
+def _unreadable(path: Path, error: Exception) -> dict[str, Any]:
+    """The verdict on a stored walk whose file cannot be read: not verified, and why."""
+    return {"walk": str(path), "experiment": "?", "strategy": "?", "transcription": "?", "N": "?",
+            "verified": False, "reasons": [f"walk file unreadable: {error}"], "acot": None, "stored_acot": None,
+            "claimed_acot": None, "thesis_reading_acot": None, "max_join_mismatch": None, "join_energy": 0.0,
+            "max_resim_error": None, "max_defect": None}
+
+
+def _columns(report: dict[str, Any]) -> dict[str, Any]:
+    """The store columns a walk's verdict fills: the flag, its reasons, the maxima of the steps it reports and the
+    thesis's reading."""
+    return {"verified": report["verified"], "verification_failure": "; ".join(report["reasons"]) or None,
+            **{column: report[column] for column in ("max_join_mismatch", "join_energy", "max_defect",
+                                                      "max_resim_error", "thesis_reading_acot")}}
 
 
 def _print(console: Console, report: dict[str, Any]) -> None:

@@ -2,8 +2,8 @@
 
 The plant is the model the walk was solved with (4-DOF with the stance foot held, or the 2-DOF First Phase
 model): M q̈ + C q̇ + G + d = B τ + Sᵀ f, with the disturbance d on the left-hand side as the thesis's "+ d̂" in
-its laws implies (ch4 §5.2). Each step runs for the reference's duration; at its end come the push-off the
-controller commands (4-DOF) and the plastic heel strike, exactly as in DECISIONS §3 (the landing is checked,
+its laws implies (thesis §4.3). Each step runs for the reference's duration; at its end come the push-off the
+controller commands (4-DOF) and the plastic heel strike, exactly as in docs/model.md §3 (the landing is checked,
 :mod:`gaitbench.control.falls`). Control is continuous, or sampled with a zero-order hold at a given rate
 (restarted at every impact). The observer always runs in continuous time on the measured angles and the applied
 torques.

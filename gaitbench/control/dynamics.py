@@ -20,7 +20,7 @@ def inverse_dynamics(model: BipedModel, q: np.ndarray, dq: np.ndarray, ddq: np.n
     """Hip torques that give the leg accelerations ``ddq`` with the stance foot held: rows 1–2 of M q̈ + C q̇ + G.
 
     With the foot held, q̈3 = q̈4 = 0, and rows 3–4 only fix the ground reaction; this is computed torque on the
-    constrained model and equals collocated PFL with the exact contact force (ch4 §3.4).
+    constrained model and equals collocated PFL with the exact contact force (docs/tracking.md).
     """
     mass, coriolis, gravity = model_terms(model)(q, dq, stance)
     return (mass @ ddq + coriolis @ dq + gravity)[:2]
@@ -30,7 +30,7 @@ def held_foot_acceleration(model: BipedModel, q: np.ndarray, dq: np.ndarray, tau
                            stance: int) -> np.ndarray:
     """q̈ with the stance foot held (q̇3 = q̇4 = 0) under hip torques ``tau``: M11 q̈_a = τ − (C q̇ + G)_a, q̈_na = 0.
 
-    The same accelerations as the model's constrained forward dynamics (the KKT system of DECISIONS §2), from the
+    The same accelerations as the model's constrained forward dynamics (the KKT system of docs/model.md §2), from the
     memoized terms, which the loop's controller and observer need anyway.
     """
     mass, coriolis, gravity = model_terms(model)(q, dq, stance)

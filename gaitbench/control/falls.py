@@ -30,7 +30,7 @@ class FallCriteria:
     reference asks for in that step (the thesis's long steps legitimately bring the hip down to 0.3 l).
     ``ground_tolerance`` (m): the swing foot goes that much deeper below the step's chord line than the reference
     does, or is that far from the chord line when the reference's heel strike comes. Leg angles must stay within
-    the experiment's angle bounds (DECISIONS §8).
+    the experiment's angle bounds (docs/model.md §8).
     """
 
     hip_fraction: float = 0.5

@@ -3,7 +3,7 @@
 The reference of a step is the transcription's own interpolant of the stored solution (cubic Hermite for
 Hermite–Simpson, the cubic of DMOC, the quadratic of trapezoidal collocation, ...), refitted exactly as a
 polynomial per grid interval. The desired angles are its positions; the desired velocities and accelerations are
-their exact time derivatives, so the reference is twice differentiable as computed torque requires (ch4 §2.1). At
+their exact time derivatives, so the reference is twice differentiable as computed torque requires (thesis §4.1.2). At
 the nodes the derivative equals the stored velocity, which is what makes exact tracking possible across steps.
 """
 

@@ -1,8 +1,8 @@
 """Closed-loop tracking of a solved walk: controller, observer and disturbance plugins on the hybrid robot.
 
 The thesis's Chapter 4 tracks its optimal gaits with computed torque and collocated partial feedback
-linearization, velocity and disturbance observers, and actuator friction as the disturbance (ch4-control.md;
-DECISIONS §9). This module is the entry point of the CLI and the suite runner: it checks a run's options, builds
+linearization, velocity and disturbance observers, and actuator friction as the disturbance (thesis Chapter 4;
+docs/model.md §9). This module is the entry point of the CLI and the suite runner: it checks a run's options, builds
 the plugins and runs the loop. The pieces:
 
 - :mod:`~gaitbench.step_info`: what every plugin call is told about the current step (the plugins'

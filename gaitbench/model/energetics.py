@@ -1,4 +1,4 @@
-"""Energy and cost of transport of a walking step (thesis §3.5.3, (3.73)–(3.79); DECISIONS §5).
+"""Energy and cost of transport of a walking step (thesis §3.5.3, (3.73)–(3.79); docs/model.md §5).
 
 E_i = ∫ |τ1 q̇1 + τ2 q̇2| dt + E_PO: every joule through the hip motors costs, whether the motor does positive
 or negative work. E_PO, the kinetic-energy increase of the push-off impulse, is a difference of two kinetic
@@ -18,13 +18,13 @@ import numpy as np
 from gaitbench.model.robot import G_CONST
 
 DEFAULT_SMOOTHING_EPS = 0.1
-"""ε of the smoothed |x| for the reported results (thesis L12091–12096; ε = 1 is the other value it tried)."""
+"""ε of the smoothed |x| for the reported results (thesis §5.1; ε = 1 is the other value it tried)."""
 
 
 def smooth_abs(x: Any, eps: float = DEFAULT_SMOOTHING_EPS) -> Any:
     """√(x² + ε²): a differentiable |x| for NLP objectives, within ε of |x| and never below it.
 
-    The thesis prints √(x² + ε²)/2 (L9368–9379); the "/2" would halve the cost and is not used (DECISIONS §5).
+    The thesis prints √(x² + ε²)/2 (§3.5.3); the "/2" would halve the cost and is not used (docs/model.md §5).
     """
     return (x * x + eps * eps) ** 0.5
 
@@ -33,7 +33,7 @@ def simpson_weights(n_nodes: int) -> np.ndarray:
     """Quadrature weights for ``n_nodes`` equally spaced nodes at unit spacing (multiply by h).
 
     Odd n: composite Simpson 1, 4, 2, 4, …, 2, 4, 1 over 3 (4 on even 1-based nodes; the thesis's description
-    at L9360–9366 swaps 2 and 4). Even n ≥ 4 (an odd number of intervals, which Simpson cannot cover):
+    in (3.77)/(3.78) swaps 2 and 4). Even n ≥ 4 (an odd number of intervals, which Simpson cannot cover):
     composite Simpson on the first n − 4 intervals and Simpson's 3/8 rule on the last 3. n = 2: trapezoid.
     Exact for cubic polynomials whenever n ≥ 3.
     """
@@ -116,14 +116,14 @@ def push_off_work(accounting: str, kinetic_gain: Any, foot_velocity: Any, stance
 
 
 def cost_of_transport(energy: Any, total_mass: float, chord: float, g: float = G_CONST) -> Any:
-    """COT = E / (M_total g D): energy per unit weight and unit distance (thesis (3.79), L9381–9412)."""
+    """COT = E / (M_total g D): energy per unit weight and unit distance (thesis (3.79))."""
     if total_mass <= 0 or chord <= 0 or g <= 0:
         raise ValueError(f"total_mass = {total_mass}, chord = {chord}, g = {g}: all must be positive")
     return energy / (total_mass * g * chord)
 
 
 def average_cot(cots: Sequence[float] | np.ndarray) -> float:
-    """ACOT = (1/H) Σ COT_i over the H steps of a walk (thesis L12183–12193)."""
+    """ACOT = (1/H) Σ COT_i over the H steps of a walk (thesis §5.2)."""
     values = np.asarray(cots, dtype=float)
     if values.size == 0:
         raise ValueError("average_cot needs at least one step's COT")
@@ -131,12 +131,12 @@ def average_cot(cots: Sequence[float] | np.ndarray) -> float:
 
 
 def candidate_cot(pcot: np.ndarray, total_mass: float, chord: float, g: float = G_CONST) -> float:
-    """Σ_k PCOT_k / (M_total g D), the thesis's COT of a synthesized candidate (L10093–10100), from the point
+    """Σ_k PCOT_k / (M_total g D), the thesis's COT of a synthesized candidate (§3.7), from the point
     costs of :meth:`gaitbench.problem.objective.Objective.point_costs`.
 
     Taken literally this mixes watts (the nodal powers, with no h or quadrature weights) and joules (the
     push-off term), so it is not an energy per weight and distance. It ranks candidates of one step on one
     grid; the COT of a chosen trajectory is recomputed with :func:`hip_energy` and :func:`cost_of_transport`
-    (DECISIONS §5).
+    (docs/model.md §5).
     """
     return float(cost_of_transport(float(np.sum(pcot)), total_mass, chord, g))

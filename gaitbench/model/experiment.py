@@ -1,6 +1,6 @@
 """A walking experiment: robot, terrain, initial state, step timing, friction disturbance and actuator limits.
 
-Leg labels are fixed and roles alternate (DECISIONS §1): in step i (1-based) Leg 1 is the stance leg when i is
+Leg labels are fixed and roles alternate (docs/model.md §1): in step i (1-based) Leg 1 is the stance leg when i is
 odd and Leg 2 when i is even, so Leg 2 swings first.
 """
 
@@ -30,9 +30,9 @@ STATE_NAMES = ("q1", "q2", "q3", "q4", "dq1", "dq2", "dq3", "dq4")
 
 @dataclass(frozen=True)
 class FrictionParameters:
-    """Steady-state joint friction, the disturbance of the thesis's tracking runs (L12098–12150).
+    """Steady-state joint friction, the disturbance of the thesis's tracking runs (§5.1).
 
-    D(q̇) = [F_c + (F_s − F_c) exp(−|q̇/v_s|^n)] sgn(q̇) + f_v q̇ per joint (DECISIONS §9). The rotational
+    D(q̇) = [F_c + (F_s − F_c) exp(−|q̇/v_s|^n)] sgn(q̇) + f_v q̇ per joint (docs/model.md §9). The rotational
     hip joints 1 and 2 share ``Fc`` (Nm), ``Fs`` (Nm), ``fv`` (Nm/(rad/s)) and ``vs`` (rad/s). For the linear
     stance-foot joints 3 and 4 the thesis gives F_c, F_s and f_v as multiples of the step's time step h^(i)
     ("Fc3 = Fc4 = 5h(i) Ns"); ``Fc_lin``, ``Fs_lin`` and ``fv_lin`` are those multipliers, ``vs_lin`` (m/s)
@@ -71,9 +71,9 @@ class FrictionParameters:
 
 @dataclass(frozen=True)
 class Limits:
-    """Actuator and joint limits of the gait problems (thesis constraints (9)–(12), L9514–9537).
+    """Actuator and joint limits of the gait problems (thesis §3.6, constraints (9)–(12)).
 
-    The thesis's torque, velocity and push-off limits were in the lost Fig. 5.1 (DECISIONS §8). The defaults
+    The thesis's torque, velocity and push-off limits were in the lost Fig. 5.1 (docs/model.md §8). The defaults
     are gaitbench choices for the forward robot (80 kg, 1 m legs), generous enough for every thesis step to be
     feasible; :meth:`sized_for` scales them to another robot:
 
@@ -85,7 +85,7 @@ class Limits:
     - ``push_off_max`` = 500 N·s: far above the impulse that restores a heel-strike loss at walking speed.
 
     Whether a bound is active is reported with every result. ``angle_bounds`` are the thesis's −π/2 ≤ q ≤ π,
-    used only with the problem option ``angle_bounds = "thesis"``; the default limits are physical (DECISIONS §4).
+    used only with the problem option ``angle_bounds = "thesis"``; the default limits are physical (docs/model.md §4).
     """
 
     tau_max: float = 3000.0
@@ -110,7 +110,7 @@ class Limits:
 
     @classmethod
     def sized_for(cls, robot: RobotParameters) -> Limits:
-        """The default limits scaled from the forward robot's (80 kg, 1 m legs) to ``robot`` (DECISIONS §8).
+        """The default limits scaled from the forward robot's (80 kg, 1 m legs) to ``robot`` (docs/model.md §8).
 
         Each limit keeps its dimensionless size: torque in units of m g l, angular rate in √(g/l), impulse in
         m √(g l), with m the total mass. The downward slope's robot (120 kg, 1.5 m legs) gets 6750 Nm, where
@@ -127,10 +127,10 @@ REFERENCE_MASS, REFERENCE_LEG = 80.0, 1.0
 
 
 GAITBENCH_LIMIT_CHOICES = {"tau_max": "Nm", "dq_max": "rad/s", "push_off_max": "N·s"}
-"""Limits (with units) whose default values are gaitbench choices, not thesis values (DECISIONS §8)."""
+"""Limits (with units) whose default values are gaitbench choices, not thesis values (docs/model.md §8)."""
 
 GAITBENCH_CHOICE = "gaitbench choice, not thesis"
-"""Marks a rendered value the thesis does not give (DECISIONS §8, §9)."""
+"""Marks a rendered value the thesis does not give (docs/model.md §8, §9)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,7 +189,7 @@ class Experiment:
         return 1 if step % 2 == 1 else 2
 
     def time_step(self, n_nodes: int) -> float:
-        """h = T / (N − 1) for N nodes per step (DECISIONS §6)."""
+        """h = T / (N − 1) for N nodes per step (docs/model.md §6)."""
         if n_nodes < 2:
             raise ValueError(f"n_nodes = {n_nodes}: a step needs at least 2 nodes")
         return self.step_duration / (n_nodes - 1)
@@ -206,7 +206,7 @@ class Experiment:
         return check_feasibility(self.terrain, self.robot.l, box)
 
     def start_state(self, pose: str = "on-ground") -> np.ndarray:
-        """(q1, q2, q̇1, q̇2) at the start of step 1 (DECISIONS §4).
+        """(q1, q2, q̇1, q̇2) at the start of step 1 (docs/model.md §4).
 
         ``on-ground``: the printed pose rotated about the stance foot until the trailing foot touches the ground
         behind it, which keeps the inter-leg angle and the rates. The thesis prints flat-ground poses (q2 = −q1)
@@ -296,7 +296,7 @@ def _parameter_table(experiment: Experiment) -> Table:
         value = getattr(limits, name)
         note = f"{GAITBENCH_CHOICE}, sized to the robot" if value == getattr(defaults, name) else ""
         table.add_row(name, f"{value:.4g} {unit}", note)
-    table.add_row("leg-angle limits", "physical", "no leg points into the ground (DECISIONS §4)")
+    table.add_row("leg-angle limits", "physical", "no leg points into the ground (docs/model.md §4)")
     lower, upper = limits.angle_bounds
     note = "thesis (10), as printed" if limits.angle_bounds == THESIS_ANGLE_BOUNDS else ""
     table.add_row("thesis angle bounds", f"[{lower:.4f}, {upper:.4f}] rad", f"{note}; angle_bounds = \"thesis\"")

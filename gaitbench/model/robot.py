@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 G_CONST = 9.81
-"""Gravitational acceleration in m/s² (vertical; the thesis's slope factor is not used, DECISIONS §2)."""
+"""Gravitational acceleration in m/s² (vertical; the thesis's slope factor is not used, docs/model.md §2)."""
 
 
 class InvalidParameterError(ValueError):

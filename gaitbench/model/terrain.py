@@ -1,7 +1,7 @@
 """Walking terrain as a sequence of footholds, and the step geometry every gait problem shares.
 
 Step i moves the foothold by the chord D_i at inclination θ_i, Δ = D_i (cos θ_i, sin θ_i), with θ > 0 uphill
-(thesis §2.4, L3423–3439; DECISIONS §4). The heel-strike configuration and the clearance below are written in
+(thesis §2.4; docs/model.md §4). The heel-strike configuration and the clearance below are written in
 that convention; the thesis's own formulas treat θ > 0 as downhill (see docs/deviations.md, H1).
 
 Leg angles are absolute from the vertical, counter-clockwise positive, in "Convention A":
@@ -21,7 +21,7 @@ import numpy as np
 from gaitbench.model.robot import InvalidParameterError
 
 THESIS_ANGLE_BOUNDS = (-math.pi / 2, math.pi)
-"""Leg-angle bounds −π/2 ≤ q1, q2 ≤ π as printed (thesis (10), L9516–9525; kept as printed, DECISIONS §8)."""
+"""Leg-angle bounds −π/2 ≤ q1, q2 ≤ π as printed (thesis §3.6, constraint (10); kept as printed, docs/model.md §8)."""
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,7 @@ class Terrain:
 
     @classmethod
     def stairs(cls, run_rise_pairs: Iterable[tuple[float, float]]) -> Terrain:
-        """Stairs from (run L_i, rise H_i) pairs: D = √(L² + H²), θ = atan2(H, L) (thesis L3441–3449)."""
+        """Stairs from (run L_i, rise H_i) pairs: D = √(L² + H²), θ = atan2(H, L) (thesis §2.4)."""
         steps = []
         for i, (run, rise) in enumerate(run_rise_pairs, start=1):
             if not (math.isfinite(run) and math.isfinite(rise)) or run <= 0:
@@ -136,7 +136,7 @@ TERRAIN_KINK_SMOOTHING = 1e-2
 
 def terrain_clearance(q_st: Any, q_sw: Any, theta: Any, theta_behind: Any,
                       eps: float = TERRAIN_KINK_SMOOTHING) -> Any:
-    """Swing-foot height over l above the ground profile through the footholds it passes (DECISIONS §4).
+    """Swing-foot height over l above the ground profile through the footholds it passes (docs/model.md §4).
 
     The stance foot stands where the ground bends from ``theta_behind`` (the chord the swing foot comes from) to
     ``theta`` (the chord it lands on). With the foot at (x, y) from the stance foot, in leg lengths, the profile is
@@ -201,7 +201,7 @@ def check_feasibility(
 ) -> list[StepCheck]:
     """Check every step's heel-strike configuration against reach (D ≤ 2l) and the leg-angle limits.
 
-    ``angle_bounds`` ``None`` (the default) checks the physical limits (DECISIONS §4): at heel strike neither leg
+    ``angle_bounds`` ``None`` (the default) checks the physical limits (docs/model.md §4): at heel strike neither leg
     points into the ground of the step it ends, nor of the step it starts (the same angles begin step i+1). A
     (low, high) pair checks that box instead, e.g. the thesis's printed :data:`THESIS_ANGLE_BOUNDS`. Each
     problem names the violated limit and the numbers behind it (``StepCheck.described`` adds the step).
@@ -259,7 +259,7 @@ def _check_physical(terrain: Terrain, l: float) -> list[StepCheck]:  # noqa: E74
 
 
 def leg_angle_window(theta: float, theta_behind: float | None = None) -> tuple[float, float]:
-    """Physical leg-angle limits (DECISIONS §4) in a step of inclination θ.
+    """Physical leg-angle limits (docs/model.md §4) in a step of inclination θ.
 
     With ``theta_behind`` (the stance leg, whose foot stands where the ground bends from θ_behind to θ): the hip
     above the ground, θ − π/2 ≤ q ≤ θ_behind + π/2, which is above both lines in a valley and above either on a

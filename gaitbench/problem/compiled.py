@@ -1,9 +1,10 @@
 """Small CasADi functions compiled to C once per machine and loaded from a disk cache.
 
-Compiling a whole step NLP does not pay (tens of seconds of gcc per grid size, docs/performance.md); compiling the
-few-thousand-instruction functions of one grid interval does: they do not depend on N, so one compilation serves
-every grid, every worker process and every later run. The cache is keyed by a hash of the generated C source and
-the compiler command, so a changed model or compiler never loads a stale library.
+Compiling a whole step NLP does not pay (tens of seconds of gcc per grid size,
+docs/decisions/0012-compiled-interval-blocks.md); compiling the few-thousand-instruction functions of one grid interval
+does: they do not depend on N, so one compilation serves every grid, every worker process and every later run. The cache
+is keyed by a hash of the generated C source and the compiler command, so a changed model or compiler never loads a
+stale library.
 
 Set ``GAITBENCH_CACHE`` to move the cache (default ``~/.cache/gaitbench``). Without a C compiler the function is
 returned as it is, interpreted: the same values, only slower, and a warning says so once.

@@ -4,7 +4,7 @@ A step is posed in *role* coordinates (stance leg first, swing leg second) with 
 robot whose legs are relabelled accordingly. This is exact — the two stance cases are mirror images under
 relabelling (tested in ``tests/test_mechanics.py``) — and it lets one built NLP serve odd and even steps.
 
-Phases (DECISIONS §3, §5): ``first`` is the 2-DOF First-Phase problem (stance foot pinned, no push-off);
+Phases (docs/model.md §3, §5): ``first`` is the 2-DOF First-Phase problem (stance foot pinned, no push-off);
 ``second`` adds the 4-DOF quantities: the push-off impulse and its energy, and the exact stance-foot ground
 reaction with optional unilateral-contact and friction-cone constraints. During swing the stance foot is held,
 so the swing dynamics of both phases are the pinned model's (identical to the 2-DOF model, tested).
@@ -45,22 +45,23 @@ class ProblemOptions:
 
     limits: Limits = field(default_factory=Limits)
     absolute_value: str = "slack"  # |hip power| in the objective: "slack" (exact split) or "smooth" (thesis)
-    smoothing_eps: float = 0.1  # ε of the thesis's √(x² + ε²), used with absolute_value = "smooth" (DECISIONS §5)
-    # Interior nodes keep the swing foot above: "terrain" (DECISIONS §4), the ground profile through the footholds
+    smoothing_eps: float = 0.1  # ε of the thesis's √(x² + ε²), used with absolute_value = "smooth" (docs/model.md §5)
+    # Interior nodes keep the swing foot above: "terrain" (docs/model.md §4), the ground profile through the footholds
     # it passes; "chord", the line of the current step's chord (the thesis's form); "off", nowhere (scuffing allowed,
     # as the passive-walking literature allows it).
     clearance: str = "terrain"
     # Swing-foot height over l above that ground at interior nodes. The legs must cross, and at the crossing the
-    # height is exactly 0 (digest ch2 C1), so any positive margin makes fine grids infeasible.
+    # height is exactly 0 (docs/deviations.md, "Swing-foot clearance"), so any positive margin makes fine grids
+    # infeasible.
     clearance_margin: float = 0.0
     # The old stance foot leaves the ground at push-off: its velocity after heel strike along the normal of the
-    # step's chord is at least this (l/s; DECISIONS §3). ``lift_off = False`` is the thesis's literal problem.
+    # step's chord is at least this (l/s; docs/model.md §3). ``lift_off = False`` is the thesis's literal problem.
     lift_off: bool = True
     lift_off_rate: float = 0.0
-    # Leg-angle limits (DECISIONS §4): "physical", no leg points into the ground of its step (|q − θ| ≤ π/2);
+    # Leg-angle limits (docs/model.md §4): "physical", no leg points into the ground of its step (|q − θ| ≤ π/2);
     # "thesis", the printed −π/2 ≤ q ≤ π from the vertical (``limits.angle_bounds``).
     angle_bounds: str = "physical"
-    # The state step 1 starts from (DECISIONS §4): "on-ground", the printed pose rotated so that both feet touch the
+    # The state step 1 starts from (docs/model.md §4): "on-ground", the printed pose rotated so that both feet touch the
     # ground, keeping its inter-leg angle and rates; "printed", the experiment's initial state as printed.
     start_pose: str = "on-ground"
     approach_rate: float = 1e-3  # the swing foot nears the chord line at the last node at least this fast (l/s)

@@ -16,7 +16,7 @@ order (:func:`gaitbench.problem.gait_problem.role_robot_vector`: masses at 0–2
 
 Objectives are frozen dataclasses: a step's built NLP is cached under a structure that includes its objective, so
 equal objectives must compare (and hash) equal. ``net-power`` lives here because it is the core's default
-(DECISIONS §5); the other built-in objectives are plugins (``plugins/objectives/energy_costs.py``).
+(docs/model.md §5); the other built-in objectives are plugins (``plugins/objectives/energy_costs.py``).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ class Objective:
 
     def point_costs(self, dq: np.ndarray, tau: np.ndarray, push_off_work: float, stance: int,
                     robot: np.ndarray) -> np.ndarray:
-        """Decrease and conquer's point cost PCOT_k per node (thesis ch3b §6.3): the running cost at the nodes,
+        """Decrease and conquer's point cost PCOT_k per node (thesis §3.7): the running cost at the nodes,
         the push-off's event cost added at the last node (the thesis's |hip power| + E_PO under ``net-power``)."""
         pcot = self.rate(dq, tau, stance, robot)
         pcot[-1] += self.event_cost(push_off_work)

@@ -35,7 +35,7 @@ def charged(builder: NLPBuilder, structure: StepStructure, name: str, powers: ca
 
     ``slack`` (default): P = s⁺ − s⁻ with s± ≥ 0 as new variables (blocks ``name_positive``, ``name_negative``, the
     constraint ``name_split``) and the charge w⁺ s⁺ + w⁻ s⁻, exact at any optimum and smooth for the solver.
-    ``smooth``: the thesis's √(P² + ε²) for |P| (DECISIONS §5), whose kink of curvature 1/ε makes interior-point
+    ``smooth``: the thesis's √(P² + ε²) for |P| (docs/model.md §5), whose kink of curvature 1/ε makes interior-point
     solvers crawl; kept to reproduce the thesis.
     """
     if powers.numel() == 0:

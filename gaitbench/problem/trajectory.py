@@ -77,7 +77,7 @@ class StepTrajectory:
 
 
 def blended_seed(p: np.ndarray, n_nodes: int) -> Seed:
-    """DECISIONS §7: angles blend linearly from the initial state to the heel-strike configuration, with the
+    """docs/model.md §7: angles blend linearly from the initial state to the heel-strike configuration, with the
     matching constant rates and zero torque."""
     layout = PARAMETER_LAYOUT
     x0 = p[layout["initial_state"]]

@@ -126,7 +126,7 @@ class TranscribedStep:
         return x
 
     def initial_guess(self, data: StepData, seed: Seed | None = None) -> np.ndarray:
-        """The variables sampled from ``seed``; by default the blended guess of DECISIONS §7, the same for every
+        """The variables sampled from ``seed``; by default the blended guess of docs/model.md §7, the same for every
         solver."""
         p = data.parameter_vector()
         guess = np.zeros(self.nlp.n_variables)
@@ -227,7 +227,7 @@ def _configuration(transcription: object) -> dict:
 
 
 def heel_strike_angles(symbols: StepSymbols) -> tuple[ca.SX, ca.SX]:
-    """(q_st, q_sw) at heel strike: θ ∓ asin(D / 2l) (DECISIONS §4)."""
+    """(q_st, q_sw) at heel strike: θ ∓ asin(D / 2l) (docs/model.md §4)."""
     alpha = ca.asin(symbols.chord / (2 * symbols.leg_length))
     return symbols.slope - alpha, symbols.slope + alpha
 
@@ -250,12 +250,12 @@ def _add_step_constraints(
         builder.constrain("clearance", clearance(interior[0, :], interior[1, :], theta), options.clearance_margin,
                           np.inf)
     if options.angle_bounds == "physical":
-        # No leg points into the ground (DECISIONS §4), linear in q: the windows of `leg_angle_window`.
+        # No leg points into the ground (docs/model.md §4), linear in q: the windows of `leg_angle_window`.
         stance_low, stance_high = leg_angle_window(theta, symbols.previous_slope)
         swing_low, swing_high = leg_angle_window(theta)
         builder.constrain("leg_angles", ca.vertcat(q[0, :] - stance_low, stance_high - q[0, :],
                                                    q[1, :] - swing_low, swing_high - q[1, :]), 0.0, np.inf)
-    # Replaces the thesis's infeasible "monotonically descending swing foot" (DECISIONS §4): d/dt of the
+    # Replaces the thesis's infeasible "monotonically descending swing foot" (docs/model.md §4): d/dt of the
     # clearance at the last node is negative, i.e. the swing foot comes down onto the ground.
     approach = -ca.sin(q[0, -1] - theta) * dq[0, -1] + ca.sin(q[1, -1] - theta) * dq[1, -1]
     builder.constrain("approach", approach, -np.inf, -options.approach_rate)
@@ -281,7 +281,7 @@ def _add_step_constraints(
     push_off_energy = push_off_work(options.push_off_cost, kinetic_gain, dq_plus[2:4], symbols.robot[0])
 
     if options.lift_off:
-        # DECISIONS §3: the old stance foot leaves the ground. After heel strike it is the 4-DOF model's free foot
+        # docs/model.md §3: the old stance foot leaves the ground. After heel strike it is the 4-DOF model's free foot
         # (q3, q4); its velocity along the normal of the step's chord must not point into the ground.
         dq_after, _ = model4.heel_strike(q_end4, dq_plus, symbols.robot)
         normal_rate = -ca.sin(theta) * dq_after[2] + ca.cos(theta) * dq_after[3]

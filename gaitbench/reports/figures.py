@@ -217,8 +217,8 @@ def savings_figure(savings: pd.DataFrame, experiment: str, paired: pd.DataFrame 
     legend_below(fig, ncol=2)
     roles = " and ".join(thesis_values.figure(experiment, role) or "" for role in ("savings_op", "savings_reference"))
     return Figure(f"fig-savings-{slug(experiment)}", f"Energy savings of Decrease & Conquer: {experiment}",
-                  "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N both methods solved "
-                  "(ch5 §1.3). Solid: D&C's verified ACOT; dashed: its claim, as the thesis computes it."
+                  "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N both methods solved. "
+                  "Solid: D&C's verified ACOT; dashed: its claim, as the thesis computes it."
                   + ("" if paired is None else " Dotted: the median verified saving over N, shaded: its bootstrap 95 % "
                      "interval (savings_paired.csv).")
                   + (f" Thesis counterparts: {roles}." if roles.strip(" and") else ""), render(fig))
@@ -316,7 +316,7 @@ def tracking_figures(case_key: str, label: str, series: dict[str, np.ndarray], s
             ax.set_title(f"increase {increase:+.2f} %")
         figures.append(Figure(f"fig-track-acot-{key}", f"ACOT under control: {label}",
                               "ACOT of the reference against the ACOT of the tracked walk (thesis: +0.5 % to +1.2 %, "
-                              "ch5 §2.4)." + (" The reference is decrease and conquer's verified trajectory, each "
+                              "§5.2–5.5)." + (" The reference is decrease and conquer's verified trajectory, each "
                                               "step polished, and its ACOT the verified one." if polished else ""),
                               render(fig)))
     return figures

@@ -3,7 +3,7 @@
 The walk is read from the store (``cases/<key>/walk.json`` + ``walk.npz``, a walk file of
 :mod:`gaitbench.solve.walk_file`). Times are made global (each step starts where the previous one ended).
 Ground reactions are computed from the stored nodal trajectory with the 4-DOF model's exact constraint force
-(:meth:`gaitbench.model.mechanics.BipedModel.forward_dynamics`, DECISIONS §2); the 2-DOF First-Phase model pins its
+(:meth:`gaitbench.model.mechanics.BipedModel.forward_dynamics`, docs/model.md §2); the 2-DOF First-Phase model pins its
 stance foot and defines no ground reaction, and the report says so instead of inventing one.
 """
 
@@ -255,7 +255,7 @@ def gait_figures(gait: Gait) -> list[Figure]:
         legend_below(fig)
         figures.append(Figure(f"fig-gait-grf-{key}", f"Ground reactions (butterfly diagram): {gait.label}",
                               "Stance-foot ground reaction, friction and normal components, computed at each node "
-                              "as the exact constraint force of the 4-DOF model (DECISIONS §2)"
+                              "as the exact constraint force of the 4-DOF model (docs/model.md §2)"
                               + (", of the verified trajectory." if gait.trajectory == "polished" else ".")
                               + _thesis(gait, "ground_reaction"), render(fig)))
     impulses = [(s.index, s.push_off) for s in gait.steps if s.push_off is not None]
@@ -288,7 +288,7 @@ def _thesis(gait: Gait, role: str) -> str:
 
 def stick_frames(gait: Gait, frame_rate: float = FRAME_RATE) -> list[list[float]]:
     """Frames of the walk: [stance foot x, y, hip x, y, swing foot x, y] at ``frame_rate`` (Convention A,
-    DECISIONS §1; nodal angles linearly interpolated)."""
+    docs/model.md §1; nodal angles linearly interpolated)."""
     l = gait.leg_length  # noqa: E741
     frames = []
     for step in gait.steps:

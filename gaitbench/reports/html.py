@@ -35,14 +35,31 @@ def format_value(value: Any) -> str:
     return str(value)
 
 
-def table_html(table: pd.DataFrame, table_id: str, highlight: str | None = None) -> str:
-    """A DataFrame as an escaped HTML table; rows where the boolean column ``highlight`` is true get a class."""
+HEADER_WORDS = {"acot": "ACOT", "cot": "COT", "ci": "CI", "id": "ID", "is": ""}
+"""How a word of a column name reads in a header (``is_minimum`` reads "minimum")."""
+
+HEADER_UNITS = {"percent": "(%)", "s": "(s)"}
+"""A column name's last word that is its unit (``wall_time_s``: "wall time (s)")."""
+
+
+def header(column: str) -> str:
+    """The header of a CSV column in an HTML table: words, not snake_case (``claimed_acot_at_min``: "claimed ACOT at
+    min"). The CSV files keep the names (docs/reports.md); each header's tooltip gives it."""
+    words = str(column).split("_")
+    unit = HEADER_UNITS.get(words[-1]) if len(words) > 1 else None
+    words = [HEADER_WORDS.get(word, word) for word in (words[:-1] if unit else words)]
+    text = " ".join(word for word in words if word).replace("push off", "push-off").replace("back ups", "back-ups")
+    return f"{text} {unit}" if unit else text
+
+
+def table_html(table: pd.DataFrame, table_id: str, highlight: str | None = None, empty: str = "No rows.") -> str:
+    """A DataFrame as an escaped HTML table; rows where the boolean column ``highlight`` is true get a class. An
+    empty one is the sentence ``empty``, which says why it is empty."""
     from markupsafe import escape
 
     if table.empty:
-        return f'<p class="empty" id="{table_id}">(no rows)</p>'
-    # Long column names may break after an underscore, so a wide table wraps within the page instead of overflowing.
-    head = "".join(f"<th>{str(escape(str(column))).replace('_', '_<wbr>')}</th>" for column in table.columns)
+        return f'<p class="empty" id="{table_id}">{escape(empty)}</p>'
+    head = "".join(f'<th title="{escape(str(column))}">{escape(header(column))}</th>' for column in table.columns)
     rows = []
     for _, row in table.iterrows():
         marked = highlight is not None and bool(row.get(highlight))
@@ -50,6 +67,51 @@ def table_html(table: pd.DataFrame, table_id: str, highlight: str | None = None)
         rows.append(f'<tr class="minimum">{cells}</tr>' if marked else f"<tr>{cells}</tr>")
     return (f'<table id="{table_id}" class="data"><thead><tr>{head}</tr></thead>'
             f"<tbody>{''.join(rows)}</tbody></table>")
+
+
+EMPTY_TABLES = {
+    "acot_minima": "No walk of this experiment's sweep is in the store.",
+    "acot": "No walk of this experiment's sweep is in the store.",
+    "stop_causes": "No case in the store.",
+    "consistency": "No exceptions: no method has a finer N whose ACOT lies outside the tolerance.",
+    "published_acot": "None of the thesis's experiments (forward, downward-slope, upward-slope, stairs) is in this "
+                      "store, so there is no published figure to set ours beside.",
+    "published_savings": "None of the thesis's experiments is in this store, so there is no published saving to set "
+                         "ours beside.",
+    "unverified_cases": "None: every complete walk passed the whole-walk verification.",
+    "failed_cases": "None: every case's walk was solved to its last step.",
+    "provenance": "The store records no run.",
+}
+"""Why each table of the page is empty, where one reason covers it (the savings' depends on the store:
+:func:`empty_reason`)."""
+
+
+def empty_reason(name: str, report, experiment: str | None = None) -> str:
+    """Why the report's table ``name`` (of ``experiment``) has no rows, in a sentence."""
+    if name in ("savings", "savings_paired"):
+        from gaitbench.reports import case_frame
+        from gaitbench.reports.tables import baselines
+
+        cases = report.cases
+        if experiment is not None and not cases.empty:
+            cases = cases[cases["experiment"] == experiment]
+        if cases.empty or not cases["is_dc"].any():
+            return ("No decrease-and-conquer method in this store" + (" for this experiment" if experiment else "")
+                    + ": a saving is decrease and conquer's against One Phase or the reference method.")
+        pairs = [pair for pair in baselines(case_frame.method_info(report.cases)) if pair[0] == experiment]
+        if not pairs:
+            return ("No baseline for decrease and conquer: no One Phase method with its transcription and solver, "
+                    "and no method labelled reference.")
+        return "Decrease and conquer and its baselines were run at no N in common."
+    if name == "consistency":
+        low, high = statistics.CONSISTENCY_BAND
+        acot = report.tables["acot"]
+        references = acot[(acot["N"] >= low) & (acot["N"] <= high)].dropna(subset=["acot"])
+        checked = acot[acot["N"] > high].merge(references[["experiment", "method"]].drop_duplicates())
+        if checked.empty:
+            return (f"Nothing to check: no method has both a verified walk at N = {low}–{high} (the reference) and "
+                    f"a walk at an N above {high}.")
+    return EMPTY_TABLES.get(name, "No rows.")
 
 
 def _cell(value: Any) -> str:
@@ -91,6 +153,7 @@ class HtmlReporter:
         environment.filters["fmt"] = format_value
         environment.filters["slug"] = slug
         environment.filters["src"] = figure_src
+        environment.filters["header"] = header
         tables = report.tables
 
         def rows(name: str, experiment: str | None = None, columns: list[str] | None = None) -> pd.DataFrame:
@@ -103,7 +166,9 @@ class HtmlReporter:
                   highlight: str | None = None):
             from markupsafe import Markup
 
-            return Markup(table_html(rows(name, experiment, columns), table_id, highlight))
+            shown = rows(name, experiment, columns)
+            empty = empty_reason(name, report, experiment) if shown.empty else ""
+            return Markup(table_html(shown, table_id, highlight, empty))
 
         df = report.cases
         counts = df["status"].value_counts().to_dict() if not df.empty else {}

@@ -115,7 +115,7 @@ def paired_savings(savings: pd.DataFrame, minima: pd.DataFrame) -> pd.DataFrame:
 
 
 def _saving(baseline: float | None, candidate: float | None) -> float:
-    """100 (baseline − candidate) / baseline (ch5 §1.3), NaN where either is missing."""
+    """100 (baseline − candidate) / baseline, NaN where either is missing."""
     if baseline is None or candidate is None or not (math.isfinite(baseline) and math.isfinite(candidate)):
         return math.nan
     return 100 * (baseline - candidate) / baseline

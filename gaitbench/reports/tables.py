@@ -137,7 +137,7 @@ def cot_bounds(acot: pd.DataFrame) -> pd.DataFrame:
 # --- energy savings ----------------------------------------------------------------------------------------------
 
 def savings_percent(reference: Any, candidate: Any) -> Any:
-    """S = 100 (ACOT_ref − ACOT_D&C) / ACOT_ref (ch5 §1.3), element-wise; NaN where either is missing."""
+    """S = 100 (ACOT_ref − ACOT_D&C) / ACOT_ref, element-wise; NaN where either is missing."""
     reference = pd.to_numeric(reference, errors="coerce") if isinstance(reference, pd.Series) else reference
     return 100.0 * (reference - candidate) / reference
 
@@ -198,7 +198,7 @@ def published_comparison(minima: pd.DataFrame, bounds: Mapping[str, ExperimentBo
                    "difference": math.nan, "difference_percent": math.nan, "claimed_acot": math.nan,
                    "claimed_difference": math.nan, "thesis_reading_acot": math.nan,
                    **_bound_cells(value, bounds.get(experiment)),
-                   "source": f"ch5 §2.3, {thesis_values.MINIMUM_ACOT_LINES[experiment]}"}
+                   "source": f"thesis {thesis_values.MINIMUM_ACOT_SOURCES[experiment]}"}
             if not match.empty:
                 m = match.iloc[0]
                 ours_acot, claimed = m["min_acot"], m["claimed_acot_at_min"]
@@ -256,7 +256,7 @@ def published_savings(savings: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame
                    "published_min_N": n_low, "published_max_percent": high, "published_max_N": n_high,
                    "min_percent": math.nan, "min_N": None, "max_percent": math.nan, "max_N": None,
                    "claimed_max_percent": math.nan, "claimed_max_N": None,
-                   "source": f"ch5 §2.3, {thesis_values.SAVINGS_LINES[experiment]}"}
+                   "source": f"thesis {thesis_values.SAVINGS_SOURCES[experiment]}"}
             ours = savings[(savings["experiment"] == experiment)
                            & (savings["method"].map(lambda m, e=experiment: thesis.get((e, m))) == dc)
                            & (savings["baseline"].map(lambda m, e=experiment: thesis.get((e, m))) == base)]

@@ -1,23 +1,24 @@
-"""The thesis's published chapter 5 numbers, typed in once, as data, with their line references.
+"""The thesis's published chapter 5 numbers, typed in once, as data, with the section and figures they come from.
 
-These are the only typed-in results of the reports: everything else is computed from the store. Source: the
-chapter 5 digest (``spec/thesis/ch5-experiments.md`` §2.3 and §2.4; ``Lnnnn`` are lines of ``seed/thesis.txt``).
+These are the only typed-in results of the reports: everything else is computed from the store. Source: the results
+of the four experiments, thesis §5.2–5.5 (minimum ACOT and savings with Figs 5.2–5.5, 5.15–5.18, 5.28–5.31,
+5.41–5.44; tracking with the figures after them).
 The thesis's ACOT of Decrease & Conquer is the claim of its synthesized node-wise patchwork, which in general
-violates the dynamics (docs/deviations.md, DECISIONS §7): gaitbench reports that claim and the verified figure.
+violates the dynamics (docs/deviations.md, docs/model.md §7): gaitbench reports that claim and the verified figure.
 """
 
 from __future__ import annotations
 
 EXPERIMENTS = ("forward", "downward-slope", "upward-slope", "stairs")
-"""The gaitbench experiment names of the thesis's four experiments (ch5 §5.2–5.5)."""
+"""The gaitbench experiment names of the thesis's four experiments (§5.2–5.5)."""
 
 METHODS = ("OP-DM", "OP-DC", "SNOPT", "D&C-DM", "D&C-DC")
-"""The thesis's five methods (ch5 §0)."""
+"""The thesis's five methods (§5.1)."""
 
 REFERENCE_METHOD = "SNOPT"
-"""The thesis's commercial reference solver; gaitbench suites label their stand-in ``reference`` (DECISIONS §10)."""
+"""The thesis's commercial reference solver; gaitbench suites label their stand-in ``reference`` (docs/model.md §10)."""
 
-# experiment -> method -> (minimum ACOT, N at which it is first reached); source lines per experiment.
+# experiment -> method -> (minimum ACOT, N at which it is first reached); the thesis section per experiment.
 MINIMUM_ACOT: dict[str, dict[str, tuple[float, int]]] = {
     "forward": {"OP-DM": (0.3698, 140), "OP-DC": (0.3615, 140), "SNOPT": (0.1875, 180),
                 "D&C-DM": (0.0814, 100), "D&C-DC": (0.0695, 90)},
@@ -28,8 +29,8 @@ MINIMUM_ACOT: dict[str, dict[str, tuple[float, int]]] = {
     "stairs": {"OP-DM": (0.1484, 180), "OP-DC": (0.1285, 140), "SNOPT": (0.099, 200),
                "D&C-DM": (0.0632, 110), "D&C-DC": (0.039, 110)},
 }
-MINIMUM_ACOT_LINES = {"forward": "L12204–12218", "downward-slope": "L12485–12500",
-                      "upward-slope": "L12773–12787", "stairs": "L13066–13084"}
+MINIMUM_ACOT_SOURCES = {"forward": "§5.2, Fig. 5.2", "downward-slope": "§5.3, Fig. 5.15",
+                        "upward-slope": "§5.4, Fig. 5.28", "stairs": "§5.5, Fig. 5.41"}
 
 # experiment -> (D&C method, baseline) -> ((min %, N), (max %, N)): the quoted range of the savings over N.
 SAVINGS: dict[str, dict[tuple[str, str], tuple[tuple[float, int], tuple[float, int]]]] = {
@@ -46,8 +47,8 @@ SAVINGS: dict[str, dict[tuple[str, str], tuple[tuple[float, int], tuple[float, i
     "stairs": {("D&C-DM", "OP-DM"): ((10.29, 20), (84.21, 110)), ("D&C-DC", "OP-DC"): ((13.77, 10), (89.96, 110)),
                ("D&C-DM", "SNOPT"): ((4.58, 10), (82.26, 110)), ("D&C-DC", "SNOPT"): ((10.0, 30), (89.05, 110))},
 }
-SAVINGS_LINES = {"forward": "L12242–12262", "downward-slope": "L12532–12554",
-                 "upward-slope": "L12814–12834", "stairs": "L13109–13131"}
+SAVINGS_SOURCES = {"forward": "§5.2, Figs. 5.4–5.5", "downward-slope": "§5.3, Figs. 5.17–5.18",
+                   "upward-slope": "§5.4, Figs. 5.30–5.31", "stairs": "§5.5, Figs. 5.43–5.44"}
 
 # experiment -> (N used for the plots, position error, velocity-estimation error, ACOT increase in %).
 TRACKING: dict[str, tuple[int, str, str, float]] = {
@@ -56,8 +57,8 @@ TRACKING: dict[str, tuple[int, str, str, float]] = {
     "upward-slope": (100, "≈1e-4", "≈1e-4", 0.7),
     "stairs": (110, "≈1e-4", "≈1e-3–1e-4", 1.2),
 }
-TRACKING_LINES = {"forward": "L12266–12343", "downward-slope": "L12556–12638",
-                  "upward-slope": "L12836–12923", "stairs": "L13133–13215"}
+TRACKING_SOURCES = {"forward": "§5.2, Figs. 5.6–5.14", "downward-slope": "§5.3, Figs. 5.19–5.27",
+                    "upward-slope": "§5.4, Figs. 5.32–5.40", "stairs": "§5.5, Figs. 5.45–5.53"}
 
 FIGURES: dict[str, dict[str, str]] = {
     "forward": {"acot": "5.2", "cot_bounds": "5.3", "savings_op": "5.4", "savings_reference": "5.5",
@@ -73,7 +74,7 @@ FIGURES: dict[str, dict[str, str]] = {
                "angles": "5.45", "velocities": "5.48", "torques": "5.51", "ground_reaction": "5.52",
                "push_off": "5.53"},
 }
-"""The thesis figure each regenerated figure corresponds to (ch5 §3.1)."""
+"""The thesis figure each regenerated figure corresponds to."""
 
 
 def figure(experiment: str, role: str) -> str | None:

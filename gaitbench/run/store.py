@@ -42,10 +42,12 @@ from gaitbench.run.store_files import (
     CHECKPOINTS_DIR,
     case_file,
     checkpoint_file,
+    holds_anything,
     leftovers,
     place_case,
     process_alive,
     remove,
+    umask,
 )
 from gaitbench.run.store_schema import (
     CASE_COLUMNS,
@@ -108,7 +110,7 @@ class ResultStore:
         """
         directory = Path(directory)
         database = directory / DATABASE
-        if directory.is_dir() and not database.exists() and _holds_anything(directory):
+        if directory.is_dir() and not database.exists() and holds_anything(directory):
             raise StoreError(f"{directory}: not a gaitbench results store (a directory with other files and no "
                              f"{DATABASE}); nothing was changed; choose a new or empty directory, or a store")
         try:
@@ -348,12 +350,13 @@ class ResultStore:
     def finished_keys(self, retry_failed: bool = False, retry_incomplete: bool = False,
                       retry_unverified: bool = False) -> set[str]:
         """Keys of cases that need no new run: all stored ones, less the run's failures with ``retry_failed``, the
-        walks that stopped with ``retry_incomplete``, and the complete walks without a verified ACOT (a
-        decrease-and-conquer polish that failed) with ``retry_unverified``."""
+        walks that stopped with ``retry_incomplete``, and with ``retry_unverified`` the complete walks that failed
+        the whole-walk verification (``verified`` 0) or have no ACOT; rows never checked (``verified`` null) are
+        not run again: `gaitbench verify --store` checks them."""
         again = (RETRYABLE_STATUSES if retry_failed else ()) + (("incomplete",) if retry_incomplete else ())
         query = f"SELECT case_key FROM cases WHERE status NOT IN ({', '.join('?' * len(again))})"
         if retry_unverified:
-            query += " AND NOT (status = 'solved' AND acot IS NULL)"
+            query += " AND NOT (status = 'solved' AND (acot IS NULL OR COALESCE(verified, 1) = 0))"
         with self._failing("read the cases"):
             return {key for (key,) in self._db.execute(query, again)}
 
@@ -378,7 +381,7 @@ class ResultStore:
                                           (key,)).fetchone()
                 named = stored is not None and any(
                     isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored)
-                place_case(self.directory, key, files, 0o777 & ~_umask(), replaceable=named)
+                place_case(self.directory, key, files, 0o777 & ~umask(), replaceable=named)
         with self._write(f"record case {key}"):
             self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
             self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
@@ -478,26 +481,6 @@ def run_alive(run: Mapping[str, Any]) -> bool:
     except (TypeError, ValueError):
         return False
     return age < LEASE_S
-
-
-def _umask() -> int:
-    """This process's umask, read without changing it where Linux tells it (changing it races other threads)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _holds_anything(directory: Path) -> bool:
-    try:
-        return next(directory.iterdir(), None) is not None
-    except OSError:  # unreadable: mkdir and SQLite say what is wrong
-        return False
 
 
 def _now() -> str:

@@ -135,3 +135,24 @@ def process_alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
     except (OSError, IndexError):
         return True
+
+
+def umask() -> int:
+    """This process's umask, read without changing it where Linux tells it (changing it races other threads)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def holds_anything(directory: Path) -> bool:
+    """Whether ``directory`` has any entry (False when it cannot be read: mkdir and SQLite then say what is wrong)."""
+    try:
+        return next(directory.iterdir(), None) is not None
+    except OSError:
+        return False

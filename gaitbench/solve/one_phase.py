@@ -1,9 +1,9 @@
-"""The One Phase strategy: each step's problem solved directly from the blended initial guess (DECISIONS §7).
+"""The One Phase strategy: each step's problem solved directly from the blended initial guess (docs/model.md §7).
 
 With ``phase="second"`` (the default) this is the thesis's One Phase method and the baseline that
 decrease-and-conquer is compared against: the full 4-DOF problem with push-off, heel strike and ground reactions.
 ``phase="first"`` walks with the 2-DOF First Phase problem alone, which is what the thesis's Chapter 2 evaluates.
-``look_ahead=H`` solves each step together with the next H − 1 and commits it alone (DECISIONS §7); H = 1, the
+``look_ahead=H`` solves each step together with the next H − 1 and commits it alone (docs/model.md §7); H = 1, the
 default, is the thesis's greedy walk. With ``back_up`` (the default), a step the solver cannot solve is first taken
 for a dead end that the step before walked into: that step is solved again looking one step further ahead (H + 1)
 and the walk goes on from there. With ``rescue`` (the default), a step that still fails is solved on coarser grids

@@ -18,7 +18,7 @@ BACKEND_SETTINGS: dict[str, dict] = {"piqp": {"reg_finetune_lower_limit": 1e-10}
 convexified gait QPs, whose Hessian shift is as small as 1e-10·max|H|, its iterates then diverge from a point where
 the QP was solved to a duality gap of 1e-8 (the dual residual climbs from 2e-9 to 1e-1), and it ends at its
 iteration limit. With the floor kept at 1e-10 it solves half of the QPs it failed that way, in the same iterations
-as the others (docs/solvers.md, the sqp section's "PIQP's regularisation floor")."""
+as the others (docs/decisions/0002-qp-backends.md)."""
 
 RETRY_SETTINGS: dict[str, dict] = {"piqp": {"preconditioner_iter": 0}}
 """Settings under which a backend solves again, before another backend, a gait QP it failed. PIQP without its Ruiz
@@ -26,7 +26,7 @@ equilibration: on the late gait steps PIQP fails up to half the QPs (forward ste
 Clarabel, solving them cold, ends most at its reduced accuracy (``AlmostSolved``, 124 of 255) in 85-110 ms each.
 Unequilibrated, PIQP solves 38 of 40 of those QPs in a median of 33 iterations, to objectives at or below
 Clarabel's; as the first try it fails others that the equilibrated PIQP solves, so it is the second
-(docs/solvers.md, the sqp section's "PIQP without its equilibration"), but where :class:`RetryOrder` lets the two
+(docs/decisions/0002-qp-backends.md), but where :class:`RetryOrder` lets the two
 take turns going first: for ``fsqp`` from a solve's first QP, for ``sqp`` once its late-step crawl shows ("PIQP's
 failures in runs")."""
 
@@ -37,7 +37,7 @@ class RetryOrder:
 
     Why: PIQP fails the late gait steps' QPs in runs (a QP after a failed one failed 229 times in 266 on forward
     step 2, HS N = 100), and each failure costs its iteration limit before the retry solves the QP; trying the
-    settings that solved the last failed QP first saves those calls (docs/solvers.md, "PIQP's failures in runs",
+    settings that solved the last failed QP first saves those calls (docs/decisions/0002-qp-backends.md,
     and for ``fsqp`` "The retry settings first")."""
 
     def __init__(self) -> None:

@@ -19,7 +19,7 @@ from gaitbench.walk_types import StepOutcome, WalkProblem
 
 COARSE_GRIDS = (3 / 4, 1 / 2)
 """The grids, as fractions of N, that :func:`coarse_grid_rescue` solves a stopped step on, finest first. Measured on
-the two `thesis-all` walks that stopped after every rung and the back-up (docs/solvers.md, "Retries"):
+the two `thesis-all` walks that stopped after every rung and the back-up (docs/decisions/0008-retry-ladder.md):
 
 - stairs, OP-DM, N = 200, step 8 (IPOPT ends in restoration from the blended and the First-Phase seeds): from the
   same state the step solves at 150, 100 and 67 nodes, and seeded from the 150- or the 100-node solution the 200-node

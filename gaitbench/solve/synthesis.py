@@ -1,4 +1,4 @@
-"""Decrease & Conquer's trajectory synthesis with on-line verification (thesis §3.7, ch3b §6.4–6.5), in the core so
+"""Decrease & Conquer's trajectory synthesis with on-line verification (thesis §3.7), in the core so
 that any strategy can build on it.
 
 Pure logic on node arrays, independent of how the candidates were computed: candidate ``j`` is defined from its
@@ -34,7 +34,7 @@ def relation_holds(candidate: np.ndarray, previous: np.ndarray, reference: np.nd
                    tolerance: float = 1e-9) -> bool:
     """Whether every variable changes from ``previous`` to ``candidate`` in the direction the reference changes.
 
-    The thesis's "typical value relation" (L10054–10089) is not defined further; this is the reading of ch3b
+    The thesis's "typical value relation" (§3.7) is not defined further; this is the reading of ch3b
     §6.4: the signs of the increments agree, with changes within ``tolerance`` counting as "equal".
     """
     return bool(relations_hold(candidate[None], previous, _direction(reference - reference_previous, tolerance),
@@ -109,7 +109,7 @@ def _ranked(costs: np.ndarray) -> list[int]:
 
 
 def complete_sections(values: np.ndarray, starts: list[int]) -> np.ndarray:
-    """Each candidate's missing nodes filled in (ch3b §6.5): node m < start comes from the candidate starting at m
+    """Each candidate's missing nodes filled in (thesis §3.7): node m < start comes from the candidate starting at m
     (whose values there are the First Phase's), or from the reference where no candidate starts at m.
 
     ``values`` is (J, N, ...) with NaN before each start; returns the completed copy.

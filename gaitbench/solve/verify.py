@@ -1,6 +1,6 @@
 """Verification of every solved step: is it a trajectory of the robot, and what does it really cost?
 
-The optimizer's objective is not trusted for reporting (DECISIONS §5): the COT is recomputed from the trajectory's
+The optimizer's objective is not trusted for reporting (docs/model.md §5): the COT is recomputed from the trajectory's
 own interpolant on a fine grid with the step's objective (:mod:`gaitbench.problem.objective`) read exactly (|·| without
 slacks or smoothing), and the trajectory is re-simulated with the core simulator driven
 by its controls from its initial state.

@@ -2,7 +2,7 @@
 step-by-step chaining most strategies share.
 
 Each step starts from the heel-strike map (after push-off, in the second phase) of the previous step's solution
-(DECISIONS §7). A step whose geometry is infeasible or whose solve fails ends the walk with its reason; the steps
+(docs/model.md §7). A step whose geometry is infeasible or whose solve fails ends the walk with its reason; the steps
 solved before it are kept.
 """
 
@@ -43,7 +43,7 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
                       on_step: Callable[[StepOutcome], None] | None = None, phase: str = "second",
                       back_up: BackUp | None = None, resumable: bool = True,
                       rescue: Rescue | None = None) -> WalkResult:
-    """The thesis's walk: step after step, each from the heel-strike state of the previous one (DECISIONS §7).
+    """The thesis's walk: step after step, each from the heel-strike state of the previous one (docs/model.md §7).
 
     A step whose geometry is infeasible, or that ``solve_step`` cannot solve, ends the walk with its reason; the
     steps before it are kept. With ``back_up``, a step that the solver cannot solve is first taken as a dead end

@@ -1,4 +1,4 @@
-"""Several consecutive steps as one NLP: the whole walk, or a look-ahead window (DECISIONS §7).
+"""Several consecutive steps as one NLP: the whole walk, or a look-ahead window (docs/model.md §7).
 
 Step j > 1 of a chain starts not from a parameter but from the push-off and heel-strike map of step j − 1's final
 state and impulse, written symbolically into its parameters. Every step keeps its own transcription variables and
@@ -103,7 +103,7 @@ class WalkChain:
 @dataclass
 class LookAhead:
     """One Phase with a receding horizon: step i is solved together with the next ``horizon − 1`` steps, and only
-    step i is committed (DECISIONS §7). Each window starts from the previous window's later steps; its last step
+    step i is committed (docs/model.md §7). Each window starts from the previous window's later steps; its last step
     from the blended guess. A window that fails after the solver's continuations (when it ran out of iterations),
     remedies and last resorts falls back to step i alone, with the retry ladder, and says so in the step's details
     (unless ``fallback`` is off: then the failure is returned). Upward slope, HS, N = 150: the back-up window of

@@ -1,8 +1,8 @@
-"""Tracking controllers of the thesis's Chapter 4 (ch4-control.md §1–3; DECISIONS §9), and a PD baseline.
+"""Tracking controllers of the thesis's Chapter 4 (§4.1–4.2; docs/model.md §9), and a PD baseline.
 
 Each is built as ``factory(model, reference, **options)`` and tracks :class:`gaitbench.control.reference.Reference`.
 
-Gains (DECISIONS §8: the thesis's values were lost). The model-based laws impose ë + K_v ė + K_p e = 0 on each
+Gains (docs/model.md §8: the thesis's values were lost). The model-based laws impose ë + K_v ė + K_p e = 0 on each
 leg; the defaults K_p = 900 s⁻², K_v = 60 s⁻¹ make it critically damped at ω_n = 30 rad/s (4.8 Hz): well above the
 gait's content (a 0.73 s step, 1.4 Hz), so the reference is followed closely, and a decade below what a 1 kHz
 servo loop or the observers' fast poles (l = 500 s⁻¹) can support, so sampling and estimation stay out of the way.
@@ -29,7 +29,7 @@ DEFAULT_KV = 60.0
 def _gain(value: float | Sequence[float], name: str) -> np.ndarray:
     gain = np.broadcast_to(np.asarray(value, dtype=float), (2,)).copy()
     if not np.all(np.isfinite(gain)) or np.any(gain <= 0):
-        raise ValueError(f"{name} = {value!r}: gains must be positive (s² + K_v s + K_p Hurwitz, ch4 §3.3)")
+        raise ValueError(f"{name} = {value!r}: gains must be positive (s² + K_v s + K_p Hurwitz, thesis §4.2)")
     return gain
 
 
@@ -40,8 +40,9 @@ class ComputedTorque:
     τ = [M(q) v + C(q, q̂̇) q̂̇ + G(q)]₁,₂ + d̂ with v = (q̈_d − K_v(q̂̇ − q̇_d) − K_p(q − q_d), 0, 0): the fully actuated
     model of the push-off phase with the foot's rows left to the ground reaction. Push-off: the thesis's fully
     actuated law in impulse form asks for the generalized impulse M(q)(q̇_d⁺ − q̂̇⁻); the only actuator is the scalar
-    impulse along the stance leg (DECISIONS §3), so its M⁻¹-weighted projection on that axis is applied,
-    F = (J M⁻¹ Jᵀ)⁻¹ J (q̇_d⁺ − q̂̇⁻) (ch4 §9 item 15). On the reference it is exactly the planned impulse.
+    impulse along the stance leg (docs/model.md §3), so its M⁻¹-weighted projection on that axis is applied,
+    F = (J M⁻¹ Jᵀ)⁻¹ J (q̇_d⁺ − q̂̇⁻) (the impulse form of thesis §4.2.2). On the reference it is exactly the planned
+    impulse.
     """
 
     def __init__(self, model: BipedModel, reference: Reference, kp: float | Sequence[float] = DEFAULT_KP,
@@ -68,14 +69,14 @@ class ComputedTorque:
 
 
 class PartialFeedbackLinearization:
-    """Collocated PFL on q1, q2 (thesis (4.8)–(4.12), (4.24)–(4.28), (4.37), (4.39)) with the digest's corrections:
-    one C_a q̇_a term and the Schur complement M_a = M11 − M12 M22⁻¹ M21 (ch4 §3.2, §9 items 7–8).
+    """Collocated PFL on q1, q2 (thesis (4.8)–(4.12), (4.24)–(4.28), (4.37), (4.39)) with two corrections of the
+    printed law: one C_a q̇_a term and the Schur complement M_a = M11 − M12 M22⁻¹ M21 (docs/tracking.md).
 
     τ = M_a v_a + C_a q̂̇_a + C_na q̂̇_na + G̃ + M12 M22⁻¹ F + d̂. ``contact_force`` chooses F: ``"constraint"``
     (default) is the exact held-foot force M21 v_a + C21 q̂̇_a + C22 q̂̇_na + G2, which linearizes q̈_a = v_a exactly
-    (and makes the law coincide with computed torque, ch4 §3.4.1); ``"thesis"`` is the closed form (3.39),
+    (and makes the law coincide with computed torque, docs/tracking.md); ``"thesis"`` is the closed form (3.39),
     C21 q̇_a + G2, which drops M21 q̈_a and leaves q̈_a = M11⁻¹ M_a v_a — kept to show the thesis's error.
-    Heel strike is an instantaneous plastic impact here (DECISIONS §3), on which finite hip torques do no work, so
+    Heel strike is an instantaneous plastic impact here (docs/model.md §3), on which finite hip torques do no work, so
     the heel-strike PFL is this same law acting from the first instant of the next step. The push-off is not PFL's
     (it is fully actuated): this controller applies the planned impulse.
     """
@@ -109,7 +110,7 @@ class PartialFeedbackLinearization:
 
 
 class ThesisControl:
-    """The thesis's assignment per phase (ch4 §1): collocated PFL in swing and heel strike, computed torque at the
+    """The thesis's assignment per phase (§4.1.1): collocated PFL in swing and heel strike, computed torque at the
     fully actuated push-off. Options are those of both: ``kp``, ``kv``, ``contact_force``."""
 
     def __init__(self, model: BipedModel, reference: Reference, kp: float | Sequence[float] = DEFAULT_KP,
@@ -152,7 +153,8 @@ def register_controllers():
     return [
         Registration("computed-torque", "Computed torque on the held-foot model in swing, projected CTC impulse "
                      "at push-off (thesis (4.6), (4.22))", ComputedTorque),
-        Registration("pfl", "Collocated partial feedback linearization on q1, q2 with the digest's corrections; "
+        Registration("pfl", "Collocated partial feedback linearization on q1, q2 with the corrections of "
+                            "docs/tracking.md; "
                      "planned push-off (thesis (4.12), (4.28))", PartialFeedbackLinearization),
         Registration("thesis", "The thesis's per-phase assignment: PFL in swing and heel strike, computed torque at "
                      "push-off", ThesisControl),

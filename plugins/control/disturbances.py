@@ -1,7 +1,7 @@
 """Disturbances for closed-loop tracking: the thesis's actuator friction, none, and an external push.
 
 Each is built as ``factory(experiment, **options)`` and returns generalized forces on the left-hand side of
-M q̈ + C q̇ + G + d = B τ + Sᵀ f (the sign the thesis's "+ d̂" in its laws implies, ch4-control.md §5.2).
+M q̈ + C q̇ + G + d = B τ + Sᵀ f (the sign the thesis's "+ d̂" in its laws implies, thesis §4.3).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ class NoDisturbance:
 
 
 class Friction:
-    """Steady-state actuator friction per generalized coordinate j (thesis L12098–12150; DECISIONS §9):
+    """Steady-state actuator friction per generalized coordinate j (thesis §5.1; docs/model.md §9):
 
     D_j(q̇) = [F_cj + (F_sj − F_cj) exp(−|q̇_j / v_sj|^n)] sgn(q̇_j) + f_vj q̇_j, with each experiment's values
     (:class:`gaitbench.model.experiment.FrictionParameters`) and n = 2.
@@ -97,7 +97,7 @@ class Push:
 
     def force(self, t: float, q: np.ndarray, dq: np.ndarray, step: StepInfo) -> np.ndarray:
         push = self.external_force(t, step)
-        jacobian = np.zeros((2, len(q)))  # ∂(point)/∂q in Convention A (DECISIONS §1)
+        jacobian = np.zeros((2, len(q)))  # ∂(point)/∂q in Convention A (docs/model.md §1)
         st, sw = step.stance - 1, 2 - step.stance
         jacobian[:, st] = -self.leg * math.cos(q[st]), -self.leg * math.sin(q[st])
         if self.point == "swing-foot":
@@ -115,6 +115,6 @@ def register_disturbances():
     return [
         Registration("none", "No disturbance: the exact model", NoDisturbance),
         Registration("friction", "Coulomb, static, viscous and Stribeck actuator friction with the experiment's "
-                     "values (thesis L12098–12150, n = 2)", Friction),
+                     "values (thesis §5.1, n = 2)", Friction),
         Registration("push", "External half-sine push on the hip or swing foot at a given step and time", Push),
     ]

@@ -1,8 +1,8 @@
-"""Velocity and disturbance observers of the thesis's §4.3 in their working form (ch4-control.md §4–5; DECISIONS §9).
+"""Velocity and disturbance observers of the thesis's §4.3 in their working form (docs/model.md §9).
 
-The printed pair (4.40)–(4.41) diverges: E is undefined and one term is dimensionally inconsistent (ch4 §5.3, §9
-item 11). Its structure is kept and it is driven by the model-predicted acceleration
-â = M⁻¹(B τ − C(q, q̂̇) q̂̇ − G − d̂) (with the stance foot held, ch4 §5.3's repaired variant):
+The printed pair (4.40)–(4.41) diverges: E is undefined and one term is dimensionally inconsistent
+(docs/tracking.md). Its structure is kept and it is driven by the model-predicted acceleration
+â = M⁻¹(B τ − C(q, q̂̇) q̂̇ − G − d̂) (with the stance foot held, the repaired variant of docs/tracking.md):
 
 - velocity observer  q̂̇ = z + L q,  ż = â − L q̂̇   (so d/dt q̂̇ = â + L (q̇ − q̂̇));
 - disturbance observer  d̂ = p − Φ q̂̇,  ṗ = Φ â   (so d/dt d̂ = −Φ L (q̇ − q̂̇)).
@@ -10,12 +10,12 @@ item 11). Its structure is kept and it is driven by the model-predicted accelera
 With a constant disturbance the estimation errors obey q̃̈ + L q̃̇ + Φ L M⁻¹ q̃ = 0, stable for every l, φ > 0.
 
 Estimates live on the leg angles q1, q2: the held stance foot's rates are known zeros and a disturbance on it is
-absorbed by the ground reaction (ch4 §5.2). The tracking loop maps the velocity estimate through the same push-off
+absorbed by the ground reaction (thesis §4.3). The tracking loop maps the velocity estimate through the same push-off
 and heel-strike maps as the robot and keeps the disturbance estimate (leg labels are fixed, so a leg's friction
 stays that leg's); ``reset`` then re-initialises z and p so that the estimates are exactly those mapped values.
-Re-initialising matters: z = q̂̇ − L q would otherwise carry the pre-impact configuration (ch4 §4).
+Re-initialising matters: z = q̂̇ − L q would otherwise carry the pre-impact configuration.
 
-Gains (DECISIONS §8: lost). l = 500 s⁻¹ puts the velocity observer's fast pole a decade above the controllers'
+Gains (docs/model.md §8: lost). l = 500 s⁻¹ puts the velocity observer's fast pole a decade above the controllers'
 30 rad/s. φ = 2000 N·m·s/rad: the slow pole of s² + l s + φ l / m is ≈ φ / m, about 30 s⁻¹ along the forward
 robot's heaviest leg-angle direction (m ≈ 68 kg·m²), so a constant disturbance is learned within ~0.15 s, a fifth of
 a step; along the light swing direction (m ≈ 5 kg·m²) the pair is underdamped (ζ ≈ 0.56) but fast.
@@ -141,5 +141,5 @@ def register_observers():
         Registration("disturbance", "Disturbance observer d̂ = p − Φ q̇ on measured velocities (thesis (4.41), "
                      "working form)", DisturbanceObserver),
         Registration("thesis", "Velocity and disturbance observers coupled as in the thesis §4.3 (working form, "
-                     "DECISIONS §9)", ThesisObserver),
+                     "docs/model.md §9)", ThesisObserver),
     ]

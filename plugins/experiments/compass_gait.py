@@ -19,7 +19,7 @@ from gaitbench import Registration, hookimpl
 LEG_MASS = 5.0  # kg
 HIP_MASS = 10.0  # kg
 LEG_LENGTH = 1.0  # m, with a = b = 0.5 m and point-mass legs (no inertia about the leg CoM)
-SLOPE = -math.radians(3.0)  # downhill (θ > 0 is uphill, DECISIONS §4)
+SLOPE = -math.radians(3.0)  # downhill (θ > 0 is uphill, docs/model.md §4)
 STEPS = 11
 INITIAL_GUESS = (0.27, -1.1, -0.4)  # half inter-leg angle, stance and swing rates: only a starting point
 

@@ -1,8 +1,8 @@
-"""The virtual bipeds of the thesis's energetics study (§5.6, L13296–13545), as one experiment with options.
+"""The virtual bipeds of the thesis's energetics study (§5.6), as one experiment with options.
 
 ``energetics`` walks ``steps`` equal steps (chord D, slope θ) with a biped whose mass and length distributions
-are the study's ratios Rm = m_leg / M and Rl = b / l (thesis (5.1), L13316–13329). The thesis says its
-parameters are non-dimensional (L13347–13349) but not how; these are the gaitbench choices:
+are the study's ratios Rm = m_leg / M and Rl = b / l (thesis (5.1)). The thesis says its
+parameters are non-dimensional (§5.6) but not how; these are the gaitbench choices:
 
 - length: leg length l = 1 m; ``step_length`` is the chord D in units of l (so D ≤ 2).
 - mass: total mass M + 2 m = 80 kg, the forward experiment's robot, so M = 80 / (1 + 2 Rm) and m = Rm M. The COT
@@ -10,13 +10,13 @@ parameters are non-dimensional (L13347–13349) but not how; these are the gaitb
   so the study's bipeds keep the thesis robots' scale. Rm = Rl = 0.5 is the forward experiment's robot.
 - speed: ``speed`` V in units of √(g l) (the Froude scaling of walking), g = 9.81 m/s²; the step duration is
   T = D l / (V √(g l)). The thesis's own experiments (D ≈ 1 m, l = 1 m, T = 0.7343 s) walk at V ≈ 0.43, between
-  the study's V = 0.4 and 0.6 (L13370–13374).
+  the study's V = 0.4 and 0.6 (§5.6).
 - slope: ``slope`` θ in degrees, > 0 uphill; every step has the same chord and slope.
-- Rl sets a = l (1 − Rl); inertias m l²/12 (DECISIONS §1). No friction disturbance (the study compares gaits).
+- Rl sets a = l (1 − Rl); inertias m l²/12 (docs/model.md §1). No friction disturbance (the study compares gaits).
 
 The initial state is the symmetric configuration just after a heel strike of a step of the same length, Leg 1
 in stance: q1 = θ + α, q2 = θ − α with α = asin(D / 2). Its rates are the thesis's: its four initial states are
-scaled copies of one base state, q̇1 = −4.995 q1 and q̇2 = −1.7256 q1 at T = 0.7343 s (digest ch5 §2.1); here
+scaled copies of one base state, q̇1 = −4.995 q1 and q̇2 = −1.7256 q1 at T = 0.7343 s (derived from §5.2–5.5); here
 q̇1 = −3.668 α / T and q̇2 = −1.267 α / T, the same shape scaled to the step's angle and duration.
 """
 
@@ -31,7 +31,7 @@ LEG_LENGTH = 1.0
 TOTAL_MASS = 80.0
 """M + 2 m in kg: the forward experiment's robot."""
 THESIS_RATE_SHAPE = (-4.995 * 0.7343, -1.7256 * 0.7343)
-"""(q̇1, q̇2) · T / α of the thesis's initial states (digest ch5 §2.1, [derived] there)."""
+"""(q̇1, q̇2) · T / α of the thesis's initial states (derived from §5.2–5.5)."""
 
 DESCRIPTION = ("Energetics study biped (thesis §5.6): options mass_ratio Rm, length_ratio Rl, speed V (√(g l)), "
                "step_length D (l), slope (deg), steps")
@@ -92,7 +92,7 @@ def energetics(mass_ratio: float = 0.5, length_ratio: float = 0.5, speed: float 
         step_duration=duration,
         friction=None,
         limits=limits,
-        source="thesis §5.6 Energetics (L13296–13545): Rm, Rl (5.1) L13316–13329; normalization, mass scale and "
+        source="thesis §5.6 Energetics: Rm, Rl (5.1); normalization, mass scale and "
                "initial state are gaitbench choices (plugins/experiments/energetics.py)",
     )
     problems = [problem for check in experiment.feasibility() for problem in check.described]

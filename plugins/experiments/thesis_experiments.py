@@ -1,10 +1,10 @@
 """The four walking experiments of the thesis's chapter 5, with every parameter the text gives.
 
-Line numbers (Lnnnn) refer to ``seed/thesis.txt``. Common to all four (§5.2–5.5): H = 11 steps, a = b = l/2,
+Parameters as printed in each experiment's section. Common to all four (§5.2–5.5): H = 11 steps, a = b = l/2,
 step duration 0.7343 s, stance foot starting at rest at the origin (q3 = q4 = dq3 = dq4 = 0), inertias m l²/12
-(not given; DECISIONS §1), Leg 2 swings first. Limits are the gaitbench defaults sized to each robot (the
-thesis's were lost, DECISIONS §8). The printed initial poses are flat-ground poses; walks start from them rotated
-onto the ground (``Experiment.start_state``, DECISIONS §4).
+(not given; docs/model.md §1), Leg 2 swings first. Limits are the gaitbench defaults sized to each robot (the
+thesis's were lost, docs/model.md §8). The printed initial poses are flat-ground poses; walks start from them rotated
+onto the ground (``Experiment.start_state``, docs/model.md §4).
 Importing this module is cheap: the experiments are built only when a factory is called.
 """
 
@@ -13,12 +13,12 @@ from __future__ import annotations
 from gaitbench import Registration, hookimpl
 
 STEP_DURATION = 0.7343
-"""Seconds per step in all four experiments (L12163, L12439, L12729, L13011)."""
+"""Seconds per step in all four experiments (§5.2–5.5)."""
 
-FORWARD_CHORDS = (0.6, 0.8, 1.0, 1.4, 1.7, 1.9, 1.6, 1.3, 1.1, 0.8, 0.6)  # L12167–12169
-DOWNWARD_CHORDS = (2.8, 2.6, 2.3, 2.15, 1.95, 1.8, 1.75, 1.35, 1.15, 1.05, 0.6)  # L12445–12447
-UPWARD_CHORDS = (0.7, 0.8, 1.0, 1.2, 1.35, 1.45, 1.55, 1.6, 1.85, 2.1, 2.25)  # L12735–12737
-STAIRS_RUN_RISE = (  # (L_i, H_i) in m, L13015–13029; D and θ follow from them (DECISIONS §4)
+FORWARD_CHORDS = (0.6, 0.8, 1.0, 1.4, 1.7, 1.9, 1.6, 1.3, 1.1, 0.8, 0.6)  # §5.2
+DOWNWARD_CHORDS = (2.8, 2.6, 2.3, 2.15, 1.95, 1.8, 1.75, 1.35, 1.15, 1.05, 0.6)  # §5.3
+UPWARD_CHORDS = (0.7, 0.8, 1.0, 1.2, 1.35, 1.45, 1.55, 1.6, 1.85, 2.1, 2.25)  # §5.4
+STAIRS_RUN_RISE = (  # (L_i, H_i) in m, §5.5; D and θ follow from them (docs/model.md §4)
     (1.0, 0.6), (1.4, 0.6), (1.5, 0.8), (1.2, 0.4), (1.1, 0.5),
     (0.9, -0.8), (0.8, -1.0), (0.75, -0.7), (0.6, -0.6), (0.5, -0.6), (0.2, -0.4),
 )
@@ -57,8 +57,7 @@ def forward():
         q0=(0.2187, -0.2187), dq0=(-1.0924, -0.3774),
         friction=dict(Fc=6.0, Fs=10.0, fv=8.0, vs=0.19, Fc_lin=5.0, Fs_lin=5.0, fv_lin=6.0, vs_lin=0.03),
         source=(
-            "thesis §5.2 Forward Walking, parameters L12157–12179 (initial state L12171, "
-            "friction L12175–12179)"
+            "thesis §5.2 Forward Walking (parameters, initial state and friction as printed there)"
         ),
     )
 
@@ -72,8 +71,8 @@ def downward_slope():
         q0=(0.4330, -0.4330), dq0=(-2.162, -0.7472),
         friction=dict(Fc=7.0, Fs=11.0, fv=9.0, vs=0.21, Fc_lin=6.0, Fs_lin=6.0, fv_lin=7.0, vs_lin=0.07),
         source=(
-            "thesis §5.3 Downward Slope, parameters L12433–12459 (θ L12443, initial state L12449, "
-            "friction L12455–12459); steps 1-2 violate the printed angle bound -π/2 at heel strike, and the "
+            "thesis §5.3 Downward Slope (parameters, θ, initial state and friction as printed there); "
+            "steps 1-2 violate the printed angle bound -π/2 at heel strike, and the "
             "printed pose q2 = -q1 puts the trailing foot 0.79 m below the slope"
         ),
     )
@@ -88,8 +87,7 @@ def upward_slope():
         q0=(0.2296, -0.2296), dq0=(-1.1470, -0.3962),
         friction=dict(Fc=6.0, Fs=12.0, fv=8.5, vs=0.25, Fc_lin=6.0, Fs_lin=7.0, fv_lin=7.5, vs_lin=0.08),
         source=(
-            "thesis §5.4 Upward Slope, parameters L12723–12746 (θ L12733, initial state L12739, "
-            "friction L12742–12746)"
+            "thesis §5.4 Upward Slope (parameters, θ, initial state and friction as printed there)"
         ),
     )
 
@@ -103,9 +101,9 @@ def stairs():
         q0=(0.2843, -0.2893), dq0=(-1.4201, -0.4906),
         friction=dict(Fc=7.0, Fs=10.5, fv=8.5, vs=0.21, Fc_lin=6.5, Fs_lin=6.0, fv_lin=7.0, vs_lin=0.06),
         source=(
-            "thesis §5.5 Down/Up Stairs, parameters L13005–13039 ((L, H) pairs L13015–13029, which win over "
-            "the printed D_i/θ_i; initial state L13031 with q2 = -0.2893 kept as printed, likely a typo for "
-            "-0.2843; friction L13035–13039); step 7 violates the printed angle bound -π/2 at heel strike"
+            "thesis §5.5 Down/Up Stairs, as printed ((L, H) pairs, which win over "
+            "the printed D_i/θ_i; initial state with q2 = -0.2893 kept as printed, likely a typo for "
+            "-0.2843); step 7 violates the printed angle bound -π/2 at heel strike"
         ),
     )
 

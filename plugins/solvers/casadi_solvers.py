@@ -9,11 +9,11 @@ Each is ``casadi.nlpsol`` with one of CasADi's plugins, built once per NLP and o
 
 Dense FATROP solves forward step 1 of the gait problems at N = 20, 20–150× slower than IPOPT, and fails the
 harder steps without the torque tie-break. Stage-wise FATROP solves 8 of the solver benchmark's 18 gait steps
-(N = 25 and 50; none at N = 100), at 3–23× IPOPT's time (docs/solvers.md has the measurements).
+(N = 25 and 50; none at N = 100), at 3–23× IPOPT's time (docs/decisions/0005-casadi-solvers.md).
 CasADi's ``sqpmethod``, ``feasiblesqpmethod`` and ``blocksqp`` were plugins here too and were removed (issue 22):
 the first two reach no solution on forward step 1 with any option CasADi 3.8 offers, and blockSQP, without the
 HSL solver its QP and restoration phase need, converges on 2 of the 18 steps and ignores its time limit
-(docs/solvers.md, "Removed").
+(docs/decisions/0005-casadi-solvers.md).
 
 At ``print_level`` 0 standard output and error are discarded during build and solve (at the file-descriptor
 level, so for the whole process while it lasts): CasADi's FATROP interface writes a warning per row its structure
@@ -227,7 +227,7 @@ class Fatrop(CasadiMethod):
       own variables as controls, copies of earlier ones and of the global variables as states, gap-closing rows
       that carry the copies) and FATROP is given its structure (``N``, ``nx``, ``nu``, ``ng``); the solution is
       mapped back, so the result is the NLP's own. ``structure_detection="auto"`` instead leaves the structure to
-      CasADi's detection, which misreads this form (docs/solvers.md): kept for comparison, not for use.
+      CasADi's detection, which misreads this form: kept for comparison, not for use.
     - ``stagewise=False``: with ``structure_detection="none"`` (default) the NLP is one stage with all
       variables as controls, which FATROP solves with a dense factorization (correct, without its speed-up).
       ``structure_detection="auto"`` (CasADi's detection, given which constraints are equalities) is for NLPs
@@ -235,9 +235,9 @@ class Fatrop(CasadiMethod):
     - ``stagewise="auto"`` (default): the stage-wise form where the NLP has one (the gait steps: variable blocks
       over a grid, rows and objective that join nearby stages only), the dense stage otherwise (textbook NLPs) or
       where a structure is given (``structure_detection``, ``N``, ...). Measured on the solver benchmark's 18 gait
-      steps: stage-wise 8 converged, dense 2 (docs/solvers.md).
+      steps: stage-wise 8 converged, dense 2 (docs/decisions/0005-casadi-solvers.md).
 
-    docs/solvers.md compares the two forms with IPOPT. ``max_iterations`` is FATROP's ``max_iter`` less one (FATROP
+    ``max_iterations`` is FATROP's ``max_iter`` less one (FATROP
     takes one iteration past its ``max_iter``), ``tolerance`` is ``tol``; ``print_level`` is FATROP's own but at
     least 5 when not 0, the first level at which FATROP prints its iterations. FATROP stops at an acceptable point
     (its ``acceptable_tol``/``acceptable_iter``, like IPOPT's) when it cannot reach ``tol``, which it often cannot

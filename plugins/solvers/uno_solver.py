@@ -182,13 +182,13 @@ class Uno:
     ``preset`` is one of Uno's method presets: ``ipopt`` (line-search filter interior point with primal-dual
     inertia correction, MUMPS; the default), ``filtersqp`` (trust-region filter SQP, BQPD as QP solver),
     ``funnelsqp`` (the same with a funnel instead of a filter) or ``auto`` (Uno's choice by problem size: ``ipopt``
-    from n + m = 2000 on). The default is chosen by measurement on forward walks (docs/solvers.md): only ``ipopt``
-    completes them; the SQP presets stall or stop with algorithmic errors from step 2 on.
-    ``max_iterations`` (Uno's ``max_iterations``), ``time_limit_s`` (``time_limit``, wall clock, checked once per
-    iteration; ``None`` for no limit), ``tolerance`` (both ``primal_tolerance`` and ``dual_tolerance``: Uno stops
-    when constraint violation, stationarity and complementarity are all below it) and ``print_level`` (0: Uno's
-    logger ``SILENT``; 1: ``INFO``, the iteration log; 2 and more: ``DEBUG`` and beyond) are the options every
-    gaitbench solver shares. ``scaling="nominal"`` solves the NLP scaled by
+    from n + m = 2000 on). The default is chosen by measurement on forward walks
+    (docs/decisions/0004-uno-default-preset.md): only ``ipopt`` completes them; the SQP presets stall or stop with
+    algorithmic errors from step 2 on. ``max_iterations`` (Uno's ``max_iterations``), ``time_limit_s`` (``time_limit``,
+    wall clock, checked once per iteration; ``None`` for no limit), ``tolerance`` (both ``primal_tolerance`` and
+    ``dual_tolerance``: Uno stops when constraint violation, stationarity and complementarity are all below it) and
+    ``print_level`` (0: Uno's logger ``SILENT``; 1: ``INFO``, the iteration log; 2 and more: ``DEBUG`` and beyond) are
+    the options every gaitbench solver shares. ``scaling="nominal"`` solves the NLP scaled by
     :func:`gaitbench.problem.scaling.nominal_factors`
     (as the ``ipopt`` plugin's option does; the tolerances then hold in scaled units). Any other keyword is a Uno
     option set after the preset (https://unosolver.readthedocs.io, "Options"), for example

@@ -1,4 +1,4 @@
-"""Decrease & Conquer (thesis §3.7; ch3b §6; DECISIONS §7), with the verification the thesis leaves out.
+"""Decrease & Conquer (thesis §3.7; docs/model.md §7), with the verification the thesis leaves out.
 
 Per step:
 

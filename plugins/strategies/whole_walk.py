@@ -24,7 +24,7 @@ from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 
 
 class WholeWalk:
-    """Options: ``guess`` ("blended", the default: every step from the blended guess of DECISIONS §7, the
+    """Options: ``guess`` ("blended", the default: every step from the blended guess of docs/model.md §7, the
     experiment's initial state mirrored for Leg-2 stance steps; "one-phase": start from the One Phase walk, a
     feasible point of this NLP, so the optimizer improves on it)."""
 

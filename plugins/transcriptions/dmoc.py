@@ -2,7 +2,7 @@
 
 The configuration is discretized, not the state: positions q_k at the nodes, the midpoint discrete Lagrangian
 L_d(q_k, q_{k+1}) = h L((q_k + q_{k+1})/2, (q_{k+1} − q_k)/h) on each interval, and one constant torque τ_k per
-interval whose discrete forces are f_k^± = (h/2) τ_k (DECISIONS §6; digest ch2 §4.6, App. A §2.3–2.5 with the
+interval whose discrete forces are f_k^± = (h/2) τ_k (docs/model.md §6; thesis §2.3 and §8.2 with the
 corrected "+" sign of (8.49)). The dynamics are a momentum balance at every node: the momentum arriving from the
 interval before (the forced discrete Legendre transform p_k⁺ = D2 L_d(q_{k−1}, q_k) + (h/2) τ_{k−1}) equals the
 momentum leaving into the interval after (p_k⁻ = −D1 L_d(q_k, q_{k+1}) − (h/2) τ_k). At the two ends the
@@ -19,7 +19,7 @@ power is a quadratic in time, so the rule integrates it exactly: its signed sum 
 τ_k·(q_k+1 − q_k) = h τ_k·v_k, what the midpoint discrete Lagrangian accounts for, and its |P| is the energy
 wherever the power keeps its sign in the interval.
 
-Why not the discrete Lagrangian's midpoint rule Σ h |τ_k·v_k| (``quadrature="midpoint"``, DECISIONS §5 read
+Why not the discrete Lagrangian's midpoint rule Σ h |τ_k·v_k| (``quadrature="midpoint"``, docs/model.md §5 read
 literally)? It measures that net work, |∫P|, not ∫|P|. The net-power cost is blind to torques orthogonal to the
 velocity, and the optimizer used the difference to accelerate the legs for free: on the forward walk's step 2 at
 N = 20, torques up to 2700 N·m whose power is −4900 W at one end of an interval, +5050 W at the other and zero at its
@@ -89,7 +89,7 @@ class DiscreteMechanics(Transcription):
         builder.constrain("dynamics", arriving[:, -1] - leaving[:, -1])
         builder.constrain("initial_state", ca.vertcat(q[:, 0], dq_start) - symbols.initial_state)
 
-        # DMOC velocities live on the intervals (App. A §3.2); the thesis bounds these finite differences.
+        # DMOC velocities live on the intervals (thesis §8.3.2); the thesis bounds these finite differences.
         v = (q[:, 1:] - q[:, :-1]) / h
         builder.constrain("velocity_bounds", v, -limits.dq_max, limits.dq_max)
         if self.quadrature == "midpoint":
@@ -101,7 +101,7 @@ class DiscreteMechanics(Transcription):
                                            [q[:, :-1], q[:, 1:], tau], symbols.vector)
             cost = h * ca.sum2(ca.mtimes(ca.DM(weights).T, rates))
 
-        # Node velocities M(q_k)⁻¹ p_k⁺ (App. A §2.4); the boundary velocities themselves at the two ends.
+        # Node velocities M(q_k)⁻¹ p_k⁺ (thesis (8.50)–(8.52)); the boundary velocities themselves at the two ends.
         interior = _velocity(model).map(n - 2)(q[:, 1:-1], arriving[:, 1:-1], ca.repmat(robot, 1, n - 2))
         velocities = ca.horzcat(dq_start, interior, dq_end)
         nodal_velocities = ca.Function("nodal_velocities", [q, dq_start, dq_end, tau, symbols.vector], [velocities])

@@ -1,4 +1,4 @@
-"""Trapezoidal direct collocation: the second collocation scheme of DECISIONS §6.
+"""Trapezoidal direct collocation: the second collocation scheme of docs/model.md §6.
 
 States are collocated at the nodes only: the defects x_{k+1} − x_k − h/2 (f_k + f_{k+1}) are the trapezoid rule
 applied to ẋ = f(x, u), second order. Controls are piecewise linear. The interpolant is the standard one (Betts,

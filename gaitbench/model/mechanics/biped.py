@@ -1,6 +1,6 @@
 """The planar two-leg biped of the thesis, derived symbolically for both stance cases and both models.
 
-Conventions (DECISIONS §1): q1, q2 are absolute leg angles from the vertical, counter-clockwise positive;
+Conventions (docs/model.md §1): q1, q2 are absolute leg angles from the vertical, counter-clockwise positive;
 leg labels are fixed and roles alternate (``stance`` is the label of the stance leg, 1 or 2). The 4-DOF
 model adds the stance-foot position (q3, q4); the 2-DOF model pins the stance foot at the origin.
 Kinematics ("Convention A"): hip = foot + l(−sin q_st, cos q_st), swing foot = hip + l(sin q_sw, −cos q_sw).
@@ -107,7 +107,7 @@ def biped_functions(dof: int, stance: int) -> BipedFunctions:
 
     inputs = ca.vertcat(tau, ca.SX.zeros(dof - 2))
     if dof == 4:
-        # Stance foot held by a holonomic constraint: the ground reaction is the exact multiplier (DECISIONS §2).
+        # Stance foot held by a holonomic constraint: the ground reaction is the exact multiplier (docs/model.md §2).
         select = ca.horzcat(ca.SX.zeros(2, 2), ca.SX.eye(2))
         kkt = ca.blockcat([[eom.mass, -select.T], [select, ca.SX.zeros(2, 2)]])
         solution = ca.solve(kkt, ca.vertcat(inputs - bias, ca.SX.zeros(2)))
@@ -115,7 +115,7 @@ def biped_functions(dof: int, stance: int) -> BipedFunctions:
     else:
         ddq, reaction = ca.solve(eom.mass, inputs - bias), ca.SX.zeros(2)
 
-    # Heel strike: plastic impact at the swing foot, the old stance foot free (DECISIONS §3).
+    # Heel strike: plastic impact at the swing foot, the old stance foot free (docs/model.md §3).
     jac = ca.jacobian(swing_foot, q)
     momentum = _angular_momentum(points, velocity, swing_foot, dq, inertia1, inertia2)
     if dof == 4:

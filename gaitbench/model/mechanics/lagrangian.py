@@ -1,6 +1,6 @@
 """Equations of motion from a Lagrangian, symbolically, so no matrix is ever transcribed by hand.
 
-The thesis prints several expanded matrices with errors (DECISIONS §1–2); deriving M, C and G from the
+The thesis prints several expanded matrices with errors (docs/model.md §1–2); deriving M, C and G from the
 kinetic and potential energies removes that whole class of mistakes.
 """
 

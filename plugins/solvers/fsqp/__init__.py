@@ -7,7 +7,7 @@ Mayne–Polak relaxation: each is oriented so that it is ≤ 0 at the start and 
 F_c = f − c Σ_E c_j drives it to zero. Feasible descent directions follow Panier–Tits, and an arc search with a
 second-order correction avoids the Maratos effect. H is a damped BFGS matrix or the convexified exact Hessian.
 
-The steps follow the corrected pseudo-code of the thesis digest (shared/spec/thesis/appBCD-solvers.md §2.3):
+The steps follow the thesis's FSQP algorithm (§11.2), with its printed errors corrected:
 Step 1 approximate active set with ε-halving, Step 2 least-squares multipliers and penalty update, Step 3 the
 directions d0, d1 (or the d2/d3 combination) and the correction d̃, Step 4 the arc search, Step 5 BFGS. gaitbench's
 ``lbg ≤ g ≤ ubg, lbx ≤ x ≤ ubx`` becomes the thesis form: every finite one-sided bound of g or x is an inequality

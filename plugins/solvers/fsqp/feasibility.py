@@ -34,10 +34,9 @@ _EQUALITY_START = 1e-6
 
 _ELASTIC_WEIGHT = 1e6
 """ρ of :func:`elastic_projection`: the weight of the linearised rows' residual against ½‖d‖² (scaled units), a
-Levenberg–Marquardt damping of 1/ρ. Taken as every phase-1 step on the upward-slope HS step at N = 100, at 1e10 it
-gave the inconsistent projection's step again (‖d‖ ~ 5e3, cut to t ~ 1e-3 by the line search every iteration), at
-1e6 steps of ‖d‖ ~ 80 taken with t = 1/16 to 1 (docs/solvers.md, the fsqp section's "Phase 1 where the projection is
-inconsistent")."""
+Levenberg–Marquardt damping of 1/ρ. Much larger, it gives back the inconsistent projection's huge step, which the
+line search then cuts to almost nothing; at 1e6 the steps are moderate and taken nearly whole
+(docs/decisions/0007-fsqp-qp-subproblem.md)."""
 
 
 def push_inside(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

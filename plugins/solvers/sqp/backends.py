@@ -30,8 +30,8 @@ _BACKEND_OPTIONS: dict[str, dict] = {"osqp": {"polishing": True, "max_iter": 200
 """Fixed extra options, besides the settings every gait QP gets (``BACKEND_SETTINGS``). OSQP's ADMM alone reaches
 tight tolerances slowly; its polishing step solves the identified active set's equality QP exactly. PIQP solves the
 gait QPs it solves at all in at most 95 iterations; on the others it ends at its limit whatever the limit, so 100
-iterations instead of 250 bound what such a failure costs before the fallback solves the QP (docs/solvers.md, the
-sqp section's "Speed")."""
+iterations instead of 250 bound what such a failure costs before the fallback solves the QP
+(docs/decisions/0002-qp-backends.md)."""
 
 _TIME_LIMITED = frozenset({"clarabel", "daqp", "highs", "osqp"})
 """Backends with a ``time_limit`` option (seconds): they get the time left, so one slow QP cannot overrun the
@@ -96,8 +96,8 @@ class QPBackends:
         """One backend's answer: its call, and where that fails, its call under ``RETRY_SETTINGS`` (cold; flag "u"
         when those solve it). While ``swap`` is on (``sqp`` turns it on once the late-step crawl shows), the two go
         in the other order after the retry settings have solved a QP the backend's own failed, until the reverse:
-        PIQP fails the late gait steps' QPs in runs, each failure costing its 100-iteration limit (docs/solvers.md,
-        "PIQP's failures in runs")."""
+        PIQP fails the late gait steps' QPs in runs, each failure costing its 100-iteration limit
+        (docs/decisions/0002-qp-backends.md)."""
         first, *rest = self.order.settings(solver, self.swap)
         outcome = self._call(solver, problem, None if first else warm, log, first)
         if outcome.solved or not rest:

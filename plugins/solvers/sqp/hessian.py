@@ -38,7 +38,7 @@ CRAWL_SHIFT_FLOOR = 1e-12
 set by H's largest entries (~2e4 on the stairs step 3 at N = 80; ~7e6 where multipliers reach ~5e5), so 1e-10 of
 it can be the only curvature along the cost's valleys, and the steps along them their reduced gradient over it:
 that step slid to the iteration limit, f falling ~2e-4 an iteration; with 1e-12 it converges in 477
-(docs/solvers.md, "The crawl floor"). Not lower: at 1e-13 PIQP fails the QPs and the iteration cycles through
+(docs/decisions/0003-sqp-late-step-crawl.md). Not lower: at 1e-13 PIQP fails the QPs and the iteration cycles through
 elastic steps."""
 
 
@@ -55,7 +55,7 @@ def hessian_multipliers(lam: np.ndarray, jacobian: sp.csr_matrix) -> np.ndarray:
     dominate H and pins the iterate. On the gait steps that row is the clearance at the node where the legs cross
     (a product of two factors that both change sign in the stride, zero whatever the stance angle there): stairs
     N = 140, step 5, spent ~800 of its 3,000 iterations, at 10x their cost, with that multiplier climbing from 1e4
-    to 1e6 (docs/solvers.md, "The clearance's saddle where the legs cross"). The QP's rows, the merit's weights
+    to 1e6 (docs/decisions/0006-sqp-clearance-saddle.md). The QP's rows, the merit's weights
     and the KKT test keep the multipliers as they are."""
     over = np.abs(lam) > DEGENERATE_MULTIPLIER_CAP
     if not over.any():
@@ -127,9 +127,9 @@ def release_linear_variables(model: Model, H: sp.csc_matrix) -> Model:
     Why: the shift was those variables' only curvature, so the QP's step along them was the reduced gradient over
     the shift. Along the cost's flat valleys (reduced gradients ~1e-8) that made the QP nearly unbounded, PIQP
     failed it, and the steps, of the same direction at every iteration, moved f by ~2e-8 each while keeping the
-    split rows violated: the late-step crawl (docs/solvers.md). Released and bounded, the step on them is the
-    linear programme's, to a bound or to where the rows stop it; a bound alone, with the shift kept, did not end
-    the crawl on DMOC (forward DMOC N = 100, step 2: iteration limit on every rung). Released from the first
+    split rows violated: the late-step crawl (docs/decisions/0003-sqp-late-step-crawl.md). Released and bounded, the
+    step on them is the linear programme's, to a bound or to where the rows stop it; a bound alone, with the shift kept,
+    did not end the crawl on DMOC (forward DMOC N = 100, step 2: iteration limit on every rung). Released from the first
     iteration it moved the first steps' paths (forward HS N = 50, 3-step walk: ACOT 0.0557 against 0.0504), so
     ``Subproblems._model`` releases only once the shift has sat at its floor."""
     linear = np.asarray(abs(H).sum(axis=0)).ravel() == 0
@@ -157,8 +157,8 @@ def working_set(lin: Linearization, x: np.ndarray, g: np.ndarray, lam: np.ndarra
     bound that the QP leaves inactive is held the same way: its term ρ·(aᵀd)²/‖a‖² is constant only where the row
     is active, so off its bound it damps every step towards it, and the iterate crept there (forward DMOC N = 100,
     step 1: a clearance row 2e-7 above its bound came down 6e-10 an iteration for 42 iterations, which held the
-    KKT residual at 5.5e-4, until it reached its bound with a multiplier of 0.1; docs/solvers.md, "Rows near
-    their bound")."""
+    KKT residual at 5.5e-4, until it reached its bound with a multiplier of 0.1;
+    docs/decisions/0003-sqp-late-step-crawl.md)."""
     significant = 1e-6 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))  # interior-point duals never
     near = 1e-6 * (1.0 + np.abs(np.where(np.isfinite(lin.ubg), lin.ubg, 0.0)))  # vanish on inactive rows
     upper = lin.upper[((g[lin.upper] >= lin.ubg[lin.upper] - near[lin.upper]) & ~kept_inside[lin.upper])

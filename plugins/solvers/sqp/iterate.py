@@ -158,7 +158,8 @@ class Iterate:
         """Where the violation is and what the last step moved, by the NLP's named blocks: the two constraint blocks
         with the most ℓ1 violation (with their part of the ℓ1 merit, Σ μ_i·viol_i) and the two variable blocks the
         step moved most (‖d‖₂). This is how the late-step crawl was read: violation the merit does not weigh, on
-        rows with tiny multipliers, and steps along variables without curvature (docs/solvers.md)."""
+        rows with tiny multipliers, and steps along variables without curvature
+        (docs/decisions/0003-sqp-late-step-crawl.md)."""
         nlp = self.evaluator.nlp
         violations = self.lin.violations(self.g)
         rows = sorted(((float(np.sum(violations[block])), name, float(self.weights[block] @ violations[block]))

@@ -14,7 +14,7 @@ from plugins.solvers.sqp.backends import QPOutcome
 
 DEGENERATE_GRADIENT = 1e-2
 """A row whose gradient norm is below this is degenerate: the gait rows are O(1), and the one that gets there is the
-clearance where the legs cross (docs/solvers.md, "The clearance's saddle where the legs cross")."""
+clearance where the legs cross (docs/decisions/0006-sqp-clearance-saddle.md)."""
 
 
 def row_norms(jacobian: sp.csr_matrix) -> np.ndarray:
@@ -66,8 +66,9 @@ class Linearization:
         Why: the multiplier of an active row whose gradient vanishes grows as 1/‖∇g_i‖ while its force stays
         bounded. Posed at unit norm, the row's QP dual is that force: with the crossing's clearance at ~1e-4, PIQP
         and its retry failed nearly every QP of the stairs N = 140 step 3's slide (~400 ms an iteration, Clarabel's
-        fallback solving them), and scaled they solve (~50 ms) along the same path (docs/solvers.md). ``sqp`` scales
-        once the late-step crawl shows (``Subproblems._qp``)."""
+        fallback solving them), and scaled they solve (~50 ms) along the same path
+        (docs/decisions/0003-sqp-late-step-crawl.md). ``sqp`` scales once the late-step crawl shows
+        (``Subproblems._qp``)."""
         norms = row_norms(jacobian)
         degenerate = (norms < DEGENERATE_GRADIENT) & (norms > 0)
         if not degenerate.any():

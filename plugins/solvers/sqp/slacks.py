@@ -9,7 +9,7 @@ rest of x, the row fixes a⁺s⁺ + a⁻s⁻, and the cheapest such pair has one
 Why: along the thesis cost's flat valleys the QP's steps move the powers' factors (torques, rates) far enough that
 the bilinear powers leave their split rows violated by ~1e-3, while the rows' multipliers, and so their ℓ1 weights,
 are ~1e-6: the merit hardly sees that violation, so it stays, and the solve can never be at the acceptable level
-(docs/solvers.md, "The slack pairs' reset"). The reset removes it exactly, at the cost of one evaluation of f and g.
+(docs/decisions/0003-sqp-late-step-crawl.md). The reset removes it exactly, at the cost of one evaluation of f and g.
 """
 
 from __future__ import annotations

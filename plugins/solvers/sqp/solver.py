@@ -106,20 +106,16 @@ class SQP:
     def continuations(self) -> list[tuple[str, SQP]]:
         """After a solve that ran out of iterations, the same solver again from its last iterate, with the crawl
         floor (:data:`.hessian.CRAWL_SHIFT_FLOOR` once the crawl shows): on the gait steps such a solve is often
-        still converging along the cost's valleys. The reference column's forward step 6 at N = 120 reached its
-        limit 752 iterations before an optimum at COT 0.688, and the First-Phase seed then gave 1.488
-        (docs/solvers.md, "Why forward at N = 120 lies above its neighbours"). Where the solve was sliding at the
-        floor, the lower floor lengthens its steps along the valley: the stairs step 3 at N = 80 converges in 391
-        iterations to COT 1.2754, against 2,821 to 1.3468 at the usual floor; where it was not, the floor never
-        drops, and the continuation is the same solve on ("The crawl floor continues")."""
+        still converging along the cost's valleys, and the lower floor lengthens its steps there; where the solve
+        was not sliding, the floor never drops and the continuation is the same solve on
+        (docs/decisions/0008-retry-ladder.md)."""
         if self.crawl_shift_floor <= CRAWL_SHIFT_FLOOR:
             return [("continue", self)]
         return [("continue-crawl-floor", replace(self, crawl_shift_floor=CRAWL_SHIFT_FLOOR))]
 
     def remedies(self) -> list[tuple[str, SQP]]:
         """Variants for the walk's retry ladder from any start: Clarabel's QPs instead of PIQP's. From the first
-        attempt's guess it is the one that solves: in the reference column's 43 walks it converged on 31 of the 50
-        steps it was tried on (docs/solvers.md, "Retries")."""
+        attempt's guess it is the variant that solves most often (docs/decisions/0008-retry-ladder.md)."""
         if self.qp_solver == "clarabel":
             return []
         return [("clarabel", replace(self, qp_solver="clarabel", fallback_qp_solver=self.qp_solver))]
@@ -127,10 +123,8 @@ class SQP:
     def seed_remedies(self) -> list[tuple[str, SQP]]:
         """Variants for retries started from a trajectory (the First-Phase seed, a coarse grid's solution, a back-up
         window), never from the blended guess: the filter instead of the ℓ1 merit. From the blended guess the first
-        QP step is huge (‖d‖∞ = 8,869 on a stairs step) and the filter goes into restoration at once and stays
-        there: tried so on 63 of the reference column's steps, it solved none, each try running to its iteration
-        limit (3,472 s); from the First-Phase seed it solved all three steps it was tried on (docs/solvers.md,
-        "Retries")."""
+        QP step is huge and the filter goes into restoration at once and stays there; from a trajectory it solves
+        steps the ℓ1 merit does not (docs/decisions/0008-retry-ladder.md)."""
         if self.merit == "filter":
             return []
         return [("filter", replace(self, merit="filter"))]
@@ -138,12 +132,9 @@ class SQP:
     def last_resorts(self) -> list[tuple[str, SQP]]:
         """After the walk's other rungs, the crawl's two remedies, cheaper first. ``crawl-floor``: the shift's floor
         lowered to :data:`.hessian.CRAWL_SHIFT_FLOOR` once the crawl shows, whose steps along the cost's valleys
-        are then 100 times longer (stairs step 3, HS N = 80, from the walk's state: 477 iterations where the first
-        attempt slid to its 3,000th; docs/solvers.md, "The crawl floor"). ``more-iterations``: :data:`LONG_BUDGET`
-        iterations, on which the slide itself converges (the stairs step 1 as the reference column walks it, at
-        N = 80, 90 and 100: 3,417, 7,126 and 9,037 iterations before the slack pairs' reset; "The reference
-        column"). Last resorts because either moves where a solve ends on the valley, which the first attempt and
-        the other rungs leave as it was."""
+        are then 100 times longer (docs/decisions/0003-sqp-late-step-crawl.md). ``more-iterations``:
+        :data:`LONG_BUDGET` iterations, on which a slide itself converges. Last resorts because either moves where a
+        solve ends on the valley, which the first attempt and the other rungs leave as it was."""
         resorts = []
         if self.crawl_shift_floor > CRAWL_SHIFT_FLOOR:
             resorts.append(("crawl-floor", replace(self, crawl_shift_floor=CRAWL_SHIFT_FLOOR)))

@@ -22,12 +22,12 @@ from plugins.solvers.sqp.iterate import Iterate
 
 _FLOOR_ITERATIONS = 20
 """Consecutive iterations with the shift at its floor after which the linear variables are released: how the
-late-step crawl shows (docs/solvers.md, "The step bound on the linear power parts")."""
+late-step crawl shows (docs/decisions/0003-sqp-late-step-crawl.md)."""
 _INSIDE_STEPS = 5
 """Consecutive QP steps that leave a row strictly inside its bounds after which nearness alone no longer puts it in
 the convexification's working set (:func:`.hessian.working_set`). Measured on the solver benchmark's 18 ``sqp``
 rows: after one step, 14 converged against 15 (the first steps' paths move with any change of their QPs); after
-five, the same 15, in 10 % fewer iterations (docs/solvers.md, "Rows near their bound")."""
+five, the same 15, in 10 % fewer iterations (docs/decisions/0003-sqp-late-step-crawl.md)."""
 
 
 def _row_tolerance(value: np.ndarray) -> np.ndarray:
