@@ -139,16 +139,16 @@ MUTANTS = (
            "vector[[0, 1]] = vector[[1, 0]]", "vector[[0, 1]] = vector[[0, 1]]"),
     Mutant("roles: stance and swing inertias not swapped", "gaitbench/problem/gait_problem.py",
            "vector[[5, 6]] = vector[[6, 5]]", "vector[[5, 6]] = vector[[5, 6]]"),
-    # walks (gaitbench/solve/walk.py, gaitbench/model/energetics.py)
-    Mutant("walk: ACOT over a partial walk's solved steps", "gaitbench/solve/walk.py",
+    # walks (gaitbench/walk_types.py, gaitbench/solve/walk.py, gaitbench/model/energetics.py)
+    Mutant("walk: ACOT over a partial walk's solved steps", "gaitbench/walk_types.py",
            "return average_cot([step.verified.verification.cot for step in self.steps]) if self.complete else None",
            "solved = [step.verified.verification.cot for step in self.steps if step.solved]\n"
            "        return average_cot(solved) if solved else None"),
-    Mutant("walk: complete without its requested steps", "gaitbench/solve/walk.py",
+    Mutant("walk: complete without its requested steps", "gaitbench/walk_types.py",
            "return len(self.steps) == self.requested_steps and all(", "return len(self.steps) > 0 and all("),
     Mutant("walk: ACOT the median", "gaitbench/model/energetics.py",
            "return float(values.mean())", "return float(np.median(values))"),
-    Mutant("walk: a polished step's verified outcome ignored", "gaitbench/solve/walk.py",
+    Mutant("walk: a polished step's verified outcome ignored", "gaitbench/walk_types.py",
            "return self.polished if self.polished is not None and self.polished.solved else self", "return self"),
     Mutant("walk: next step starts without the push-off", "gaitbench/solve/walk.py",
            "dq, _ = model.push_off(q, dq, trajectory.push_off, trajectory.stance)",
