@@ -282,7 +282,8 @@ def long_labelled_store(tmp_path):
             "iterations": 4321, "retries": 2, "message": ""}
     rows = [
         {"experiment": "downward-slope", "method": "decrease-and-conquer hermite-simpson ipopt", "N": 200,
-         "status": "solved", "stop_cause": "complete", "acot": 0.123456, "claimed_acot": 0.1},
+         "status": "solved", "stop_cause": "complete", "acot": 0.123456, "claimed_acot": 0.1,
+         "verified": True},
         {"experiment": "upward-slope", "method": "one-phase hermite-simpson ipopt", "N": 110, "status": "incomplete",
          "stop_cause": "verification", "stop_step": 7, "stop_status": "converged",
          "message": "step 7: dynamics residual 3.2e-01 above the tolerance after 3 retries " * 2},

@@ -102,7 +102,7 @@ def test_running_a_suite_twice_leaves_tracked_files_alone(tmp_path, monkeypatch)
     for attempt in ("first", "second"):
         result = CliRunner().invoke(main, ["run", "suites/tiny.toml", "--executor", "inprocess", "--resume"])
         assert result.exit_code == 0, (attempt, result.output)
-        assert re.search(r"forward\s+OP-DC\s+1 of 1\s+\d\.\d{4}\s+8", result.stdout), (attempt, result.stdout)
+        assert re.search(r"forward\s+OP-DC\s+1 of 1\s+1\s+\d\.\d{4}\s+8", result.stdout), (attempt, result.stdout)
         reported = re.search(r"report: (\S+)", result.stderr)
         assert reported and Path(reported.group(1)) == copy / "reports" / "tiny" / "index.html", result.stderr
         assert Path(reported.group(1)).is_file()

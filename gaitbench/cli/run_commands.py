@@ -157,10 +157,12 @@ def _suite_results(suite, store_dir: Path) -> Table:
     for row in sorted(rows, key=lambda row: order[row["case_key"]]):
         groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
     table = Table(title=f"{suite.name}: lowest ACOT over verified walks",
-                  box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False, collapse_padding=True)
+                  caption="ok: complete walks that passed verification, the only ones ACOT and N are taken over",
+                  caption_justify="left", box=box.SIMPLE_HEAD, title_justify="left", show_edge=False,
+                  pad_edge=False, collapse_padding=True)
     longest = max((len(method) for _, method in groups), default=0)
-    for column in ("experiment", "method", "complete", "verified", "ACOT", "at N", "incomplete"):
-        numeric = column in ("complete", "verified", "ACOT", "at N")
+    for column in ("experiment", "method", "complete", "ok", "ACOT", "at N", "incomplete"):
+        numeric = column in ("complete", "ok", "ACOT", "at N")
         table.add_column(column, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric,
                          min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
     for (experiment, method), group in groups.items():
