@@ -157,14 +157,14 @@ def _suite_results(suite, store_dir: Path) -> Table:
     for row in sorted(rows, key=lambda row: order[row["case_key"]]):
         groups.setdefault((row["experiment"], row["method"] or row["strategy"]), []).append(row)
     table = Table(title=f"{suite.name}: lowest ACOT over verified walks",
-                  caption="ok: complete walks that passed verification, the only ones ACOT and N are taken over",
+                  caption="done: complete walks; ok: those that passed verification, over which ACOT and N are taken",
                   caption_justify="left", box=box.SIMPLE_HEAD, title_justify="left", show_edge=False,
                   pad_edge=False, collapse_padding=True)
     longest = max((len(method) for _, method in groups), default=0)
-    for column in ("experiment", "method", "complete", "ok", "ACOT", "at N", "incomplete"):
-        numeric = column in ("complete", "ok", "ACOT", "at N")
+    for column in ("experiment", "method", "done", "ok", "ACOT", "at N", "incomplete"):
+        numeric = column in ("done", "ok", "ACOT", "at N")
         table.add_column(column, justify="right" if numeric else "left", overflow="fold", no_wrap=numeric,
-                         min_width=min(22, longest) if column == "method" else None)  # "decrease-and-conquer"
+                         min_width=min(20, longest) if column == "method" else None)  # "decrease-and-conquer"
     for (experiment, method), group in groups.items():
         complete = [row for row in group if row["status"] == "solved"]
         verified = [row for row in complete if row.get("verified") and row["acot"] is not None]
