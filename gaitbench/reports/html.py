@@ -65,8 +65,14 @@ def table_html(table: pd.DataFrame, table_id: str, highlight: str | None = None,
         marked = highlight is not None and bool(row.get(highlight))
         cells = "".join(_cell(row[column]) for column in table.columns)
         rows.append(f'<tr class="minimum">{cells}</tr>' if marked else f"<tr>{cells}</tr>")
-    return (f'<table id="{table_id}" class="data"><thead><tr>{head}</tr></thead>'
+    kind = "data many" if len(table.columns) > MANY_COLUMNS else "data"
+    return (f'<table id="{table_id}" class="{kind}"><thead><tr>{head}</tr></thead>'
             f"<tbody>{''.join(rows)}</tbody></table>")
+
+
+MANY_COLUMNS = 14
+"""A table with more columns than this is set smaller (class ``many``), so that it fits a narrow window without
+scrolling sideways."""
 
 
 EMPTY_TABLES = {
