@@ -37,9 +37,9 @@ ACOT_RTOL = 0.01
 OBJECTIVE_GAP = 0.10
 OBJECTIVE_GAP_AT_N = 2.0
 """|objective gap| (:func:`gaitbench.solve.verify.objective_gap`) may be at most ``max(OBJECTIVE_GAP,
-OBJECTIVE_GAP_AT_N / N)``: 10 % from N = 20, 20 % at N = 10. DMOC's discrete cost differs from its interpolant's
-by up to 7.6 % at every N (docs/decisions/verification-thresholds.md): a gap beyond 10 % is the optimizer exploiting
-its quadrature, not a transcription's own consistent error."""
+OBJECTIVE_GAP_AT_N / N)``: 10 % from N = 20, 20 % at N = 10. The floor lies above the consistent difference
+between DMOC's discrete cost and its interpolant's (docs/decisions/verification-thresholds.md), so that a gap beyond
+it is the optimizer exploiting its quadrature, not a transcription's own offset."""
 
 
 @dataclass(frozen=True)

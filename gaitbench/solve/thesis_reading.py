@@ -21,11 +21,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from gaitbench.model.energetics import average_cot, cost_of_transport, hip_energy, hip_power, push_off_work
+from gaitbench.model.energetics import average_cot, cost_of_transport, hip_energy, hip_power
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.robot import RobotParameters
 from gaitbench.problem.gait_problem import StepData
 from gaitbench.problem.trajectory import StepTrajectory
+from gaitbench.solve.verify import push_off_charge
 
 
 @dataclass(frozen=True)
@@ -50,16 +51,11 @@ def nodal_hip_powers(trajectory: StepTrajectory) -> np.ndarray:
 def thesis_push_off_energy(trajectory: StepTrajectory, robot: RobotParameters,
                            model: BipedModel | None = None) -> float:
     """½ m_stance |v_foot|² of (3.77): the stance foot's speed just after the step's push-off impulse, at the
-    stance leg's mass. ``model``: the robot's 4-DOF model, built when not given."""
+    stance leg's mass (:func:`~gaitbench.solve.verify.push_off_charge` under the ``thesis`` accounting).
+    ``model``: the robot's 4-DOF model, built when not given."""
     if trajectory.push_off == 0.0:
         return 0.0
-    model = model or BipedModel(robot, 4)
-    foot = np.zeros(2)
-    dq_plus, _ = model.push_off(np.r_[trajectory.q[-1], foot], np.r_[trajectory.dq[-1], foot], trajectory.push_off,
-                                trajectory.stance)
-    velocity = np.ravel(dq_plus)[2:4]
-    stance_mass = robot.m1 if trajectory.stance == 1 else robot.m2
-    return float(push_off_work("thesis", 0.0, velocity, stance_mass))
+    return push_off_charge(model or BipedModel(robot, 4), trajectory, "thesis")
 
 
 def thesis_reading(trajectory: StepTrajectory, data: StepData, model: BipedModel | None = None) -> ThesisReading:

@@ -24,6 +24,7 @@ from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import PluginRegistry, load_registry
 from gaitbench.problem.gait_problem import StepData, StepStructure
+from gaitbench.problem.trajectory import StepTrajectory
 from gaitbench.solve.thesis_reading import thesis_reading_acot
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk_file import WalkFile
@@ -77,12 +78,16 @@ def thesis_reading_of(walk: WalkResult, experiment: Experiment) -> float | None:
     None unless the walk is complete."""
     if not walk.complete:
         return None
-    terrain = experiment.terrain
-    return thesis_reading_acot(
-        (step.trajectory, StepData(experiment.robot, step.stance, np.r_[step.trajectory.q[0], step.trajectory.dq[0]],
-                                   terrain.steps[step.index - 1].D, terrain.steps[step.index - 1].theta,
-                                   float(step.trajectory.times[1] - step.trajectory.times[0])))
-        for step in walk.steps)
+    return thesis_reading_acot((step.trajectory, _step_data(experiment, step, step.trajectory))
+                               for step in walk.steps)
+
+
+def _step_data(experiment: Experiment, step: StepOutcome, trajectory: StepTrajectory) -> StepData:
+    """The numbers of step ``step`` of ``experiment`` as ``trajectory`` walked it: its start state and time step."""
+    geometry = experiment.terrain.steps[step.index - 1]
+    return StepData(experiment.robot, step.stance, np.r_[trajectory.q[0], trajectory.dq[0]], geometry.D,
+                    geometry.theta, float(trajectory.times[1] - trajectory.times[0]),
+                    previous_slope=experiment.terrain.ground_behind(step.index))
 
 
 def reverify(walk_file: WalkFile, registry: PluginRegistry | None = None) -> WalkResult:
@@ -96,14 +101,10 @@ def reverify(walk_file: WalkFile, registry: PluginRegistry | None = None) -> Wal
     transcription = registry.create("transcription", walk.transcription)
     built = transcription.build(StepStructure(walk.phase, walk.N, options, walk_file.objective(registry)))
     model = BipedModel(experiment.robot, 4 if walk.phase == "second" else 2)
-    terrain = experiment.terrain
     for step in walk.steps:
         motion = step.verified
         trajectory = motion.trajectory
-        geometry = terrain.steps[step.index - 1]
-        data = StepData(experiment.robot, step.stance, np.r_[trajectory.q[0], trajectory.dq[0]], geometry.D,
-                        geometry.theta, float(trajectory.times[1] - trajectory.times[0]),
-                        previous_slope=terrain.ground_behind(step.index))
+        data = _step_data(experiment, step, trajectory)
         motion.verification = verify_step(built, built.variables(trajectory, data), data, trajectory, model)
     walk.verification = verify_walk(walk, experiment.start_state(options.start_pose), experiment.robot)
     walk.thesis_reading_acot = thesis_reading_of(walk, experiment)
