@@ -10,6 +10,10 @@ and the walk goes on from there. With ``rescue`` (the default), a step that stil
 from the same state (:func:`~gaitbench.solve.rescue.coarse_grid_rescue`) before the walk stops. A walk that completes
 without them is the same walk with them.
 
+``start`` picks where each step's solve begins (:mod:`gaitbench.solve.continuation`): the blended guess (the
+thesis's One Phase, the default), the same step solved first on ``coarse_nodes`` nodes (``continuation``), or both,
+keeping the cheaper verified motion (``best``). Walks of at most ``coarse_nodes`` nodes start from the blended guess.
+
 It lives in the core, registered by ``plugins/strategies/one_phase.py``, because other strategies build on it
 (whole-walk's ``guess="one-phase"``) and plugins use each other only through the core.
 """
@@ -20,6 +24,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from gaitbench.solve.continuation import STARTS, GridContinuation, best_start
 from gaitbench.solve.rescue import coarse_grid_rescue
 from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
 from gaitbench.solve.walk_chain import LookAhead
@@ -29,7 +34,8 @@ from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 class OnePhase:
     name = "one-phase"
 
-    def __init__(self, phase: str = "second", look_ahead: int = 1, back_up: bool = True, rescue: bool = True) -> None:
+    def __init__(self, phase: str = "second", look_ahead: int = 1, back_up: bool = True, rescue: bool = True,
+                 start: str = "blended", coarse_nodes: int = 40) -> None:
         if phase not in ("first", "second"):
             raise ValueError(f"phase = {phase!r}: expected 'first' (2-DOF) or 'second' (4-DOF)")
         if int(look_ahead) != look_ahead or look_ahead < 1:
@@ -40,17 +46,32 @@ class OnePhase:
         self.look_ahead = int(look_ahead)
         self.back_up = bool(back_up) and phase == "second"
         self.rescue = bool(rescue)
+        if start not in STARTS:
+            raise ValueError(f"start = {start!r}: expected one of {', '.join(STARTS)}")
+        if start != "blended" and look_ahead > 1:
+            raise ValueError(f"start = {start!r} starts single steps: it needs look_ahead = 1")
+        if int(coarse_nodes) != coarse_nodes or coarse_nodes < 5:
+            raise ValueError(f"coarse_nodes = {coarse_nodes!r}: expected a whole number of nodes, at least 5")
+        self.start = start
+        self.coarse_nodes = int(coarse_nodes)
 
     def solve(self, problem: WalkProblem, on_step: Callable[[StepOutcome], None] | None = None) -> WalkResult:
         built = problem.transcription.build(problem.structure(self.phase, walked=True))
         window = LookAhead(built, self.look_ahead)
         backing = LookAhead(built, self.look_ahead + 1, fallback=False)
+        continued = self.start != "blended" and problem.n_nodes > self.coarse_nodes
+        continuation = GridContinuation(problem, built, self.coarse_nodes) if continued else None
 
         def solve_step(problem: WalkProblem, index: int, state: np.ndarray) -> StepOutcome:
             if self.look_ahead > 1:
                 return window.solve_step(problem, index, state)
             data = problem.step_data(index, state)
-            outcome = solve_with_retries(problem, index, built, data, phase=self.phase)
+            if continuation is not None and self.start == "continuation":
+                outcome = continuation.solve(problem, index, state)
+            else:
+                outcome = solve_with_retries(problem, index, built, data, phase=self.phase)
+                if continuation is not None:
+                    outcome = best_start(problem, index, state, outcome, continuation)
             seed = backing.seed_for(state)
             if outcome.solved or seed is None:
                 return outcome
