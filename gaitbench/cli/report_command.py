@@ -13,7 +13,10 @@ a clone, so that running a suite never changes tracked files)."""
 
 
 def default_report_dir(store: str | Path) -> Path:
-    return REPORTS_DIR / Path(store).resolve().name
+    """``reports/<name>``: the store directory's name, or its pack's without ``.tar.xz``."""
+    from gaitbench.run.pack_format import PACK_SUFFIX
+
+    return REPORTS_DIR / Path(store).resolve().name.removesuffix(PACK_SUFFIX)
 
 
 def write_with_progress(store: str | Path, out_dir: Path, console: Console, **options) -> Path:

@@ -45,7 +45,7 @@ def runs_list(stores: tuple[Path, ...], wide: bool) -> None:
         try:
             with ResultStore.open(path) as store:
                 runs_rows = store.runs()
-                flying = walks_in_flight(path, runs_rows, store.live_claims())
+                flying = walks_in_flight(store.directory, runs_rows, store.live_claims())
         except StoreError as error:
             raise click.ClickException(str(error)) from None
         listed.append((path, runs_rows, flying))
