@@ -52,7 +52,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
         if absent:  # a pack of the report's trajectories: one line for all it cannot verify
             note = (f"{count(len(absent), 'stored walk')} not verified: {absent[0]}"
                     + (f" (and {len(absent) - 1} more like it)" if len(absent) > 1 else ""))
-            click.echo(note, err=True) if as_json else print_plain(console, note)
+            click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
     for path, case_key, stored_acot in targets:
         try:
             walk_file = read_walk(path)
