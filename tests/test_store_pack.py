@@ -25,7 +25,8 @@ from gaitbench.run.store_schema import StoreError
 
 @pytest.fixture(autouse=True)
 def _cache(tmp_path, monkeypatch):
-    """Each test unpacks into its own cache."""
+    """Each test unpacks into its own cache (GAITBENCH_CACHE, which would take precedence, unset)."""
+    monkeypatch.delenv("GAITBENCH_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
 
 

@@ -3,8 +3,9 @@
 ``ResultStore.open`` hands a pack (:func:`gaitbench.run.pack_format.is_pack`) to :func:`unpacked`, which returns the
 store directory inside the cache, its files read-only; every command that reads a store therefore reads a pack.
 
-The cache is ``$XDG_CACHE_HOME/gaitbench/packs`` (``~/.cache/gaitbench/packs`` when that variable is unset), or,
-where that cannot be written, ``gaitbench-packs-<uid>`` in the temporary directory. Each pack lives in
+The cache is ``packs`` in gaitbench's cache directory: ``$GAITBENCH_CACHE`` where it is set (as for the compiled
+functions, :mod:`gaitbench.problem.compiled`), else ``$XDG_CACHE_HOME/gaitbench``, else ``~/.cache/gaitbench``; where
+that cannot be written, ``gaitbench-packs-<uid>`` in the temporary directory. Each pack lives in
 ``<sha256 of its bytes, first 32 hex digits>/<store name>``: the same pack is unpacked once wherever it lies and
 whatever it is called, and a changed pack gets a directory of its own. Unpacking goes to a staging directory that
 is renamed into place when it is whole, so a killed unpack leaves nothing that is read, and two processes
@@ -29,8 +30,9 @@ _CHUNK = 1 << 20
 
 def cache_root() -> Path:
     """The directory packs are unpacked into (made if needed): see the module docstring."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    root = Path(base) / "gaitbench" / "packs"
+    configured = os.environ.get("GAITBENCH_CACHE")
+    xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    root = (Path(configured) if configured else Path(xdg) / "gaitbench") / "packs"
     try:
         root.mkdir(parents=True, exist_ok=True)
         if os.access(root, os.W_OK):
