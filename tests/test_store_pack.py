@@ -140,6 +140,9 @@ def test_a_walk_whose_trajectories_the_pack_left_out_says_so(store, tmp_path):
     assert "its trajectories are not in this pack of packed" in problem and "--trajectories all" in problem
     assert "\n" not in problem
 
+    with pytest.raises(PackError, match=r"report\.tar\.xz: holds only some trajectories"):
+        pack_store(summary.path, tmp_path / "not-whole.tar.xz")  # a pack cannot claim what it lacks
+
     verified = invoke("verify", "--store", str(summary.path))
     assert "1 stored walk not verified" in _text(verified) and "not in this pack" in _text(verified)
     assert verified.exit_code == 0, verified.output  # the walk it holds is verified

@@ -18,7 +18,8 @@ from gaitbench.cli.consistency_options import consistency_options, inconsistent_
 
 @click.group("runs")
 def runs() -> None:
-    """Look at results stores: their runs, their cases, exports for other tools, and merging stores."""
+    """Look at results stores: their runs, their cases, exports for other tools, merging stores, and packing a store
+    into one file (which every command that reads a store reads as it is)."""
 
 
 @runs.command("list")

@@ -33,6 +33,7 @@ from gaitbench.run.pack_format import (
     TRAJECTORY_SUFFIX,
     PackError,
     extract,
+    read_manifest,
 )
 from gaitbench.run.store import DATABASE, ResultStore
 from gaitbench.run.store_files import CASES_DIR, holds_anything, remove, umask
@@ -69,6 +70,10 @@ def pack_store(store_dir: str | Path, out: str | Path, trajectories: str = "all"
         directory, keys = store.directory, sorted(row["case_key"] for row in store.cases())
         database = store.database
     name = directory.resolve().name  # a pack's own name in the cache (gaitbench.run.pack_cache)
+    source = read_manifest(directory)
+    if trajectories == "all" and source is not None and source.get("trajectories") != "all":
+        raise PackError(f"{store_dir}: holds only some trajectories (a pack made with --trajectories "
+                        f"{source.get('trajectories')}); pack the whole store for --trajectories all")
     files = {DATABASE: _database_copy(database)}
     kept = left_out = 0
     for key in keys:
