@@ -15,6 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.cli.report_command import default_report_dir
 from gaitbench.reports import build_report, report_trajectories, write_report
 from gaitbench.run.pack_cache import unpacked
 from gaitbench.run.pack_format import MANIFEST, PackError
@@ -72,6 +73,8 @@ def test_a_store_packs_to_the_same_bytes_and_comes_back_whole(store, tmp_path):
     assert first.path.read_bytes() == second.path.read_bytes()
     assert (first.cases, first.trajectories_kept, first.trajectories_left_out) == (2, 2, 0)
 
+    with pytest.raises(PackError, match="not empty; unpack into a new or empty directory"):
+        unpack_store(first.path, store)  # never over a store
     back = unpack_store(first.path, tmp_path / "back")
     assert json.loads((back / MANIFEST).read_text())["trajectories"] == "all"
     assert _files(back / "cases") == _files(store / "cases")  # every case file, markers included, byte for byte
@@ -95,6 +98,7 @@ def test_report_and_runs_read_a_pack_as_they_read_the_store(store, tmp_path):
 
     built = build_report(pack)
     assert built.store_dir == pack and len(built.gaits) == 1 and not built.gait_problems
+    assert default_report_dir(pack) == Path("reports/packed")  # the store's name, not the file's
 
     listed = invoke("runs", "list", str(pack))
     assert listed.exit_code == 0, listed.output
