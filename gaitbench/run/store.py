@@ -431,7 +431,7 @@ class ResultStore:
 def load_results(path: str | Path):
     """The cases of a store as a pandas DataFrame: one row per case, a ``case_key`` column, JSON columns decoded.
 
-    ``path`` is the store directory (as given to ``gaitbench run --store``) or its ``results.sqlite``.
+    ``path`` is the store directory (as given to ``gaitbench run --store``), its ``results.sqlite``, or a pack.
     """
     import pandas as pd
 
