@@ -29,6 +29,7 @@ import pandas as pd
 from gaitbench import load_results
 from gaitbench.reports import tables
 from gaitbench.reports.case_frame import method_info, prepare
+from gaitbench.run.store import ResultStore
 
 
 def completion_table(frame: pd.DataFrame) -> pd.DataFrame:
@@ -68,9 +69,9 @@ def minima_table(frame: pd.DataFrame) -> pd.DataFrame:
         "method": published["thesis_method"],
         "thesis: min ACOT (N)": [f"{a:.4f} ({int(n)})" for a, n in zip(published["published_acot"],
                                                                       published["published_N"], strict=True)],
-        "ours: min ACOT (N)": [f"{a:.4f} ({int(n)})" for a, n in zip(published["acot"], published["N_at_min"],
-                                                                    strict=True)],
-        "difference": [f"{d:+.0f} %" for d in published["difference_percent"]],
+        "ours: min ACOT (N)": [f"{a:.4f} ({int(n)})" if pd.notna(n) else "—"  # no verified walk of the method
+                               for a, n in zip(published["acot"], published["N_at_min"], strict=True)],
+        "difference": [f"{d:+.0f} %" if pd.notna(d) else "—" for d in published["difference_percent"]],
         "D&C's claimed ACOT there": [f"{c:.4f}" if pd.notna(c) else "—" for c in published["claimed_acot"]],
     })
 
@@ -231,13 +232,16 @@ def _step(value) -> str:
 
 
 def render(store: Path) -> str:
+    """The completion record of ``store``: a store directory, or a pack of one (its walk headers are all it needs)."""
     frame = load_results(store)
+    with ResultStore.open(store) as opened:
+        directory = opened.directory  # a pack's unpacked copy
     commits = sorted({row.get("git_commit", "?") for row in frame["provenance"] if isinstance(row, dict)})
     table = completion_table(frame)
     total, complete = int(table["walks"].sum()), int(table["complete"].sum())
     verified = int(table["verified"].sum())
     lines = [
-        f"# Completion: {store.name}",
+        f"# Completion: {directory.name}",
         "",
         f"{complete} of {total} walks complete ({100 * complete / total:.0f} %), {verified} of them with a verified "
         f"ACOT ({100 * verified / total:.0f} % of the walks). Rendered by `benchmarks/completion.py` from the store; "
@@ -258,7 +262,7 @@ def render(store: Path) -> str:
         markdown_table(savings_summary_table(frame)),
         "",
     ]
-    walks = read_walks(frame, store)
+    walks = read_walks(frame, directory)
     tries = ladder_tries(frame, walks)
     if not tries.empty:
         lines += ["The retry ladder (docs/solvers.md, \"Retries\"): per method, each step's failed first attempt "

@@ -1,16 +1,18 @@
-"""Copy a results store that runs are still writing into one that can be committed, walks in flight included.
+"""Copy a results store that runs are still writing into one that can be carried to the next session, walks in flight
+included.
 
 The long sweeps (`thesis-all`'s decrease-and-conquer walks at N >= 150 take hours each) outlive a session, and a
-session's machine does not outlive it: only what is committed reaches the next one. So the committed store carries,
-beside every finished case, the step checkpoints of the walks in flight. A later run of the same suite on that store
-with ``--resume``, under the same commit (a checkpoint resumes only under the code that saved it,
-:mod:`gaitbench.checkpoint`), goes on from the last saved step instead of step 1.
+session's machine does not outlive it. So the snapshot carries, beside every finished case, the step checkpoints of
+the walks in flight. A later run of the same suite on that store with ``--resume``, under the same commit (a
+checkpoint resumes only under the code that saved it, :mod:`gaitbench.checkpoint`), goes on from the last saved step
+instead of step 1. What is committed is a pack (`gaitbench runs pack`, docs/results.md "Packed stores"), which reads
+like a store but leaves the checkpoints out.
 
 The database is copied with SQLite's online backup (consistent while runs write to it, WAL included); the copy
 drops the claims, whose runs do not travel with it. Case directories no row names and checkpoints of cases that
 have a row are left out, as the runner would remove them.
 
-    python benchmarks/snapshot_store.py ~/stores/thesis-all benchmarks/results/stores/thesis-all
+    python benchmarks/snapshot_store.py ~/stores/thesis-all ~/carry/thesis-all
 """
 
 from __future__ import annotations

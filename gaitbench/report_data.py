@@ -29,6 +29,7 @@ class ReportData:
     """Everything a reporter renders: the tables (by CSV name), the figures and the gait and tracking sections."""
 
     store_dir: Path
+    """The store as it was named: its directory, or its pack (a ``.tar.xz``)."""
     title: str
     cases: Any  # the prepared DataFrame
     runs: list[dict]

@@ -164,6 +164,7 @@ def experiments_show(ctx: click.Context, name: str) -> None:
 def _add_commands() -> None:
     """The commands that live in their own modules; registered here so `gaitbench --help` lists them."""
     from gaitbench.cli.bound_command import bound
+    from gaitbench.cli.pack_commands import pack, unpack
     from gaitbench.cli.report_command import report
     from gaitbench.cli.run_commands import run
     from gaitbench.cli.runs_commands import runs
@@ -173,6 +174,8 @@ def _add_commands() -> None:
 
     for command in (solve, verify, bound, track, run, runs, report):
         main.add_command(command)
+    runs.add_command(pack)
+    runs.add_command(unpack)
 
 
 _add_commands()

@@ -13,7 +13,10 @@ a clone, so that running a suite never changes tracked files)."""
 
 
 def default_report_dir(store: str | Path) -> Path:
-    return REPORTS_DIR / Path(store).resolve().name
+    """``reports/<name>``: the store directory's name, or its pack's without ``.tar.xz``."""
+    from gaitbench.run.pack_format import PACK_SUFFIX
+
+    return REPORTS_DIR / Path(store).resolve().name.removesuffix(PACK_SUFFIX)
 
 
 def write_with_progress(store: str | Path, out_dir: Path, console: Console, **options) -> Path:
@@ -46,8 +49,9 @@ def write_with_progress(store: str | Path, out_dir: Path, console: Console, **op
                    "lists them.")
 @click.pass_obj
 def report(state, store: Path, out_dir: Path | None, gait: str | None, reporters: tuple[str, ...]) -> None:
-    """Write the report of STORE (the directory given to `gaitbench run --store`): index.html with the thesis's
-    figures regenerated, a CSV file per table (columns in docs/reports.md) and the figures as SVG."""
+    """Write the report of STORE (the directory given to `gaitbench run --store`, or a pack of it from `gaitbench
+    runs pack`): index.html with the thesis's figures regenerated, a CSV file per table (columns in
+    docs/reports.md) and the figures as SVG."""
     import time
 
     from gaitbench.plugins import PluginConflictError, UnknownPluginError

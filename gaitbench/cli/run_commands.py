@@ -31,8 +31,8 @@ from gaitbench.run.store import LOCK_TIMEOUT_S
                    "inprocess: this process, for debugging (time limits reach the solver only).")
 @click.option("--scheduler", metavar="ADDR", help="Address of an existing Dask scheduler, e.g. tcp://HOST:8786 "
               "(implies --executor dask); without it a local cluster of --jobs workers is started.")
-@click.option("--store", "store_dir", type=click.Path(file_okay=False, path_type=Path),
-              help="Results directory [default: the suite's `output`].")
+@click.option("--store", "store_dir", type=click.Path(path_type=Path),
+              help="Results directory [default: the suite's `output`]; not a pack, which is read-only.")
 @click.option("--method", "methods", multiple=True, metavar="LABEL",
               help="Run only this method's cases (repeatable), e.g. --method OP-DC --method 'D&C-DC' (quote a "
                    "label with & in a shell); a later run with --resume does the rest.")
@@ -79,6 +79,7 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     SIGTERM (which, like Ctrl-C, stops the workers and keeps every finished case).
     """
     from gaitbench.run.executors import ExecutorError
+    from gaitbench.run.pack_format import is_pack, refusal
     from gaitbench.run.runner import RunRefused, run_suite
     from gaitbench.run.store_schema import StoreError
     from gaitbench.run.suite import SuiteError, load_suite
@@ -86,6 +87,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     if state.plugin_dirs:  # through the environment, so worker processes load them too
         os.environ[PLUGINS_DIR_ENV] = os.pathsep.join(
             [*map(str, state.plugin_dirs), *filter(None, [os.environ.get(PLUGINS_DIR_ENV)])])
+    if store_dir is not None and is_pack(store_dir):
+        raise click.ClickException(refusal(store_dir))
     try:
         suite = load_suite(suite_file)
     except SuiteError as error:  # the file names itself, the key and what was expected

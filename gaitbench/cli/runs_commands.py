@@ -18,7 +18,8 @@ from gaitbench.cli.consistency_options import consistency_options, inconsistent_
 
 @click.group("runs")
 def runs() -> None:
-    """Look at results stores: their runs, their cases, exports for other tools, and merging stores."""
+    """Look at results stores: their runs, their cases, exports for other tools, merging stores, and packing a store
+    into one file (which every command that reads a store reads as it is)."""
 
 
 @runs.command("list")
@@ -45,7 +46,7 @@ def runs_list(stores: tuple[Path, ...], wide: bool) -> None:
         try:
             with ResultStore.open(path) as store:
                 runs_rows = store.runs()
-                flying = walks_in_flight(path, runs_rows, store.live_claims())
+                flying = walks_in_flight(store.directory, runs_rows, store.live_claims())
         except StoreError as error:
             raise click.ClickException(str(error)) from None
         listed.append((path, runs_rows, flying))

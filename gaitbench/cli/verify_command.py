@@ -20,7 +20,8 @@ from gaitbench.cli.common import count, print_plain
 @click.option("--store", type=click.Path(path_type=Path), default=None,
               help="Verify every stored walk of this results store and record the verdicts in its rows "
                    "(columns verified, verification_failure, max_join_mismatch, join_energy, max_defect, "
-                   "max_resim_error, thesis_reading_acot).")
+                   "max_resim_error, thesis_reading_acot). A pack (.tar.xz) is verified as far as it holds "
+                   "trajectories, its verdicts printed, not recorded.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object per walk instead of text.")
 @click.pass_context
 def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_json: bool) -> None:
@@ -36,15 +37,22 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     Exit status 0 when every walk is verified, 1 when one is not (or its stored ACOT is off by more than 1 %),
     2 when a file cannot be read.
     """
+    from gaitbench.run.pack_format import is_pack
     from gaitbench.solve.walk_file import WalkFileError, read_walk
     from gaitbench.solve.walk_verification import reverify
 
     if not walks and store is None:
         raise click.UsageError("name walk files, or a store with --store")
     targets: list[tuple[Path, str | None, float | None]] = [(path, None, None) for path in walks]
-    if store is not None:
-        targets += _stored_walks(store)
     console, failed, updates = Console(), 0, {}
+    packed = store is not None and is_pack(store)
+    if store is not None:
+        stored, absent = _stored_walks(store)
+        targets += stored
+        if absent:  # a pack of the report's trajectories: one line for all it cannot verify
+            note = (f"{count(len(absent), 'stored walk')} not verified: {absent[0]}"
+                    + (f" (and {len(absent) - 1} more like it)" if len(absent) > 1 else ""))
+            click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
     for path, case_key, stored_acot in targets:
         try:
             walk_file = read_walk(path)
@@ -63,7 +71,10 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             click.echo(json.dumps(report))
         else:
             _print(console, report)
-    if store is not None:
+    if packed and not as_json:
+        console.print(f"verdicts not recorded: {store} is a pack, which is read-only; `gaitbench runs unpack` "
+                      "makes a store that can record them")
+    elif store is not None and not packed:
         from gaitbench.run.store import ResultStore, StoreError
 
         try:
@@ -77,16 +88,26 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
         ctx.exit(1)
 
 
-def _stored_walks(store: Path) -> list[tuple[Path, str, Any]]:
-    """The store's walks as (walk file, case key, stored ACOT)."""
+def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str]]:
+    """The store's walks as (walk file, case key, stored ACOT), and why each walk whose trajectories its pack left
+    out cannot be verified (:func:`gaitbench.run.pack_format.left_out`)."""
+    from gaitbench.run.pack_format import left_out
     from gaitbench.run.store import ResultStore, StoreError
 
     try:
         with ResultStore.open(store) as results:
             rows = [row for row in results.cases() if row.get("walk_path")]
+            directory = results.directory
     except StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    return [(store / row["walk_path"], row["case_key"], row.get("acot")) for row in rows]
+    walks, absent = [], []
+    for row in rows:
+        missing = left_out(directory, row["walk_path"])
+        if missing:
+            absent.append(missing)
+        else:
+            walks.append((directory / row["walk_path"], row["case_key"], row.get("acot")))
+    return walks, absent
 
 
 def _report(path: Path, walk, stored_acot: Any) -> dict[str, Any]:

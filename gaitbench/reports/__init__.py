@@ -75,6 +75,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     from gaitbench.reports import statistics as st
     from gaitbench.reports import tables as tb
     from gaitbench.reports.gait import animation_svg, gait_figures, load_gait
+    from gaitbench.run.pack_format import is_pack, left_out
     from gaitbench.run.store import ResultStore, load_results
     from gaitbench.run.store_schema import StoreError
     from gaitbench.solve.walk_file import WalkFileError, beside, read_arrays
@@ -88,6 +89,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         raw = load_results(store_dir)
         with ResultStore.open(store_dir) as store:
             runs = store.runs()
+            shown = store_dir if is_pack(store_dir) else store.directory  # a pack by its name, not its cache copy
             store_dir = store.directory
     except StoreError as error:
         raise ReportError(str(error)) from None
@@ -111,7 +113,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
     }
     suites = sorted({run.get("suite") or "?" for run in runs})
-    report = ReportData(store_dir=store_dir, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",
+    report = ReportData(store_dir=shown, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",
                         cases=df, runs=runs, tables=tables, experiments=case_frame.experiments(df))
     steps.add(len(report.experiments) + 1)
     for experiment in report.experiments:
@@ -141,6 +143,10 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         steps.start(f"gait of {case['experiment']}, {case['method']}, N = {int(case['N'])}")
         if not isinstance(case["walk_path"], str):
             report.gait_problems.append(f"case {key}: no stored walk ({case['status']}: {case['message']})")
+            continue
+        absent = left_out(store_dir, case["walk_path"])
+        if absent:
+            report.gait_problems.append(f"case {key}: gait not shown ({absent})")
             continue
         try:
             loaded = load_gait(store_dir, case, registry)
@@ -173,6 +179,41 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     if own:
         steps.finish()
     return report
+
+
+def report_trajectories(store_dir: str | Path) -> set[str]:
+    """The trajectory files the default report of the store draws, relative to it: the walk NPZ of each chosen
+    gait (:func:`gaitbench.reports.tables.chosen_gaits`) and each tracked case's series. What a pack made with
+    ``--trajectories report`` keeps (:func:`gaitbench.run.store_pack.pack_store`)."""
+    from gaitbench.reports import case_frame
+    from gaitbench.reports import tables as tb
+    from gaitbench.run.store import ResultStore, load_results
+
+    with ResultStore.open(store_dir) as store:
+        directory = store.directory
+    df = case_frame.prepare(load_results(store_dir))
+    drawn = set()
+    for key in tb.chosen_gaits(df).values():
+        walk_path = df.loc[df["case_key"] == key, "walk_path"].iloc[0]
+        drawn.add(_named_beside(directory, walk_path, "trajectories"))
+    for key, summary in _track_summaries(directory, df).items():
+        tracking_path = df.loc[df["case_key"] == key, "tracking_path"].iloc[0]
+        drawn.add(_named_beside(directory, tracking_path, "series", summary))
+    return {path for path in drawn if path is not None}
+
+
+def _named_beside(store_dir: Path, path: str, field: str, header: dict | None = None) -> str | None:
+    """The file a stored JSON file names under ``field`` (beside it), relative to the store; None when it names
+    none or one outside its directory."""
+    from gaitbench.solve.walk_file import beside
+
+    try:
+        header = header if header is not None else json.loads((store_dir / path).read_text(encoding="utf-8"))
+        if not isinstance(header, dict) or not header.get(field):
+            return None
+        return beside(store_dir / path, header[field]).relative_to(store_dir.resolve()).as_posix()
+    except (OSError, ValueError):
+        return None
 
 
 def _thesis_bounds(minima, registry: PluginRegistry | None) -> dict:

@@ -36,6 +36,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from gaitbench.run.pack_cache import unpacked
+from gaitbench.run.pack_format import is_pack, refusal
 from gaitbench.run.store_check import check_store, decode_json
 from gaitbench.run.store_files import (
     CASES_DIR,
@@ -103,12 +105,14 @@ class ResultStore:
         """Open the store at ``directory`` for writing, creating it (and its tables) if needed; each write waits up
         to ``lock_timeout`` seconds for the write lock.
 
-        :class:`StoreError` (one line naming the path) if the directory cannot be written, holds other files but no
-        ``results.sqlite``, or its ``results.sqlite`` is not a gaitbench store, one newer than this code or one
-        whose tables were changed outside gaitbench (:mod:`gaitbench.run.store_check`); nothing is changed then. A
-        store written by an older gaitbench is migrated to today's schema version.
+        :class:`StoreError` (one line naming the path) if ``directory`` is a pack (read-only), cannot be written,
+        holds other files but no ``results.sqlite``, or its ``results.sqlite`` is not a gaitbench store, one newer
+        than this code or one whose tables were changed outside gaitbench (:mod:`gaitbench.run.store_check`);
+        nothing is changed then. A store written by an older gaitbench is migrated to today's schema version.
         """
         directory = Path(directory)
+        if is_pack(directory):
+            raise StoreError(refusal(directory))
         database = directory / DATABASE
         if directory.is_dir() and not database.exists() and holds_anything(directory):
             raise StoreError(f"{directory}: not a gaitbench results store (a directory with other files and no "
@@ -148,15 +152,19 @@ class ResultStore:
         The connection is read-only (``immutable`` too where the directory cannot be written, which a WAL database
         needs for its lock files), so a store in a read-only place can be read and reading never changes one. A
         store written by an older gaitbench is migrated here when it can be written (see
-        :mod:`gaitbench.run.store_schema`); otherwise it is read without the columns it lacks.
+        :mod:`gaitbench.run.store_schema`); otherwise it is read without the columns it lacks. A pack
+        (:mod:`gaitbench.run.pack_format`) is read from its unpacked copy (:mod:`gaitbench.run.pack_cache`).
         """
         directory = Path(directory)
+        packed = is_pack(directory)
+        if packed:
+            directory = unpacked(directory)
         database = directory / DATABASE if directory.is_dir() else directory
         if not database.is_file():
             raise StoreError(f"{directory}: no results store here (expected {DATABASE}); "
                              "pass the directory given to `gaitbench run --store`, or the suite's output directory")
         check_file(database)
-        writable = os.access(database.parent, os.W_OK) and os.access(database, os.W_OK)
+        writable = not packed and os.access(database.parent, os.W_OK) and os.access(database, os.W_OK)
         if writable:
             upgrade_file(database)
         try:
@@ -423,7 +431,7 @@ class ResultStore:
 def load_results(path: str | Path):
     """The cases of a store as a pandas DataFrame: one row per case, a ``case_key`` column, JSON columns decoded.
 
-    ``path`` is the store directory (as given to ``gaitbench run --store``) or its ``results.sqlite``.
+    ``path`` is the store directory (as given to ``gaitbench run --store``), its ``results.sqlite``, or a pack.
     """
     import pandas as pd
 
