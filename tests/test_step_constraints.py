@@ -101,6 +101,11 @@ def test_clearance_rows_follow_the_terrain_the_chord_or_nothing():
     assert data.previous_slope == problem.experiment.terrain.steps[4].theta != data.slope
     off = problem.transcription.build(StepStructure("second", 12, replace(problem.options, clearance="off")))
     assert "clearance" not in off.nlp.constraint_blocks
+    rounded = problem.transcription.build(StepStructure("second", 12, replace(problem.options,
+                                                                              clearance_rounding=0.1)))
+    g = np.asarray(rounded.nlp.functions.constraints(x, data.parameter_vector())).ravel()
+    expected = terrain_clearance(q[0], q[1], data.slope, data.previous_slope, 0.1)
+    np.testing.assert_allclose(g[rounded.nlp.constraint_blocks["clearance"]], expected, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", ["forward", "downward-slope", "upward-slope", "stairs"])

@@ -131,7 +131,8 @@ def clearance(q_st: Any, q_sw: Any, theta: Any) -> Any:
 
 
 TERRAIN_KINK_SMOOTHING = 1e-2
-"""ε (in leg lengths) over which the ground profile's bend under the stance foot is rounded."""
+"""ε (in leg lengths) over which the ground profile's bend under the stance foot is rounded by default (the problem
+option ``clearance_rounding``)."""
 
 
 def terrain_clearance(q_st: Any, q_sw: Any, theta: Any, theta_behind: Any,

@@ -18,6 +18,7 @@ import numpy as np
 
 from gaitbench.model.experiment import Limits
 from gaitbench.model.robot import RobotParameters
+from gaitbench.model.terrain import TERRAIN_KINK_SMOOTHING
 from gaitbench.problem.objective import NET_POWER, Objective
 
 PHASES = ("first", "second")
@@ -54,6 +55,11 @@ class ProblemOptions:
     # height is exactly 0 (docs/deviations.md, "Swing-foot clearance"), so any positive margin makes fine grids
     # infeasible.
     clearance_margin: float = 0.0
+    # The length (over l) over which the "terrain" profile's bend under the stance foot is rounded
+    # (:func:`gaitbench.model.terrain.terrain_clearance`). Where the ground dips at the stance foot, a leg without a
+    # knee cannot swing through the bend above the ground, and only this rounding lets it pass; a grid fine enough
+    # to resolve it then charges a detour that a coarser grid steps over (docs/model.md §4).
+    clearance_rounding: float = TERRAIN_KINK_SMOOTHING
     # The old stance foot leaves the ground at push-off: its velocity after heel strike along the normal of the
     # step's chord is at least this (l/s; docs/model.md §3). ``lift_off = False`` is the thesis's literal problem.
     lift_off: bool = True

@@ -244,7 +244,8 @@ def _add_step_constraints(
     builder.constrain("heel_strike_configuration", q[:, -1] - ca.vertcat(q_st_end, q_sw_end))
     interior = q[:, 1:-1]
     if options.clearance == "terrain":
-        height = terrain_clearance(interior[0, :], interior[1, :], theta, symbols.previous_slope)
+        height = terrain_clearance(interior[0, :], interior[1, :], theta, symbols.previous_slope,
+                                    options.clearance_rounding)
         builder.constrain("clearance", height, options.clearance_margin, np.inf)
     elif options.clearance == "chord":
         builder.constrain("clearance", clearance(interior[0, :], interior[1, :], theta), options.clearance_margin,
