@@ -8,8 +8,9 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.acceptance import Thresholds, step_failures
+from gaitbench.acceptance import StepVerification, Thresholds, step_failures
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.trajectory import nodal_trajectory
@@ -18,7 +19,7 @@ from gaitbench.reports.tables import acot_table, unverified_cases
 from gaitbench.run.runner import walk_metrics
 from gaitbench.solve.walk import next_step_state
 from gaitbench.solve.walk_verification import solve_verified, verify_walk
-from gaitbench.walk_types import StepOutcome, StepVerification, WalkProblem, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 REGISTRY = load_registry()
 

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from gaitbench.acceptance import StepVerification
 from gaitbench.model.experiment import Experiment, Limits
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import PluginRegistry, load_registry
@@ -40,7 +41,7 @@ from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.walk import next_step_state
-from gaitbench.walk_types import StepOutcome, StepVerification, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 WALK_FORMAT_VERSION = 2
 """The version :func:`write_walk` writes; :func:`read_walk` reads it and every older one."""
