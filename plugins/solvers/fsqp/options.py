@@ -5,16 +5,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from gaitbench.options import SolverOptions
+
 
 @dataclass(frozen=True, eq=False)
-class FSQPOptions:
-    """The ``fsqp`` solver's options (a bad value raises ValueError). Compared by identity, as the solver built on
-    them is."""
+class FSQPOptions(SolverOptions):
+    """The ``fsqp`` solver's options, after the four every solver shares (a bad value raises ValueError)."""
 
-    max_iterations: int = 3000
-    time_limit_s: float | None = None
-    tolerance: float = 1e-8
-    print_level: int = 0
     hessian: str = "exact"
     alpha: float = 0.1
     beta: float = 0.5
@@ -50,8 +47,8 @@ class FSQPOptions:
                 and self.epsilon > 0 and self.rho > 0 and self.equality_margin > 0):
             raise ValueError("FSQP needs α ∈ (0, ½), β, θ ∈ (0, 1), ν > 2, δ ∈ (2, ν), τ ∈ (2, 3) and positive ξ, "
                              "ε0, ε, ρ and equality_margin")
-        normalized = {"max_iterations": int(self.max_iterations), "tolerance": float(self.tolerance),
-                      "print_level": int(self.print_level), "max_halvings": int(self.max_halvings),
-                      "rank_tolerance": float(self.rank_tolerance), "equality_margin": float(self.equality_margin)}
+        super().__post_init__()
+        normalized = {"max_halvings": int(self.max_halvings), "rank_tolerance": float(self.rank_tolerance),
+                      "equality_margin": float(self.equality_margin)}
         for name, value in normalized.items():
             object.__setattr__(self, name, value)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import qpsolvers
 
+from gaitbench.options import SolverOptions
 from plugins.solvers.sqp.hessian import SHIFT_FLOOR
 
 _HESSIANS = ("exact", "bfgs")
@@ -14,14 +15,9 @@ _MERITS = ("l1", "filter")
 
 
 @dataclass(frozen=True, eq=False)
-class SQPOptions:
-    """The ``sqp`` solver's options (a bad value raises ValueError). Compared by identity, as the solver built on
-    them is."""
+class SQPOptions(SolverOptions):
+    """The ``sqp`` solver's options, after the four every solver shares (a bad value raises ValueError)."""
 
-    max_iterations: int = 3000
-    time_limit_s: float | None = None
-    tolerance: float = 1e-8
-    print_level: int = 0
     qp_solver: str = "piqp"
     qp_tolerance: float = 1e-10
     hessian: str = "exact"
@@ -48,12 +44,10 @@ class SQPOptions:
         if not 0 < self.crawl_shift_floor <= SHIFT_FLOOR:
             raise ValueError(f"crawl_shift_floor must be in (0, {SHIFT_FLOOR:g}]: the crawl floor is the usual one "
                              f"or lower")
-        tolerance = float(self.tolerance)
-        normalized = {"max_iterations": int(self.max_iterations), "tolerance": tolerance,
-                      "print_level": int(self.print_level), "fallback_qp_solver": fallback,
-                      "qp_tolerance": float(self.qp_tolerance),
+        super().__post_init__()
+        normalized = {"fallback_qp_solver": fallback, "qp_tolerance": float(self.qp_tolerance),
                       "second_order_correction": bool(self.second_order_correction),
-                      "acceptable_tolerance": max(float(self.acceptable_tolerance), tolerance),
+                      "acceptable_tolerance": max(float(self.acceptable_tolerance), self.tolerance),
                       "crawl_shift_floor": float(self.crawl_shift_floor)}
         for field_name, value in normalized.items():
             object.__setattr__(self, field_name, value)
