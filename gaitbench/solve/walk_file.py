@@ -115,6 +115,12 @@ class WalkFile:
         return self.header["steps"]
 
     @property
+    def acot_is_claimed(self) -> bool:
+        """Whether the header's ``acot`` is decrease and conquer's claimed patchwork ACOT rather than a verified one:
+        a file before version 2 that holds patchworks, written before the claim had a field of its own."""
+        return (self.version or 0) < 2 and any(_patchwork(step) for step in self.steps)
+
+    @property
     def experiment_options(self) -> dict[str, Any]:
         return dict(self.header.get("experiment_options") or {})
 
@@ -194,7 +200,7 @@ class WalkFile:
             if "q" not in arrays or step.get("cot") is None:
                 break
             try:
-                if "chosen" in (step.get("details") or {}) and (self.version or 0) < 2:  # a patchwork as nodes
+                if _patchwork(step) and (self.version or 0) < 2:  # stored as nodes
                     nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
                     trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
                                                   int(step["stance"]))
@@ -220,6 +226,11 @@ class WalkFile:
         if not walk.steps:
             raise WalkFileError(f"{self.path}: no solved step ({data.get('failure')}); solve the walk again")
         return walk, experiment
+
+
+def _patchwork(step: dict[str, Any]) -> bool:
+    """Whether a step's record is one of decrease and conquer's patchworks (its details name the chosen sections)."""
+    return "chosen" in (step.get("details") or {})
 
 
 def read_walk(path: str | Path) -> WalkFile:
