@@ -1,4 +1,4 @@
-"""When a solved walk counts as verified: every threshold in one place.
+"""When a solved walk counts as verified: what a step's verification measures, and every threshold in one place.
 
 A walk is verified when each step it reports is a motion of the robot (its dynamics defect and re-simulation error
 are small), each step starts where the step before left the robot (the join), and each step's optimizer measured

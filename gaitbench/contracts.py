@@ -43,7 +43,7 @@ from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.solver_result import SolverResult, finite_or_flagged
-from gaitbench.walk_types import WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 if TYPE_CHECKING:
     from gaitbench.checkpoint import WalkCheckpoint
@@ -53,11 +53,11 @@ if TYPE_CHECKING:
     from gaitbench.problem.transcription import TranscribedStep
     from gaitbench.report_data import ReportData
     from gaitbench.step_info import StepInfo
-    from gaitbench.walk_types import StepOutcome
 
 __all__ = ["CONTRACTS", "BipedModel", "CheckedSolver", "Controller", "Disturbance", "Experiment", "Objective",
            "Observer", "Reporter", "Solver", "StepsOutOfRange", "Strategy", "Transcription", "WalkProblem", "checked",
            "contract_violations"]
+
 
 @runtime_checkable
 class Transcription(Protocol):
@@ -112,10 +112,11 @@ VARIANT_KINDS = ("continuations", "remedies", "seed_remedies", "last_resorts")
 
 
 class CheckedSolver:
-    """A solver plugin behind the boundary every solve of a walk passes (:class:`WalkProblem` holds
-    its solver so): a result that claims convergence at a non-finite ``x`` or objective becomes
-    :attr:`SolverStatus.NON_FINITE`, with a message that says so, instead of a point the verification would fail
-    on for another reason. The solver's variants are checked alike; everything else is the plugin's own."""
+    """A solver plugin behind the boundary every solve of a walk passes (:class:`WalkProblem` holds its solver so):
+    a result that claims convergence at a non-finite ``x`` or objective becomes
+    :attr:`gaitbench.solver_result.SolverStatus.NON_FINITE`, with a message that says so, instead of a point the
+    verification would fail on for another reason. The solver's variants are checked alike; everything else is the
+    plugin's own."""
 
     def __init__(self, solver: Solver) -> None:
         self.plugin = solver

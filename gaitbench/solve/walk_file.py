@@ -135,10 +135,15 @@ class WalkFile:
         return {key[len(prefix):]: value for key, value in self.arrays.items() if key.startswith(prefix)
                 and (name or not key[len(prefix):].startswith(f"{POLISHED}_"))}
 
-    def experiment(self, registry: PluginRegistry | None = None) -> Experiment:
-        """The experiment the walk was solved for, built with its options."""
+    def experiment(self, registry: PluginRegistry | None = None,
+                   unrecorded_options: dict[str, Any] | None = None) -> Experiment:
+        """The experiment the walk was solved for, built with its options. A file written before the format was
+        versioned records none: it is built with ``unrecorded_options`` where the caller knows them (a store row's),
+        else with the defaults."""
         registry = registry or load_registry()
-        return registry.create("experiment", self.header["experiment"], **self.experiment_options)
+        from_caller = self.version is None and unrecorded_options is not None
+        options = dict(unrecorded_options) if from_caller else self.experiment_options
+        return registry.create("experiment", self.header["experiment"], **options)
 
     def objective(self, registry: PluginRegistry | None = None) -> Objective:
         """The objective the walk's COTs are measured in: from its name and options, or, in a file written before
