@@ -222,12 +222,16 @@ def module_circles(all_modules: list[Module]) -> list[list[str]]:
         for arrow in imports(module):
             if arrow.takes_names:
                 continue
-            parts = arrow.target.split(".")
-            target = next((".".join(parts[:n]) for n in range(len(parts), 0, -1) if ".".join(parts[:n]) in names),
-                          None)
+            target = _longest_known(arrow.target, names)
             if target is not None and target != module.name:
                 graph[module.name].add(target)
     return _strongly_connected(graph)
+
+
+def _longest_known(target: str, names: set[str]) -> str | None:
+    """The module of ``names`` that an imported ``target`` (a module, or a name in one) lies in, or None."""
+    parts = target.split(".")
+    return next((".".join(parts[:n]) for n in range(len(parts), 0, -1) if ".".join(parts[:n]) in names), None)
 
 
 def too_long(root: Path) -> list[str]:
