@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.run.provenance import provenance
 from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL
-from gaitbench.walk_types import WalkProblem
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "convergence.json"

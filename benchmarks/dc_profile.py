@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions
-from gaitbench.walk_types import WalkProblem
 
 OUT = Path(__file__).parent / "results" / "dc_profile"
 

@@ -37,9 +37,9 @@ def measure(transcription: str, strategy: str, n_nodes: int, steps: int = 1) -> 
     """Walk ``steps`` forward steps in this process and return its memory figures (call in a fresh process)."""
     import resource
 
+    from gaitbench.contracts import WalkProblem
     from gaitbench.plugins import load_registry
     from gaitbench.run.provenance import git_commit
-    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")

@@ -52,6 +52,7 @@ import numpy as np
 from performance_summary import summary_markdown  # its siblings in benchmarks/
 from scaling import makespan
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import StepData, sectional_structure
 from gaitbench.run.case import Case
@@ -61,7 +62,6 @@ from gaitbench.run.store import load_results
 from gaitbench.run.suite import load_suite
 from gaitbench.solve.solver import prepare
 from gaitbench.solve.walk import solve_and_verify
-from gaitbench.walk_types import WalkProblem
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results" / "performance.json"

@@ -48,8 +48,8 @@ def solve_one(label: str, solver_name: str, options: dict, experiment_name: str,
               transcription_name: str, n_nodes: int, time_limit_s: float, max_iterations: int) -> dict:
     """Build the step's NLP and solve it once, then verify the result; runs in a child process so a solver that
     ignores its limit can be stopped."""
+    from gaitbench.contracts import WalkProblem
     from gaitbench.solve.walk import solve_and_verify
-    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     ipopt = registry.create("solver", "ipopt")

@@ -15,9 +15,9 @@ import casadi
 import numpy as np
 
 from gaitbench import __version__
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.walk_types import WalkProblem
 
 TRANSCRIPTIONS = ("hermite-simpson", "trapezoidal", "dmoc")
 NODES = (25, 50, 100, 200)

@@ -21,12 +21,13 @@ import time
 
 import numpy as np
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.energetics import average_cot, cost_of_transport
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions
 from gaitbench.solve.thesis_reading import thesis_push_off_energy, thesis_reading
-from gaitbench.walk_types import StepOutcome, WalkProblem
+from gaitbench.walk_types import StepOutcome
 
 
 def read_outcome(problem: WalkProblem, outcome: StepOutcome, model: BipedModel, prefix: str = "") -> dict:

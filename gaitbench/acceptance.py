@@ -1,4 +1,4 @@
-"""When a solved walk counts as verified: every threshold in one place.
+"""When a solved walk counts as verified: what a step's verification measures, and every threshold in one place.
 
 A walk is verified when each step it reports is a motion of the robot (its dynamics defect and re-simulation error
 are small), each step starts where the step before left the robot (the join), and each step's optimizer measured
@@ -14,11 +14,7 @@ solver's and the chain's own accuracy, independent of N.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from gaitbench.walk_types import StepVerification
+from dataclasses import asdict, dataclass
 
 MAX_DEFECT = 1e-6
 """Largest violation of the transcription's dynamics constraints: the solvers' constraint tolerance."""
@@ -60,6 +56,25 @@ class Thresholds:
     def as_dict(self) -> dict[str, float]:
         return {"max_defect": self.max_defect, "max_resim_error": self.max_resim_error,
                 "max_join_mismatch": self.max_join_mismatch, "max_objective_gap": self.max_objective_gap}
+
+
+@dataclass(frozen=True)
+class StepVerification:
+    """What the verification of one step measured (:func:`gaitbench.solve.verify.verify_step`), which
+    :func:`step_failures` holds to the thresholds."""
+
+    max_defect: float  # largest violation of the transcription's dynamics constraints
+    resim_error: float  # largest state error (angles in rad, rates in rad/s) at the step's end
+    resim_max_error: float  # largest state error at any node along the step
+    hip_energy: float  # J, the objective's running cost on a fine grid of the interpolant (net-power: exact |power|)
+    push_off_energy: float  # J, what the push-off is charged (ProblemOptions.push_off_cost); the COT has its event cost
+    cot: float
+    objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
+    objective_gap: float | None = None  # (cot − objective_cot) / max(cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
+    objective_agrees: bool | None = None  # |objective_gap| ≤ OBJECTIVE_RTOL
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
 
 
 def step_failures(check: StepVerification, limits: Thresholds) -> list[str]:

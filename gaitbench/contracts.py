@@ -5,6 +5,12 @@ the registered factories *build*: the interface the core (and the plugins that r
 calls. ``registry.create(kind, name, ...)`` is typed with these, so a type checker knows that
 ``registry.create("solver", "ipopt")`` is a :class:`Solver`.
 
+It also holds what the contracts hand a plugin beyond the values below them: the walk a strategy is asked to solve
+(:class:`WalkProblem`, which carries a transcription and a solver), and the boundary every solve of a walk passes
+(:class:`CheckedSolver`). The values the contracts name (:mod:`gaitbench.solver_result`, :mod:`gaitbench.walk_types`,
+:mod:`gaitbench.acceptance`, :mod:`gaitbench.step_info`, :mod:`gaitbench.report_data`) name no contract, and the plugin
+kinds are listed once, in :mod:`gaitbench.hookspecs`.
+
 Three kinds are value types the core defines and reads field by field, so their contract is that class itself:
 
 - ``experiment``: :class:`gaitbench.model.experiment.Experiment` (a frozen dataclass; build one, do not subclass);
@@ -22,29 +28,35 @@ kind's contract; the tests run it on every built-in plugin.
 from __future__ import annotations
 
 import inspect
+import time
 from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
+import numpy as np
+
+from gaitbench.cores import IdleCores
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
-from gaitbench.plugins import Kind
-from gaitbench.problem.objective import Objective
+from gaitbench.problem.build_cache import BuildCache
+from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
+from gaitbench.problem.objective import NET_POWER, Objective
+from gaitbench.solver_result import SolverResult, finite_or_flagged
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 if TYPE_CHECKING:
-    import numpy as np
-
-    from gaitbench.problem.gait_problem import StepStructure
+    from gaitbench.checkpoint import WalkCheckpoint
+    from gaitbench.hookspecs import Kind
+    from gaitbench.model.terrain import StepCheck as GeometryCheck
     from gaitbench.problem.nlp import NLP
     from gaitbench.problem.transcription import TranscribedStep
     from gaitbench.report_data import ReportData
-    from gaitbench.solver_result import SolverResult
     from gaitbench.step_info import StepInfo
-    from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
 
-__all__ = ["CONTRACTS", "BipedModel", "Controller", "Disturbance", "Experiment", "Kind", "Objective", "Observer",
-           "Reporter", "Solver", "Strategy", "Transcription", "contract_violations"]
-
+__all__ = ["CONTRACTS", "BipedModel", "CheckedSolver", "Controller", "Disturbance", "Experiment", "Objective",
+           "Observer", "Reporter", "Solver", "StepsOutOfRange", "Strategy", "Transcription", "WalkProblem", "checked",
+           "contract_violations"]
 
 
 @runtime_checkable
@@ -95,6 +107,37 @@ class Solver(Protocol):
         iterations and timings. A failure is a status with a message, never an exception."""
 
 
+VARIANT_KINDS = ("continuations", "remedies", "seed_remedies", "last_resorts")
+"""The optional solver members that return named variants of the solver for the retry ladder."""
+
+
+class CheckedSolver:
+    """A solver plugin behind the boundary every solve of a walk passes (:class:`WalkProblem` holds its solver so):
+    a result that claims convergence at a non-finite ``x`` or objective becomes
+    :attr:`gaitbench.solver_result.SolverStatus.NON_FINITE`, with a message that says so, instead of a point the
+    verification would fail on for another reason. The solver's variants are checked alike; everything else is the
+    plugin's own."""
+
+    def __init__(self, solver: Solver) -> None:
+        self.plugin = solver
+
+    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
+        return finite_or_flagged(self.plugin.solve(nlp, parameters, initial_guess), self.plugin.name)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "plugin":  # not set yet (an object being unpickled): no recursion through it
+            raise AttributeError(name)
+        member = getattr(self.plugin, name)
+        if name in VARIANT_KINDS:
+            return lambda: [(label, checked(variant)) for label, variant in member()]
+        return member
+
+
+def checked(solver: Solver) -> Solver:
+    """``solver`` behind :class:`CheckedSolver` (once)."""
+    return solver if isinstance(solver, CheckedSolver) else CheckedSolver(solver)  # type: ignore[return-value]
+
+
 @runtime_checkable
 class Strategy(Protocol):
     """How the per-step gait problems of a walk are posed, solved and combined (a ``strategy`` plugin, built as
@@ -107,6 +150,90 @@ class Strategy(Protocol):
         """Walk ``problem`` (experiment, transcription, solver, N, steps, problem options, objective), calling
         ``on_step`` with each step's outcome as it is finished. Returns the walk: its steps up to the first that
         failed, each with its status, trajectory and verification. Failures end the walk, never raise."""
+
+
+class StepsOutOfRange(ValueError):
+    """A walk asked for fewer than one step, or more than its experiment has."""
+
+
+@dataclass(frozen=True)
+class WalkProblem:
+    """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
+    transcription and one solver, under the given problem options, for the given objective. ``builds`` keeps
+    what a strategy builds beyond the walk's own steps for later walks: this walk's alone unless its runner
+    passes one it keeps (a suite's worker)."""
+
+    experiment: Experiment
+    transcription: Transcription
+    solver: Solver
+    n_nodes: int
+    steps: int | None = None
+    options: ProblemOptions | None = None
+    objective: Objective = NET_POWER
+    builds: BuildCache = field(default_factory=BuildCache, compare=False, repr=False)
+    deadline: float | None = field(default=None, compare=False)
+    """``time.monotonic()`` at which the walk's time runs out (a suite case's time limit): a step that would start
+    later is not started, and the walk stops there with ``time_limit``, keeping the steps it solved, instead of
+    running on until its process is stopped and losing them all."""
+    cores: IdleCores | None = field(default=None, compare=False, repr=False)
+    """The machine's ledger of the cores walks are using, when the walk may borrow idle ones (a suite's case, a
+    `gaitbench solve`): a strategy whose solves are independent may spread them over the cores it can hold."""
+    checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
+    """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
+    the walk resumes after them (:func:`walk_step_by_step`)."""
+    experiment_options: dict = field(default_factory=dict, compare=False, repr=False)
+    """The options the experiment was built with, recorded in the walk (:attr:`WalkResult.experiment_options`)."""
+    strategy_options: dict = field(default_factory=dict, compare=False, repr=False)
+    """The options the strategy was built with, recorded in the walk (:attr:`WalkResult.strategy_options`)."""
+
+    @property
+    def out_of_time(self) -> bool:
+        """Whether the walk's deadline has passed."""
+        return self.deadline is not None and time.monotonic() >= self.deadline
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "solver", checked(self.solver))  # every solve of the walk: the solver boundary
+        if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
+            raise StepsOutOfRange(f"steps = {self.steps}: the {self.experiment.name} experiment has "
+                                  f"{self.experiment.n_steps} steps")
+        if self.options is None:
+            object.__setattr__(self, "options", ProblemOptions(limits=self.experiment.limits))
+
+    @property
+    def n_steps(self) -> int:
+        return self.experiment.n_steps if self.steps is None else self.steps
+
+    def structure(self, phase: str, n_nodes: int | None = None, walked: bool = False) -> StepStructure:
+        """The step NLP's shape; ``walked``: a First-Phase step the walk goes on from (see StepStructure). Only the
+        First Phase tells the two apart, so a 4-DOF step is one structure, and one build, for every strategy."""
+        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective,
+                             walked and phase == "first")
+
+    def step_data(self, index: int, state: np.ndarray) -> StepData:
+        """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""
+        terrain = self.experiment.terrain
+        geometry = terrain.steps[index - 1]
+        return StepData(self.experiment.robot, self.experiment.stance_leg(index), np.asarray(state, dtype=float),
+                        geometry.D, geometry.theta, self.experiment.time_step(self.n_nodes),
+                        previous_slope=terrain.ground_behind(index))
+
+    def start_state(self) -> np.ndarray:
+        """(q1, q2, q̇1, q̇2) at the start of step 1, in the start pose the options ask for."""
+        return self.experiment.start_state(self.options.start_pose)
+
+    def feasibility(self) -> list[GeometryCheck]:
+        """The experiment's per-step geometry checks under the options' leg-angle limits."""
+        return self.experiment.feasibility(self.options.angle_bounds)
+
+    def model(self, phase: str) -> BipedModel:
+        """The model a step of ``phase`` is verified with: 4-DOF (push-off acts) or the 2-DOF First Phase."""
+        return BipedModel(self.experiment.robot, 4 if phase == "second" else 2)
+
+    def result(self, strategy: str, phase: str = "second") -> WalkResult:
+        return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
+                          solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
+                          requested_steps=self.n_steps, problem_options=asdict(self.options),
+                          objective=self.objective.describe(), objective_options=asdict(self.objective))
 
 
 @runtime_checkable

@@ -1,4 +1,4 @@
-"""Every hook a gaitbench plugin can implement, declared in one place.
+"""Every plugin kind and the hook a gaitbench plugin implements to register things of that kind, declared in one place.
 
 A plugin is a module (or object) with functions decorated by ``gaitbench.hookimpl`` whose names match the
 specifications below. Each hook takes no arguments and returns a list of :class:`gaitbench.Registration`,
@@ -13,9 +13,26 @@ registrations of the same kind and name are reported as a conflict and neither i
 
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 import pluggy
 
 hookspec = pluggy.HookspecMarker("gaitbench")
+
+Kind = Literal["experiment", "model", "transcription", "objective", "solver", "strategy", "controller", "observer",
+               "disturbance", "reporter"]
+"""Every plugin kind: the one list, written out so that a type checker reads it. Each kind has its hook below,
+its contract in :data:`gaitbench.contracts.CONTRACTS` and its typed :meth:`gaitbench.plugins.PluginRegistry.create`
+overload; the tests check that all of them name exactly these kinds."""
+
+
+def hook_of(kind: str) -> str:
+    """The hook whose registrations a kind holds: ``register_`` and the kind's plural."""
+    return "register_" + (kind[:-1] + "ies" if kind.endswith("y") else kind + "s")
+
+
+KINDS: dict[str, str] = {kind: hook_of(kind) for kind in get_args(Kind)}
+"""Each plugin kind and the hook whose registrations it holds."""
 
 
 @hookspec

@@ -17,10 +17,29 @@ import re
 import types
 import typing
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, fields
 from typing import Any
 
-COMMON_SOLVER_OPTIONS = ("max_iterations", "time_limit_s", "tolerance", "print_level")
-"""The options every gaitbench solver shares (docs/solvers.md), checked for every solver plugin that is given them."""
+
+@dataclass(frozen=True, eq=False)
+class SolverOptions:
+    """The options every gaitbench solver shares (docs/solvers.md), with the defaults every built-in solver gives them:
+    the base of a solver's options written as a frozen dataclass. Compared by identity, as a solver built on them is.
+    """
+
+    max_iterations: int = 3000
+    time_limit_s: float | None = None
+    tolerance: float = 1e-8
+    print_level: int = 0
+
+    def __post_init__(self) -> None:
+        """The counts as integers and the tolerance as a float, whatever number the options gave."""
+        for name, kind in (("max_iterations", int), ("tolerance", float), ("print_level", int)):
+            object.__setattr__(self, name, kind(getattr(self, name)))
+
+
+COMMON_SOLVER_OPTIONS = tuple(field.name for field in fields(SolverOptions))
+"""The options every gaitbench solver shares, checked for every solver plugin that is given them."""
 
 
 class OptionError(ValueError):

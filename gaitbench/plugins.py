@@ -18,11 +18,12 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Literal, get_args, overload
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import pluggy
 
 import gaitbench.hookspecs as hookspecs
+from gaitbench.hookspecs import KINDS
 from gaitbench.registration import Registration
 
 if TYPE_CHECKING:
@@ -43,21 +44,6 @@ PLUGINS_DIR_ENV = "GAITBENCH_PLUGINS_DIR"
 """Environment variable with extra plugin directories, separated by ``os.pathsep``."""
 
 ENTRY_POINT_GROUP = "gaitbench"
-
-Kind = Literal["experiment", "model", "transcription", "objective", "solver", "strategy", "controller", "observer",
-               "disturbance", "reporter"]
-"""Every plugin kind: the one list, written out so that a type checker reads it. What each kind's factories build is
-declared in :data:`gaitbench.contracts.CONTRACTS`, and each kind's hook in :mod:`gaitbench.hookspecs`; the tests check
-that both, and the typed overloads of :meth:`PluginRegistry.create`, name exactly these kinds."""
-
-
-def hook_of(kind: str) -> str:
-    """The hook whose registrations a kind holds: ``register_`` and the kind's plural."""
-    return "register_" + (kind[:-1] + "ies" if kind.endswith("y") else kind + "s")
-
-
-KINDS: dict[str, str] = {kind: hook_of(kind) for kind in get_args(Kind)}
-"""Each plugin kind and the hook (see :mod:`gaitbench.hookspecs`) whose registrations it holds."""
 
 _DIR_MODULE_PREFIX = "gaitbench_plugin_dir"
 

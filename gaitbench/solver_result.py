@@ -1,19 +1,15 @@
-"""What every solver plugin returns (a status, a point and the solve's figures), and the boundary that holds a
-solver to it. It sits beside the contracts (:class:`gaitbench.contracts.Solver` returns it); the optional solver
-members the core uses are in :mod:`gaitbench.solve.solver`."""
+"""What every solver plugin returns (a status, a point and the solve's figures), and how a result that claims
+convergence at non-finite values is flagged. It sits below the contracts (:class:`gaitbench.contracts.Solver` returns
+it, and :class:`gaitbench.contracts.CheckedSolver` holds every solve of a walk to it); the optional solver members the
+core uses are in :mod:`gaitbench.solve.solver`."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
 from enum import Enum
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from gaitbench.contracts import Solver
-    from gaitbench.problem.nlp import NLP
 
 
 class SolverStatus(str, Enum):
@@ -24,7 +20,7 @@ class SolverStatus(str, Enum):
     ERROR = "error"
     NON_FINITE = "non_finite"
     """The solver claimed convergence at a point or objective that is not finite
-    (:class:`gaitbench.solver_result.CheckedSolver`)."""
+    (:class:`gaitbench.contracts.CheckedSolver`)."""
 
 
 @dataclass
@@ -53,36 +49,6 @@ class SolverResult:
             data.pop(key)
         data["status"] = self.status.value
         return data
-
-
-VARIANT_KINDS = ("continuations", "remedies", "seed_remedies", "last_resorts")
-"""The optional solver members that return named variants of the solver for the retry ladder."""
-
-
-class CheckedSolver:
-    """A solver plugin behind the boundary every solve of a walk passes (:class:`gaitbench.walk_types.WalkProblem`
-    holds its solver so): a result that claims convergence at a non-finite ``x`` or objective becomes
-    :attr:`SolverStatus.NON_FINITE`, with a message that says so, instead of a point the verification would fail
-    on for another reason. The solver's variants are checked alike; everything else is the plugin's own."""
-
-    def __init__(self, solver: Solver) -> None:
-        self.plugin = solver
-
-    def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
-        return finite_or_flagged(self.plugin.solve(nlp, parameters, initial_guess), self.plugin.name)
-
-    def __getattr__(self, name: str) -> Any:
-        if name == "plugin":  # not set yet (an object being unpickled): no recursion through it
-            raise AttributeError(name)
-        member = getattr(self.plugin, name)
-        if name in VARIANT_KINDS:
-            return lambda: [(label, checked(variant)) for label, variant in member()]
-        return member
-
-
-def checked(solver: Solver) -> Solver:
-    """``solver`` behind :class:`CheckedSolver` (once)."""
-    return solver if isinstance(solver, CheckedSolver) else CheckedSolver(solver)  # type: ignore[return-value]
 
 
 def finite_or_flagged(result: SolverResult, solver: str) -> SolverResult:

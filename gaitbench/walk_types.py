@@ -1,47 +1,20 @@
-"""The walk a strategy is asked to solve and what it returns (the values :class:`gaitbench.contracts.Strategy`
-names), with the checks a solved step and a solved walk carry. They sit beside the contracts; solving them is in
-:mod:`gaitbench.solve.walk`, verifying them in :mod:`gaitbench.solve.verify` and
-:mod:`gaitbench.solve.walk_verification`."""
+"""What a strategy returns for a walk (the values :class:`gaitbench.contracts.Strategy` names): each step's outcome
+and the walk's result, with the checks a solved step and a solved walk carry. They sit below the contracts, which
+also hold the walk a strategy is asked to solve (:class:`gaitbench.contracts.WalkProblem`); solving is in
+:mod:`gaitbench.solve.walk`, verifying in :mod:`gaitbench.solve.verify` and :mod:`gaitbench.solve.walk_verification`."""
 
 from __future__ import annotations
 
-import time
-from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from gaitbench.acceptance import Thresholds
-from gaitbench.contracts import Solver, Transcription
-from gaitbench.cores import IdleCores
+from gaitbench.acceptance import StepVerification, Thresholds
 from gaitbench.model.energetics import average_cot
-from gaitbench.model.experiment import Experiment
-from gaitbench.model.mechanics import BipedModel
-from gaitbench.model.terrain import StepCheck as GeometryCheck
-from gaitbench.problem.build_cache import BuildCache
-from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
-from gaitbench.problem.objective import NET_POWER, Objective
+from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import StepTrajectory
-from gaitbench.solver_result import SolverResult, checked
-
-if TYPE_CHECKING:
-    from gaitbench.checkpoint import WalkCheckpoint
-
-
-@dataclass(frozen=True)
-class StepVerification:
-    max_defect: float  # largest violation of the transcription's dynamics constraints
-    resim_error: float  # largest state error (angles in rad, rates in rad/s) at the step's end
-    resim_max_error: float  # largest state error at any node along the step
-    hip_energy: float  # J, the objective's running cost on a fine grid of the interpolant (net-power: exact |power|)
-    push_off_energy: float  # J, what the push-off is charged (ProblemOptions.push_off_cost); the COT has its event cost
-    cot: float
-    objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
-    objective_gap: float | None = None  # (cot − objective_cot) / max(cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
-    objective_agrees: bool | None = None  # |objective_gap| ≤ OBJECTIVE_RTOL
-
-    def as_dict(self) -> dict[str, float]:
-        return asdict(self)
+from gaitbench.solver_result import SolverResult
 
 
 @dataclass(frozen=True)
@@ -253,87 +226,3 @@ class WalkResult:
             "problem_options": self.problem_options,
             "steps": [step.as_dict() for step in self.steps],
         }
-
-
-class StepsOutOfRange(ValueError):
-    """A walk asked for fewer than one step, or more than its experiment has."""
-
-
-@dataclass(frozen=True)
-class WalkProblem:
-    """What a strategy is asked to do: walk ``steps`` steps of an experiment with N nodes per step, using one
-    transcription and one solver, under the given problem options, for the given objective. ``builds`` keeps
-    what a strategy builds beyond the walk's own steps for later walks: this walk's alone unless its runner
-    passes one it keeps (a suite's worker)."""
-
-    experiment: Experiment
-    transcription: Transcription
-    solver: Solver
-    n_nodes: int
-    steps: int | None = None
-    options: ProblemOptions | None = None
-    objective: Objective = NET_POWER
-    builds: BuildCache = field(default_factory=BuildCache, compare=False, repr=False)
-    deadline: float | None = field(default=None, compare=False)
-    """``time.monotonic()`` at which the walk's time runs out (a suite case's time limit): a step that would start
-    later is not started, and the walk stops there with ``time_limit``, keeping the steps it solved, instead of
-    running on until its process is stopped and losing them all."""
-    cores: IdleCores | None = field(default=None, compare=False, repr=False)
-    """The machine's ledger of the cores walks are using, when the walk may borrow idle ones (a suite's case, a
-    `gaitbench solve`): a strategy whose solves are independent may spread them over the cores it can hold."""
-    checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
-    """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
-    the walk resumes after them (:func:`walk_step_by_step`)."""
-    experiment_options: dict = field(default_factory=dict, compare=False, repr=False)
-    """The options the experiment was built with, recorded in the walk (:attr:`WalkResult.experiment_options`)."""
-    strategy_options: dict = field(default_factory=dict, compare=False, repr=False)
-    """The options the strategy was built with, recorded in the walk (:attr:`WalkResult.strategy_options`)."""
-
-    @property
-    def out_of_time(self) -> bool:
-        """Whether the walk's deadline has passed."""
-        return self.deadline is not None and time.monotonic() >= self.deadline
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "solver", checked(self.solver))  # every solve of the walk: the solver boundary
-        if self.steps is not None and not 1 <= self.steps <= self.experiment.n_steps:
-            raise StepsOutOfRange(f"steps = {self.steps}: the {self.experiment.name} experiment has "
-                                  f"{self.experiment.n_steps} steps")
-        if self.options is None:
-            object.__setattr__(self, "options", ProblemOptions(limits=self.experiment.limits))
-
-    @property
-    def n_steps(self) -> int:
-        return self.experiment.n_steps if self.steps is None else self.steps
-
-    def structure(self, phase: str, n_nodes: int | None = None, walked: bool = False) -> StepStructure:
-        """The step NLP's shape; ``walked``: a First-Phase step the walk goes on from (see StepStructure). Only the
-        First Phase tells the two apart, so a 4-DOF step is one structure, and one build, for every strategy."""
-        return StepStructure(phase, n_nodes or self.n_nodes, self.options, self.objective,
-                             walked and phase == "first")
-
-    def step_data(self, index: int, state: np.ndarray) -> StepData:
-        """Step ``index`` (1-based) from ``state`` = (q1, q2, q̇1, q̇2), leg order, with the walk's time step."""
-        terrain = self.experiment.terrain
-        geometry = terrain.steps[index - 1]
-        return StepData(self.experiment.robot, self.experiment.stance_leg(index), np.asarray(state, dtype=float),
-                        geometry.D, geometry.theta, self.experiment.time_step(self.n_nodes),
-                        previous_slope=terrain.ground_behind(index))
-
-    def start_state(self) -> np.ndarray:
-        """(q1, q2, q̇1, q̇2) at the start of step 1, in the start pose the options ask for."""
-        return self.experiment.start_state(self.options.start_pose)
-
-    def feasibility(self) -> list[GeometryCheck]:
-        """The experiment's per-step geometry checks under the options' leg-angle limits."""
-        return self.experiment.feasibility(self.options.angle_bounds)
-
-    def model(self, phase: str) -> BipedModel:
-        """The model a step of ``phase`` is verified with: 4-DOF (push-off acts) or the 2-DOF First Phase."""
-        return BipedModel(self.experiment.robot, 4 if phase == "second" else 2)
-
-    def result(self, strategy: str, phase: str = "second") -> WalkResult:
-        return WalkResult(experiment=self.experiment.name, transcription=self.transcription.name,
-                          solver=self.solver.name, strategy=strategy, N=self.n_nodes, phase=phase,
-                          requested_steps=self.n_steps, problem_options=asdict(self.options),
-                          objective=self.objective.describe(), objective_options=asdict(self.objective))

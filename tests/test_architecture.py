@@ -1,5 +1,5 @@
 """The layout is the architecture (docs/architecture.md): packages import only the layers below them, the core never
-imports a plugin, no two packages import each other, and no module outgrows one concept.
+imports a plugin, no two packages and no two modules import each other, and no module outgrows one concept.
 
 Every check reads the source with :mod:`ast`: relative imports are resolved against their package,
 ``importlib.import_module("...")`` / ``__import__("...")`` with a literal name count as imports, and so do imports
@@ -60,6 +60,9 @@ class Arrow:
     source: Module
     target: str
     line: int
+    takes_names: bool = False
+    """The module of a ``from ... import`` statement, whose names have arrows of their own (each to the name, or to
+    the submodule of that name)."""
 
     def __str__(self) -> str:
         return f"{self.source.path.name}:{self.line} ({self.source.name}) imports {self.target}"
@@ -110,7 +113,7 @@ def imports(module: Module) -> list[Arrow]:
             found += [Arrow(module, alias.name, node.lineno) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
             target = _absolute(module, node)
-            found.append(Arrow(module, target, node.lineno))
+            found.append(Arrow(module, target, node.lineno, takes_names=True))
             found += [Arrow(module, f"{target}.{alias.name}", node.lineno) for alias in node.names]
         elif isinstance(node, ast.Call) and (target := _dynamic_target(node)):
             found.append(Arrow(module, target, node.lineno))
@@ -160,9 +163,39 @@ def plugins_reaching_other_plugins(plugins: list[Module]) -> list[str]:
     return offenders
 
 
+def _strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The groups of nodes that reach one another round a circle: the strongly connected components of ``graph``
+    (every target a key too) with more than one member, found by Tarjan's algorithm."""
+    order: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found = []
+
+    def visit(node: str) -> None:
+        order[node] = low[node] = len(order)
+        stack.append(node)
+        for target in sorted(graph[node]):
+            if target not in order:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in stack:
+                low[node] = min(low[node], order[target])
+        if low[node] == order[node]:
+            component = []
+            while (member := stack.pop()) != node:
+                component.append(member)
+            if component:
+                found.append(sorted([node, *component]))
+
+    for node in sorted(graph):
+        if node not in order:
+            visit(node)
+    return found
+
+
 def circles(all_modules: list[Module]) -> list[list[str]]:
     """The groups of packages (core layers and built-in plugins) that import one another, directly or round a
-    circle: the strongly connected components of the package graph with more than one member."""
+    circle."""
     graph: dict[str, set[str]] = {}
     for module in all_modules:
         source = _room(module.name)
@@ -174,31 +207,31 @@ def circles(all_modules: list[Module]) -> list[list[str]]:
             if target is not None and target != source:
                 graph[source].add(target)
                 graph.setdefault(target, set())
-    order: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    found = []
+    return _strongly_connected(graph)
 
-    def visit(room: str) -> None:  # Tarjan's algorithm
-        order[room] = low[room] = len(order)
-        stack.append(room)
-        for target in graph[room]:
-            if target not in order:
-                visit(target)
-                low[room] = min(low[room], low[target])
-            elif target in stack:
-                low[room] = min(low[room], order[target])
-        if low[room] == order[room]:
-            component = []
-            while (member := stack.pop()) != room:
-                component.append(member)
-            if component:
-                found.append(sorted([room, *component]))
 
-    for room in sorted(graph):
-        if room not in order:
-            visit(room)
-    return found
+def module_circles(all_modules: list[Module]) -> list[list[str]]:
+    """The groups of modules (files) that import one another, directly or round a circle: within a layer or a plugin,
+    where :func:`circles` sees one package. An imported name counts as an arrow to the module that defines it, or to
+    the submodule of that name; the package face is left out, as in :func:`circles`."""
+    names = {module.name for module in all_modules} - {FACADE}
+    graph: dict[str, set[str]] = {name: set() for name in names}
+    for module in all_modules:
+        if module.name not in names:
+            continue
+        for arrow in imports(module):
+            if arrow.takes_names:
+                continue
+            target = _longest_known(arrow.target, names)
+            if target is not None and target != module.name:
+                graph[module.name].add(target)
+    return _strongly_connected(graph)
+
+
+def _longest_known(target: str, names: set[str]) -> str | None:
+    """The module of ``names`` that an imported ``target`` (a module, or a name in one) lies in, or None."""
+    parts = target.split(".")
+    return next((".".join(parts[:n]) for n in range(len(parts), 0, -1) if ".".join(parts[:n]) in names), None)
 
 
 def too_long(root: Path) -> list[str]:
@@ -236,6 +269,12 @@ def test_no_packages_import_each_other(tree):
     assert not found, found
 
 
+def test_no_modules_import_each_other(tree):
+    core, plugins = tree
+    found = module_circles(core + plugins)
+    assert not found, found
+
+
 def test_plugins_use_each_other_only_through_the_core(tree):
     offenders = plugins_reaching_other_plugins(tree[1])
     assert not offenders, offenders
@@ -269,11 +308,20 @@ def _import_the_cli_from_the_model(root: Path) -> None:
              "from __future__ import annotations\n\nfrom ..cli import main  # noqa: F401\n")
 
 
+def _close_a_circle_of_modules(root: Path) -> None:
+    """The thresholds name the walk's values, which name the thresholds: within one layer, so only the module check
+    sees it, and under ``if TYPE_CHECKING:``, which counts as well."""
+    _replace(root / "gaitbench" / "acceptance.py", "from __future__ import annotations\n",
+             "from __future__ import annotations\n\nfrom typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n"
+             "    from gaitbench.walk_types import WalkResult  # noqa: F401\n")
+
+
 MUTATIONS = {
     "relative import of the CLI in the model": (_import_the_cli_from_the_model,
                                                 "test_each_package_imports_only_the_layers_below_it"),
     "importlib loads a plugin in the core": (_import_plugin_from_core, "test_the_core_never_imports_a_plugin"),
     "the test moved a folder deeper": (_move_the_test_deeper, "test_the_checks_read_every_core_module"),
+    "a circle of modules within a layer": (_close_a_circle_of_modules, "test_no_modules_import_each_other"),
 }
 """Each way to break the tree, and the test that must catch it."""
 

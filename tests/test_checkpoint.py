@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from gaitbench.checkpoint import WalkCheckpoint, progress_file
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.executors import InProcessExecutor
@@ -18,7 +19,7 @@ from gaitbench.run.provenance import code_fingerprint
 from gaitbench.run.runner import run_suite
 from gaitbench.run.store import ResultStore, checkpoint_file, load_results
 from gaitbench.solve.walk import walk_step_by_step
-from gaitbench.walk_types import StepOutcome, WalkProblem
+from gaitbench.walk_types import StepOutcome
 
 REGISTRY = load_registry()
 FINGERPRINT = {"case": "test", "code": "test"}

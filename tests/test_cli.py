@@ -226,10 +226,10 @@ def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_si
     """HS with the thesis's Simpson rule sees the power only at nodes and midpoints: the optimizer ends at torques whose
     power vanishes there (objective COT ~1e-4, verified 0.0045). Boole's rule on the interpolant's power finds the
     passive gait (measured 1.9e-9)."""
+    from gaitbench.contracts import WalkProblem
     from gaitbench.plugins import load_registry
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.one_phase import OnePhase
-    from gaitbench.walk_types import WalkProblem
     from plugins.solvers.ipopt import Ipopt
     from plugins.transcriptions.hermite_simpson import HermiteSimpson
 

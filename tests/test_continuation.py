@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gaitbench.acceptance import Thresholds
+from gaitbench.acceptance import StepVerification, Thresholds
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.solve.continuation import cheaper_motion
 from gaitbench.solve.one_phase import OnePhase
-from gaitbench.walk_types import StepOutcome, StepVerification, WalkProblem
+from gaitbench.walk_types import StepOutcome
 
 REGISTRY = load_registry()
 

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import gaitbench.hookspecs as hookspecs
-from gaitbench.contracts import CONTRACTS, Kind, Observer, contract_violations
+from gaitbench.contracts import CONTRACTS, Observer, contract_violations
+from gaitbench.hookspecs import Kind
 from gaitbench.plugins import KINDS, LoadedPlugin, PluginRegistry, load_registry
 
 REGISTRY = load_registry()

@@ -287,9 +287,9 @@ def test_qp_subproblem_walks_forward_step_2_dmoc_n50_to_ipopts_cot():
     """Forward step 2, DMOC, N = 50, from the state fsqp's own step 1 ends in: the step where the 3-step walk used to
     stop (iteration limit, crawling by ~1.5e-7 of merit per iteration, then a KKT test that never passed). Both
     solvers from the same guess on the same NLP; fsqp's verified COT at most 5 % above IPOPT's."""
+    from gaitbench.contracts import WalkProblem
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.walk import solve_and_verify
-    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     experiment, transcription = registry.create("experiment", "forward"), registry.create("transcription", "dmoc")
@@ -313,8 +313,8 @@ def test_qp_subproblem_walks_forward_step_2_dmoc_n50_to_ipopts_cot():
 def test_fsqp_walks_three_forward_steps_at_n20_within_5_percent_of_ipopt(transcription):
     """The solvers issue's walk: forward, 3 steps, N = 20, default options; fsqp's verified ACOT at most 5 % above
     IPOPT's (measured: DMOC 0.0512 against 0.0566, HS 0.0505 against 0.0501; HS step 3 needs 702 iterations)."""
+    from gaitbench.contracts import WalkProblem
     from gaitbench.solve.one_phase import OnePhase
-    from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")

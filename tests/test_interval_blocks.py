@@ -193,7 +193,7 @@ def test_ipopt_on_the_compiled_oracle_takes_the_flat_problem_s_iterates(transcri
     IPOPT must walk the same path as on the flat SX problem's g, to the same solution."""
     import casadi as ca
 
-    from gaitbench.walk_types import WalkProblem
+    from gaitbench.contracts import WalkProblem
 
     registry = load_registry()
     experiment = registry.create("experiment", "forward")

@@ -10,13 +10,13 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import nodal_trajectory
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
-from gaitbench.walk_types import WalkProblem
 from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 
 REGISTRY = load_registry()

@@ -530,7 +530,8 @@ def test_stop_columns_record_geometry_solver_and_complete_walks(tmp_path: Path) 
 
 
 def _step(index: int, status: str, solved: bool, retries: list | None = None):
-    from gaitbench.walk_types import StepOutcome, StepVerification
+    from gaitbench.acceptance import StepVerification
+    from gaitbench.walk_types import StepOutcome
 
     check = StepVerification(1e-12, 1e-6, 1e-6, 1.0, 0.1, 0.02) if solved else None
     return StepOutcome(index, 1, status, status, verification=check,

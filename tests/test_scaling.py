@@ -52,7 +52,7 @@ def test_scaled_functions_are_the_original_ones_in_scaled_units(case):
 @pytest.mark.parametrize("transcription", ["hermite-simpson", "dmoc"])
 def test_nominal_factors_give_blocks_their_guess_magnitude_and_rows_a_unit_gradient(transcription):
     registry = load_registry()
-    from gaitbench.walk_types import WalkProblem
+    from gaitbench.contracts import WalkProblem
 
     experiment = registry.create("experiment", "forward")
     problem = WalkProblem(experiment, registry.create("transcription", transcription),

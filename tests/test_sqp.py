@@ -29,11 +29,11 @@ from nlp_problems import (
 )
 from saved_qps import clarabel_objective, saved_qp
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP, NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solver_result import SolverStatus
-from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.sqp import SQP
 from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends

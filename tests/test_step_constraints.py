@@ -6,6 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.terrain import terrain_clearance
 from gaitbench.plugins import load_registry
@@ -14,7 +15,6 @@ from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk import solve_with_retries
 from gaitbench.solver_result import SolverResult, SolverStatus
-from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.dmoc import DiscreteMechanics
 from plugins.transcriptions.hermite_simpson import HermiteSimpson

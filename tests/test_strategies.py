@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.cores import IdleCores
 from gaitbench.plugins import load_registry
 from gaitbench.problem.build_cache import BuildCache
@@ -21,7 +22,6 @@ from gaitbench.solve.synthesis import complete_sections, relation_holds, synthes
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state
 from gaitbench.solver_result import SolverResult, SolverStatus
-from gaitbench.walk_types import WalkProblem
 from plugins.strategies.decrease_and_conquer import (
     DYNAMICS_TOLERANCE,
     DecreaseAndConquer,

@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.control.closed_loop import track
 from gaitbench.control.falls import FallCriteria
 from gaitbench.control.reference import Reference
@@ -19,7 +20,6 @@ from gaitbench.control.tracking import track_walk
 from gaitbench.plugins import UnknownPluginError, load_registry
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk_file import WalkFileError, load_walk, write_walk
-from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 

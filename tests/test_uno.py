@@ -21,11 +21,11 @@ from nlp_problems import (
     undefined_at_start,
 )
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
 from gaitbench.solve.evaluation import NLPEvaluator
 from gaitbench.solve.walk import solve_and_verify
 from gaitbench.solver_result import SolverStatus
-from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.solvers.uno_solver import Uno, gaitbench_status, register_solvers
 

@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from gaitbench.acceptance import StepVerification
 from gaitbench.model.mechanics import BipedModel, biped_functions
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import load_registry
@@ -24,7 +25,7 @@ from gaitbench.problem.step_cost import QUADRATURE_RULES, charged
 from gaitbench.problem.trajectory import Interpolant, StepTrajectory
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost, verify_step
 from gaitbench.solve.walk import next_step_state
-from gaitbench.walk_types import StepOutcome, StepVerification, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.dmoc import interval_motion

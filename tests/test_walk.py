@@ -8,13 +8,13 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, sectional_structure
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state
-from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 from plugins.transcriptions.hermite_simpson import HermiteSimpson
 

@@ -11,13 +11,13 @@ import pytest
 from click.testing import CliRunner
 
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.control.reference import load_reference
 from gaitbench.control.tracking import track_walk
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk_file import WALK_FORMAT_VERSION, WalkFileError, load_walk, read_walk, write_walk
-from gaitbench.walk_types import WalkProblem
 from plugins.solvers.ipopt import Ipopt
 
 REGISTRY = load_registry()

@@ -8,8 +8,9 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.acceptance import Thresholds, step_failures
+from gaitbench.acceptance import StepVerification, Thresholds, step_failures
 from gaitbench.cli.main import main
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import load_registry
 from gaitbench.problem.trajectory import nodal_trajectory
@@ -18,7 +19,7 @@ from gaitbench.reports.tables import acot_table, unverified_cases
 from gaitbench.run.runner import walk_metrics
 from gaitbench.solve.walk import next_step_state
 from gaitbench.solve.walk_verification import solve_verified, verify_walk
-from gaitbench.walk_types import StepOutcome, StepVerification, WalkProblem, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 REGISTRY = load_registry()
 
@@ -158,6 +159,35 @@ def test_gaitbench_verify_rechecks_a_walk_file_and_fails_one_whose_join_was_brok
     result = CliRunner().invoke(main, ["verify", str(path), "--json"])
     assert result.exit_code == 1
     assert any(reason.startswith("step 2: join mismatch 1.0e-02") for reason in json.loads(result.output)["reasons"])
+
+
+def test_a_claimed_acot_that_a_walk_file_before_format_2_stores_as_its_acot_is_a_note_not_a_failure(forward,
+                                                                                                     tmp_path):
+    from gaitbench.cli.verify_command import _report
+    from gaitbench.solve.walk_file import WalkFile
+
+    start = forward.start_state("on-ground")
+    patchwork = _step(1, 1, start, _check(cot=0.5))
+    patchwork.details = {"chosen": ["a", "b"]}
+    patchwork.polished = _step(1, 1, start, _check(cot=0.2))
+    second = _step(2, 2, patchwork.polished.next_state, _check(cot=0.4))
+    walk = _walk([patchwork, second])
+    walk.verification = verify_walk(walk, start, forward.robot)
+    assert walk.verification.acot == pytest.approx(0.3) and walk.claimed_acot == pytest.approx(0.45)
+
+    header = {"steps": [step.as_dict() for step in walk.steps]}
+    assert WalkFile(tmp_path, 1, header, {}).acot_is_claimed and WalkFile(tmp_path, None, header, {}).acot_is_claimed
+    assert not WalkFile(tmp_path, 2, header, {}).acot_is_claimed
+    assert not WalkFile(tmp_path, 1, {"steps": [second.as_dict()]}, {}).acot_is_claimed
+
+    old = _report(tmp_path, walk, 0.45, acot_is_claimed=True)
+    assert old["verified"] and old["reasons"] == []
+    assert old["notes"] == ["stored ACOT 0.4500 is the claimed patchwork ACOT: the walk file predates format 2, which "
+                            "stores the verified ACOT as acot and the claim as claimed_acot"]
+    assert _report(tmp_path, walk, 0.45)["reasons"] == ["stored ACOT 0.4500 is not the recomputed 0.3000"]
+    assert _report(tmp_path, walk, 0.6, acot_is_claimed=True)["reasons"] == [
+        "stored ACOT 0.6000 is not the recomputed 0.3000"]
+    assert _report(tmp_path, walk, 0.3, acot_is_claimed=True)["notes"] == []
 
 
 def test_gaitbench_verify_refuses_what_is_not_a_walk_file(tmp_path):

@@ -188,12 +188,12 @@ def solve(
     itself. The walk stops at the first step that fails, keeping what was solved. Exit status 1 if the walk is
     incomplete.
     """
+    from gaitbench.contracts import StepsOutOfRange
     from gaitbench.cores import IdleCores
     from gaitbench.run.case import PluginChoice
     from gaitbench.solve.walk_assembly import assemble_walk
     from gaitbench.solve.walk_file import write_walk
     from gaitbench.solve.walk_verification import solve_verified
-    from gaitbench.walk_types import StepsOutOfRange
 
     overrides = _problem_options(problem_options, absolute_value=absolute_value,
                                  torque_regularization=torque_regularization)

@@ -63,7 +63,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             report = _unreadable(path, exc)  # one broken file of a store is that walk's verdict, not the end
         else:
             stored_acot = walk_file.header.get("acot") if stored_acot is None else stored_acot
-            report = _report(path, walk, stored_acot)
+            report = _report(path, walk, stored_acot, walk_file.acot_is_claimed)
         failed += not report["verified"]
         if case_key is not None:
             updates[case_key] = _columns(report)
@@ -110,27 +110,37 @@ def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str]]:
     return walks, absent
 
 
-def _report(path: Path, walk, stored_acot: Any) -> dict[str, Any]:
+def _report(path: Path, walk, stored_acot: Any, acot_is_claimed: bool = False) -> dict[str, Any]:
     """The verdict on one walk as JSON-ready data; a stored ACOT more than :data:`ACOT_RTOL` from the recomputed
-    one fails it."""
+    one fails it, unless it is the claimed patchwork ACOT that a walk file before format 2 stores as its ACOT
+    (``acot_is_claimed``), which a note says instead."""
     verification = walk.verification
-    reasons = list(verification.reasons)
+    reasons, notes = list(verification.reasons), []
     stored = float(stored_acot) if isinstance(stored_acot, (int, float)) else None
-    if stored is not None and verification.acot is not None and \
-            abs(stored - verification.acot) > ACOT_RTOL * abs(verification.acot):
-        reasons.append(f"stored ACOT {stored:.4f} is not the recomputed {verification.acot:.4f}")
+    if stored is not None and verification.acot is not None and not _agrees(stored, verification.acot):
+        if acot_is_claimed and walk.claimed_acot is not None and _agrees(stored, walk.claimed_acot):
+            notes.append(f"stored ACOT {stored:.4f} is the claimed patchwork ACOT: the walk file predates format 2, "
+                         f"which stores the verified ACOT as acot and the claim as claimed_acot")
+        else:
+            reasons.append(f"stored ACOT {stored:.4f} is not the recomputed {verification.acot:.4f}")
     return {"walk": str(path), "experiment": walk.experiment, "strategy": walk.strategy,
             "transcription": walk.transcription, "N": walk.N, "verified": not reasons, "reasons": reasons,
+            "notes": notes,
             "acot": verification.acot, "stored_acot": stored, "claimed_acot": walk.claimed_acot,
             "thesis_reading_acot": walk.thesis_reading_acot,
             **{key: value for key, value in verification.as_dict().items()
                if key not in ("verified", "reason", "acot")}}
 
 
+def _agrees(stored: float, recomputed: float) -> bool:
+    return abs(stored - recomputed) <= ACOT_RTOL * abs(recomputed)
+
+
 def _unreadable(path: Path, error: Exception) -> dict[str, Any]:
     """The verdict on a stored walk whose file cannot be read: not verified, and why."""
     return {"walk": str(path), "experiment": "?", "strategy": "?", "transcription": "?", "N": "?",
-            "verified": False, "reasons": [f"walk file unreadable: {error}"], "acot": None, "stored_acot": None,
+            "verified": False, "reasons": [f"walk file unreadable: {error}"], "notes": [], "acot": None,
+            "stored_acot": None,
             "claimed_acot": None, "thesis_reading_acot": None, "max_join_mismatch": None, "join_energy": 0.0,
             "max_resim_error": None, "max_defect": None}
 
@@ -155,4 +165,6 @@ def _print(console: Console, report: dict[str, Any]) -> None:
     console.print(f"  largest join mismatch {figure(report['max_join_mismatch'], '.1e')}, energy appearing at the "
                   f"joins {report['join_energy']:.1f} J, largest re-simulation error "
                   f"{figure(report['max_resim_error'], '.1e')}")
+    for note in report["notes"]:
+        print_plain(console, f"  note: {note}", "")
     print_plain(console, f"  {verdict}", "" if report["verified"] else "red")

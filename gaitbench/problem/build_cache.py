@@ -3,7 +3,7 @@
 Building a step NLP (and its solver) costs more than solving it at small N, and decrease-and-conquer builds N−3
 sectional problems per walk. A section of M nodes is the step structure of M nodes whatever the walk's N, so walks
 that share a :class:`BuildCache` build only what the earlier ones have not. Its lifetime is its owner's: one walk by
-default (:class:`~gaitbench.walk_types.WalkProblem`), a worker process in a suite run (:mod:`gaitbench.run.executors`),
+default (:class:`~gaitbench.contracts.WalkProblem`), a worker process in a suite run (:mod:`gaitbench.run.executors`),
 so a fresh cache is all a test or a benchmark needs to time a walk as a fresh process would.
 """
 

@@ -85,11 +85,8 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
 
     walk = read_walk(Path(store_dir) / case["walk_path"])
     registry = registry or load_registry()
-    if walk.version is None:  # an unversioned walk file holds no experiment options; the store row does
-        options = case["experiment_options"] if isinstance(case["experiment_options"], dict) else {}
-        experiment = registry.create("experiment", walk.header["experiment"], **options)
-    else:
-        experiment = walk.experiment(registry)
+    row_options = case["experiment_options"] if isinstance(case["experiment_options"], dict) else {}
+    experiment = walk.experiment(registry, unrecorded_options=row_options)
     phase = walk.header.get("phase", "second")
     notes = []
     model = BipedModel(experiment.robot, 4) if phase == "second" else None

@@ -76,7 +76,7 @@ class Case:
     objective: PluginChoice = DEFAULT_OBJECTIVE
     """What every step minimises and every COT measures."""
     time_limit_s: float | None = None
-    """The walk's deadline: no solve starts after it (:class:`gaitbench.walk_types.WalkProblem`)."""
+    """The walk's deadline: no solve starts after it (:class:`gaitbench.contracts.WalkProblem`)."""
     plugin_dirs: tuple[str, ...] = ()
     checkpoint: str | None = None
     """Where the walk saves its solved steps as it goes, so that a run of the case after this one was stopped goes on

@@ -86,6 +86,17 @@ _OPEN_RUNS: set[str] = set()
 """Runs this process is running: a claim whose pid is this process's is alive only if its run is one of them."""
 
 
+@contextmanager
+def _closed_on_failure(connection: sqlite3.Connection) -> Iterator[None]:
+    """Close ``connection`` when what is inside raises, whatever it raises: a store that cannot be opened leaves no
+    connection open."""
+    try:
+        yield
+    except BaseException:
+        connection.close()
+        raise
+
+
 class ResultStore:
     """A store directory; open with :meth:`create` (writing) or :meth:`open` (reading an existing one)."""
 
@@ -128,7 +139,7 @@ class ResultStore:
             raise StoreError(f"{database}: cannot open the results store for writing "
                              f"({failure_cause(error, lock_timeout)})") from None
         store = cls(directory, connection, set(), lock_timeout)
-        try:
+        with _closed_on_failure(connection):
             connection.row_factory = sqlite3.Row
             with store._write("check the results store"):  # again under the write lock: what the WAL holds
                 check_schema(connection, database)
@@ -140,9 +151,6 @@ class ResultStore:
                 upgrade(connection, database)
             with store._failing("check the results store's tables"):
                 store._tables = check_store(connection, database)
-        except BaseException:
-            connection.close()
-            raise
         return store
 
     @classmethod
@@ -171,22 +179,15 @@ class ResultStore:
             connection = connect_read_only(database, immutable=not writable)
         except sqlite3.Error as error:
             raise StoreError(f"{database}: cannot open the results store ({failure_cause(error)})") from None
-        try:
-            check_schema(connection, database)
-            connection.execute("SELECT case_key FROM cases LIMIT 1")
-        except sqlite3.DatabaseError as error:
-            connection.close()
-            raise StoreError(f"{database}: not a gaitbench results store ({error})") from None
-        except StoreError:
-            connection.close()
-            raise
-        store = cls(database.parent, connection, set())
-        try:
+        with _closed_on_failure(connection):
+            try:
+                check_schema(connection, database)
+                connection.execute("SELECT case_key FROM cases LIMIT 1")
+            except sqlite3.DatabaseError as error:
+                raise StoreError(f"{database}: not a gaitbench results store ({error})") from None
+            store = cls(database.parent, connection, set())
             with store._failing("check the results store's tables"):
                 store._tables = check_store(connection, database)
-        except StoreError:
-            connection.close()
-            raise
         return store
 
     def close(self) -> None:

@@ -17,10 +17,11 @@ from dataclasses import replace
 import numpy as np
 
 from gaitbench.acceptance import Thresholds, step_failures
+from gaitbench.contracts import WalkProblem
 from gaitbench.problem.trajectory import Seed
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.walk import solve_with_retries
-from gaitbench.walk_types import StepOutcome, WalkProblem
+from gaitbench.walk_types import StepOutcome
 
 STARTS = ("blended", "continuation", "best")
 """How a One Phase step is started: the blended guess; the step solved on ``coarse_nodes`` nodes first; or both,

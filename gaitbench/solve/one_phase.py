@@ -24,11 +24,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.solve.continuation import STARTS, GridContinuation, best_start
 from gaitbench.solve.rescue import coarse_grid_rescue
 from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
 from gaitbench.solve.walk_chain import LookAhead
-from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 
 class OnePhase:

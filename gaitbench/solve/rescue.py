@@ -13,9 +13,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.walk import solve_with_retries
-from gaitbench.walk_types import StepOutcome, WalkProblem
+from gaitbench.walk_types import StepOutcome
 
 COARSE_GRIDS = (3 / 4, 1 / 2)
 """The grids, as fractions of N, that :func:`coarse_grid_rescue` solves a stopped step on, finest first. Measured on

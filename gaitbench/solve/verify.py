@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gaitbench.acceptance import StepVerification
 from gaitbench.model.energetics import cost_of_transport, hip_energy, push_off_work
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.simulate import OpenLoop, simulate
@@ -22,7 +23,6 @@ from gaitbench.problem.gait_problem import StepData, role_robot_vector
 from gaitbench.problem.objective import Objective
 from gaitbench.problem.trajectory import StepTrajectory
 from gaitbench.problem.transcription import TranscribedStep
-from gaitbench.walk_types import StepVerification
 
 SAMPLES_PER_INTERVAL = 16
 INSIDE = 1e-9

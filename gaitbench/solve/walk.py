@@ -11,22 +11,17 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gaitbench.contracts import Solver
+from gaitbench.contracts import Solver, WalkProblem
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.problem.gait_problem import StepData
 from gaitbench.problem.trajectory import Seed, StepTrajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.verify import verify_step
 from gaitbench.solver_result import SolverStatus
-from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
-
-if TYPE_CHECKING:
-    pass
-
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 StepSolver = Callable[[WalkProblem, int, np.ndarray], "StepOutcome"]
 """Solves step ``index`` from a (q1, q2, q̇1, q̇2) state; a solved outcome carries the next step's state."""

@@ -8,9 +8,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any, Protocol
 
-from gaitbench.contracts import Strategy
+from gaitbench.contracts import Strategy, WalkProblem
 from gaitbench.problem.gait_problem import ProblemOptions
-from gaitbench.walk_types import WalkProblem
 
 Build = Callable[..., Any]
 """``build(kind, name, **options)``: the plugin (a registry's ``create``, or the CLI's, which turns a bad name or
@@ -31,7 +30,7 @@ def assemble_walk(build: Build, n_nodes: int, *, experiment: Choice, transcripti
     """The strategy and the problem it is to solve: the plugins built in the order above, ``problem_options``
     over the experiment's defaults (its limits), and ``walk`` the problem's other fields (``builds``, ``deadline``,
     ``checkpoint``, ``cores``). The problem keeps the experiment's and the strategy's options for the walk's record.
-    Raises :class:`gaitbench.walk_types.StepsOutOfRange` when ``steps`` does not fit the experiment."""
+    Raises :class:`gaitbench.contracts.StepsOutOfRange` when ``steps`` does not fit the experiment."""
     built_experiment = build("experiment", experiment.name, **experiment.options)
     built_transcription = build("transcription", transcription.name, **transcription.options)
     built_solver = build("solver", solver.name, **solver.options)

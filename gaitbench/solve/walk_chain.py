@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from gaitbench.contracts import Solver
+from gaitbench.contracts import Solver, WalkProblem
 from gaitbench.model.mechanics import biped_functions
 from gaitbench.problem.gait_problem import N_STEP_PARAMETERS, PARAMETER_LAYOUT, StepData, legs_to_roles
 from gaitbench.problem.nlp import NLP
@@ -26,7 +26,7 @@ from gaitbench.problem.trajectory import Seed
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state, solve_with_retries, solver_remedies, solver_variants, stopped_at
-from gaitbench.walk_types import StepOutcome, WalkProblem
+from gaitbench.walk_types import StepOutcome
 
 INITIAL_STATE = PARAMETER_LAYOUT["initial_state"]
 

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from gaitbench.acceptance import StepVerification
 from gaitbench.model.experiment import Experiment, Limits
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import PluginRegistry, load_registry
@@ -40,7 +41,7 @@ from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.walk import next_step_state
-from gaitbench.walk_types import StepOutcome, StepVerification, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 WALK_FORMAT_VERSION = 2
 """The version :func:`write_walk` writes; :func:`read_walk` reads it and every older one."""
@@ -114,6 +115,12 @@ class WalkFile:
         return self.header["steps"]
 
     @property
+    def acot_is_claimed(self) -> bool:
+        """Whether the header's ``acot`` is decrease and conquer's claimed patchwork ACOT rather than a verified one:
+        a file before version 2 that holds patchworks, written before the claim had a field of its own."""
+        return (self.version or 0) < 2 and any(_patchwork(step) for step in self.steps)
+
+    @property
     def experiment_options(self) -> dict[str, Any]:
         return dict(self.header.get("experiment_options") or {})
 
@@ -128,10 +135,15 @@ class WalkFile:
         return {key[len(prefix):]: value for key, value in self.arrays.items() if key.startswith(prefix)
                 and (name or not key[len(prefix):].startswith(f"{POLISHED}_"))}
 
-    def experiment(self, registry: PluginRegistry | None = None) -> Experiment:
-        """The experiment the walk was solved for, built with its options."""
+    def experiment(self, registry: PluginRegistry | None = None,
+                   unrecorded_options: dict[str, Any] | None = None) -> Experiment:
+        """The experiment the walk was solved for, built with its options. A file written before the format was
+        versioned records none: it is built with ``unrecorded_options`` where the caller knows them (a store row's),
+        else with the defaults."""
         registry = registry or load_registry()
-        return registry.create("experiment", self.header["experiment"], **self.experiment_options)
+        from_caller = self.version is None and unrecorded_options is not None
+        options = dict(unrecorded_options) if from_caller else self.experiment_options
+        return registry.create("experiment", self.header["experiment"], **options)
 
     def objective(self, registry: PluginRegistry | None = None) -> Objective:
         """The objective the walk's COTs are measured in: from its name and options, or, in a file written before
@@ -193,7 +205,7 @@ class WalkFile:
             if "q" not in arrays or step.get("cot") is None:
                 break
             try:
-                if "chosen" in (step.get("details") or {}) and (self.version or 0) < 2:  # a patchwork as nodes
+                if _patchwork(step) and (self.version or 0) < 2:  # stored as nodes
                     nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
                     trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
                                                   int(step["stance"]))
@@ -219,6 +231,11 @@ class WalkFile:
         if not walk.steps:
             raise WalkFileError(f"{self.path}: no solved step ({data.get('failure')}); solve the walk again")
         return walk, experiment
+
+
+def _patchwork(step: dict[str, Any]) -> bool:
+    """Whether a step's record is one of decrease and conquer's patchworks (its details name the chosen sections)."""
+    return "chosen" in (step.get("details") or {})
 
 
 def read_walk(path: str | Path) -> WalkFile:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench.acceptance import Thresholds, join_failure, step_failures
-from gaitbench.contracts import Strategy
+from gaitbench.contracts import Strategy, WalkProblem
 from gaitbench.model.energetics import average_cot
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
@@ -28,7 +28,7 @@ from gaitbench.problem.trajectory import StepTrajectory
 from gaitbench.solve.thesis_reading import thesis_reading_acot
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk_file import WalkFile
-from gaitbench.walk_types import StepCheck, StepOutcome, WalkProblem, WalkResult, WalkVerification
+from gaitbench.walk_types import StepCheck, StepOutcome, WalkResult, WalkVerification
 
 
 def verify_walk(walk: WalkResult, start_state: np.ndarray, robot: RobotParameters) -> WalkVerification:

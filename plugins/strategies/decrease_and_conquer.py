@@ -38,6 +38,7 @@ import numpy as np
 
 from gaitbench import Registration, hookimpl
 from gaitbench.acceptance import Thresholds, step_failures
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.energetics import candidate_cot
 from gaitbench.problem.gait_problem import StepData, role_robot_vector, sectional_structure
 from gaitbench.problem.objective import Objective
@@ -50,7 +51,7 @@ from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import push_off_charge, verify_step
 from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
 from gaitbench.solver_result import SolverResult
-from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 FIRST_PHASE = "first phase"
 """``details["failed_in"]`` of a step whose First Phase failed: what the rescue acts on."""

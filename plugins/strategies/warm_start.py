@@ -12,8 +12,9 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench import Registration, hookimpl
+from gaitbench.contracts import WalkProblem
 from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
-from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 
 class WarmStart:

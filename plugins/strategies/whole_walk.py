@@ -16,11 +16,12 @@ from collections.abc import Callable
 import numpy as np
 
 from gaitbench import Registration, hookimpl
+from gaitbench.contracts import WalkProblem
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state
 from gaitbench.solve.walk_chain import WalkChain
-from gaitbench.walk_types import StepOutcome, WalkProblem, WalkResult
+from gaitbench.walk_types import StepOutcome, WalkResult
 
 
 class WholeWalk:

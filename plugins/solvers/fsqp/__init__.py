@@ -24,9 +24,10 @@ structure — a feasible start, feasible iterates, an exact penalty on the equal
 second-order correction — with a QP over every linearised row (sparse, through ``qpsolvers``) for d0 and ``sqp``'s
 convexified exact Hessian; see :class:`FSQP`.
 
-Modules: :mod:`.solver` (the options and the two phases of a solve), :mod:`.feasibility` (phase 1),
-:mod:`.equality` and :mod:`.qp_subproblem` (the main phase, by subproblem), :mod:`.form` (the NLP in the thesis's
-form), :mod:`.hessian`, :mod:`.qp` (the QPs through ``qpsolvers``), :mod:`.linalg` and :mod:`.outcome`.
+Modules: :mod:`.solver` (the two phases of a solve), :mod:`.options`, :mod:`.progress` (a solve's limits and log),
+:mod:`.feasibility` (phase 1), :mod:`.equality` and :mod:`.qp_subproblem` (the main phase, by subproblem), :mod:`.form`
+(the NLP in the thesis's form), :mod:`.hessian`, :mod:`.qp` (the QPs through ``qpsolvers``), :mod:`.linalg` and
+:mod:`.outcome`. The phases take the options and the solve's progress, never the solver.
 """
 
 from __future__ import annotations

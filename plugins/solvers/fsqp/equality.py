@@ -15,11 +15,12 @@ from plugins.solvers.fsqp.linalg import Factorization, full_row_rank, kkt, least
 from plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
 
 if TYPE_CHECKING:
+    from plugins.solvers.fsqp.options import FSQPOptions
     from plugins.solvers.fsqp.progress import Progress
-    from plugins.solvers.fsqp.solver import FSQP
 
 
-def minimize(options: FSQP, progress: Progress, form: NLPForm, x: np.ndarray, iteration: int) -> Outcome:
+def minimize(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.ndarray,
+             iteration: int) -> Outcome:
     """Steps 1–5 from a point x whose inequality rows are ≤ 0, counting iterations from ``iteration``."""
     n, m, n_ineq, equalities = form.n, form.m, form.n_inequalities, form.equalities
     f, c = form.objective(x), form.constraints(x)
@@ -155,13 +156,14 @@ def minimize(options: FSQP, progress: Progress, form: NLPForm, x: np.ndarray, it
         return outcome(SolverStatus.ERROR, str(breakdown))
 
 
-def margins(options: FSQP, norm: float, power: float, c_active: np.ndarray, equality: np.ndarray) -> np.ndarray:
+def margins(options: FSQPOptions, norm: float, power: float, c_active: np.ndarray,
+            equality: np.ndarray) -> np.ndarray:
     """The interior margin ‖·‖^power of d1 and d̃ per active row (deviation 4)."""
     margin = _power(norm, power)
     return np.where(equality, np.minimum(margin, options.equality_margin * np.abs(c_active)), margin)
 
 
-def active_set(options: FSQP, jacobian: sp.csr_matrix, near: np.ndarray, n_ineq: int, epsilon: float,
+def active_set(options: FSQPOptions, jacobian: sp.csr_matrix, near: np.ndarray, n_ineq: int, epsilon: float,
                 blocking: np.ndarray) -> np.ndarray:
     """Step 1: J = {j ∈ I: near_j ≥ −ε} ∪ blocking ∪ E, ε halved until the gradients are independent; the
     blocking rows are dropped again if even the smallest ε leaves J dependent."""

@@ -18,8 +18,8 @@ from plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
 from plugins.solvers.fsqp.qp import bend, solve_qp
 
 if TYPE_CHECKING:
+    from plugins.solvers.fsqp.options import FSQPOptions
     from plugins.solvers.fsqp.progress import Progress
-    from plugins.solvers.fsqp.solver import FSQP
 
 _ACTIVE = 1e-6
 """A row is held by a QP step when c_j + ∇c_jᵀd ≥ −this (scaled units), and a bound row is near when c_j ≥ −this:
@@ -32,7 +32,8 @@ _ACCEPTABLE_ITERATIONS = 15
 converged; on the flat valleys of the thesis cost the last digits of the tolerance cost hundreds of iterations."""
 
 
-def minimize_qp(options: FSQP, progress: Progress, form: NLPForm, x: np.ndarray, iteration: int) -> Outcome:
+def minimize_qp(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.ndarray,
+                iteration: int) -> Outcome:
     """FSQP with the ``qp`` subproblem (see the class docstring), from x with every inequality row ≤ 0."""
     n, m, n_ineq = form.n, form.m, form.n_inequalities
     general, equal = np.arange(form.n_general), n_ineq + np.arange(form.n_equal_g)

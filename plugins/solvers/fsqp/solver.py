@@ -1,4 +1,5 @@
-"""The ``fsqp`` solver plugin's face: its options, the two phases of a solve, and the log of its iterations."""
+"""The ``fsqp`` solver plugin's face: the two phases of a solve under its options (:mod:`.options`), and the log of its
+iterations."""
 
 from __future__ import annotations
 
@@ -13,13 +14,14 @@ from gaitbench.solver_result import SolverResult, SolverStatus
 from plugins.solvers.fsqp.equality import minimize
 from plugins.solvers.fsqp.feasibility import feasibility, push_inside
 from plugins.solvers.fsqp.form import NLPForm
+from plugins.solvers.fsqp.options import FSQPOptions
 from plugins.solvers.fsqp.outcome import IterationRecord
 from plugins.solvers.fsqp.progress import Progress
 from plugins.solvers.fsqp.qp_subproblem import minimize_qp
 
 
 @dataclass(frozen=True, eq=False)
-class FSQP:
+class FSQP(FSQPOptions):
     """Feasible SQP after the thesis's Appendix D, with damped BFGS or the convexified exact Hessian.
 
     Shared options: ``max_iterations`` (3000, IPOPT's and ``sqp``'s, so the solvers compare on one budget; the
@@ -130,52 +132,8 @@ class FSQP:
 
     name: ClassVar[str] = "fsqp"
 
-    max_iterations: int = 3000
-    time_limit_s: float | None = None
-    tolerance: float = 1e-8
-    print_level: int = 0
-    hessian: str = "exact"
-    alpha: float = 0.1
-    beta: float = 0.5
-    nu: float = 2.5
-    delta: float = 2.2
-    tau: float = 2.5
-    theta: float = 0.8
-    xi: float = 1e-3
-    epsilon0: float = 1.0
-    epsilon: float = 1.0
-    rho: float = 1.0
-    max_halvings: int = 50
-    rank_tolerance: float = 1e-6
-    equality_margin: float = 0.1
-    h0_scaling: str | float = "auto"
-    scaling: str = "gradient"
-    subproblem: str = "qp"
     log: list[IterationRecord] = field(default_factory=list, init=False, repr=False)
     """The iterates of the last solve, both phases, in order (refilled by each solve)."""
-
-    def __post_init__(self) -> None:
-        if self.subproblem not in ("qp", "equality"):
-            raise ValueError(f"subproblem must be 'qp' or 'equality', not {self.subproblem!r}")
-        if self.hessian not in ("bfgs", "exact"):
-            raise ValueError(f"hessian must be 'bfgs' or 'exact', not {self.hessian!r}")
-        if self.subproblem == "qp" and self.hessian != "exact":
-            raise ValueError("the 'qp' subproblem takes the exact Hessian; BFGS needs subproblem='equality'")
-        if self.scaling not in ("gradient", "none"):
-            raise ValueError(f"scaling must be 'gradient' or 'none', not {self.scaling!r}")
-        h0 = self.h0_scaling
-        if h0 != "auto" and not (isinstance(h0, int | float) and h0 > 0):
-            raise ValueError(f"h0_scaling must be 'auto' or a positive number, not {h0!r}")
-        if not (0 < self.alpha < 0.5 and 0 < self.beta < 1 and self.nu > 2 and 2 < self.delta < self.nu
-                and 2 < self.tau < 3 and 0 < self.theta < 1 and self.xi > 0 and self.epsilon0 > 0
-                and self.epsilon > 0 and self.rho > 0 and self.equality_margin > 0):
-            raise ValueError("FSQP needs α ∈ (0, ½), β, θ ∈ (0, 1), ν > 2, δ ∈ (2, ν), τ ∈ (2, 3) and positive ξ, "
-                             "ε0, ε, ρ and equality_margin")
-        normalized = {"max_iterations": int(self.max_iterations), "tolerance": float(self.tolerance),
-                      "print_level": int(self.print_level), "max_halvings": int(self.max_halvings),
-                      "rank_tolerance": float(self.rank_tolerance), "equality_margin": float(self.equality_margin)}
-        for name, value in normalized.items():
-            object.__setattr__(self, name, value)
 
     def solve(self, nlp: NLP, parameters: np.ndarray, initial_guess: np.ndarray) -> SolverResult:
         """Phase 1 if the start violates an inequality, then FSQP; every failure becomes a status."""

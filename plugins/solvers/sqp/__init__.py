@@ -123,7 +123,8 @@ are never given any.
 
 Options on the command line: ``-s sqp -o qp_solver=daqp -o hessian=bfgs -o merit=filter -o qp_tolerance=1e-9``.
 
-Modules: :mod:`.solver` holds the options. One solve is a :class:`.run.Run`, built in layers, each class on the one
+Modules: :mod:`.solver` is the plugin's face (the solve and the retry ladder's variants), :mod:`.options` its options,
+which a solve reads, never the solver. One solve is a :class:`.run.Run`, built in layers, each class on the one
 before: :mod:`.iterate` (the point, its multipliers, the KKT test and the result), :mod:`.subproblems` (the QPs of an
 iteration), :mod:`.linesearch` (both globalisations), :mod:`.restoration`, :mod:`.run` (the outer loop). They use
 :mod:`.linearization` (the QPs' ``qpsolvers`` form), :mod:`.backends` (the backend calls), :mod:`.hessian` (the

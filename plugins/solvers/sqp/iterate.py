@@ -19,7 +19,7 @@ from plugins.solvers.sqp.linearization import Linearization
 from plugins.solvers.sqp.slacks import SlackPairs
 
 if TYPE_CHECKING:
-    from plugins.solvers.sqp.solver import SQP
+    from plugins.solvers.sqp.options import SQPOptions
 
 
 @dataclass
@@ -65,7 +65,7 @@ def least_squares_multipliers(jacobian: sp.csr_matrix, grad: np.ndarray) -> np.n
 class Iterate:
     """The state of one solve: the point with its derivatives and multipliers, and what the later layers keep."""
 
-    def __init__(self, options: SQP, evaluator: NLPEvaluator, x0: np.ndarray, deadline: Deadline) -> None:
+    def __init__(self, options: SQPOptions, evaluator: NLPEvaluator, x0: np.ndarray, deadline: Deadline) -> None:
         self.o = options
         self.evaluator = evaluator
         self.deadline = deadline

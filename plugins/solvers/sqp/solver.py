@@ -1,5 +1,5 @@
-"""The ``sqp`` solver plugin's face: its options, checked when it is built, and the solve that reports every
-failure as a status."""
+"""The ``sqp`` solver plugin's face: the solve under its options (:mod:`.options`), which reports every failure as a
+status, and the variants it offers the walk's retry ladder."""
 
 from __future__ import annotations
 
@@ -7,24 +7,20 @@ from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
-import qpsolvers
 
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR
+from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR
+from plugins.solvers.sqp.options import SQPOptions
 from plugins.solvers.sqp.run import Run
-
-_HESSIANS = ("exact", "bfgs")
-_MERITS = ("l1", "filter")
-
 
 LONG_BUDGET = 10_000
 """The iteration budget of the ``more-iterations`` last resort (:meth:`SQP.last_resorts`)."""
 
 
 @dataclass(frozen=True, eq=False)
-class SQP:
+class SQP(SQPOptions):
     """Line-search SQP with QP subproblems solved through ``qpsolvers``; see the package docstring for the method.
 
     Shared options: ``max_iterations`` (QP-based steps, restoration steps included; 3000, IPOPT's default: forward
@@ -62,46 +58,6 @@ class SQP:
     """
 
     name: ClassVar[str] = "sqp"
-
-    max_iterations: int = 3000
-    time_limit_s: float | None = None
-    tolerance: float = 1e-8
-    print_level: int = 0
-    qp_solver: str = "piqp"
-    qp_tolerance: float = 1e-10
-    hessian: str = "exact"
-    merit: str = "l1"
-    second_order_correction: bool = True
-    acceptable_tolerance: float = 1e-6
-    fallback_qp_solver: str | None = "clarabel"
-    crawl_shift_floor: float = SHIFT_FLOOR
-
-    def __post_init__(self) -> None:
-        if self.qp_solver not in qpsolvers.available_solvers:
-            raise ValueError(f"unknown QP solver {self.qp_solver!r}; available: "
-                             f"{', '.join(sorted(qpsolvers.available_solvers))}")
-        fallback = None if self.fallback_qp_solver in (None, "none") else self.fallback_qp_solver
-        if fallback is not None and fallback not in qpsolvers.available_solvers:
-            raise ValueError(f"unknown fallback QP solver {fallback!r}; available: "
-                             f"{', '.join(sorted(qpsolvers.available_solvers))}")
-        if self.hessian not in _HESSIANS:
-            raise ValueError(f"unknown hessian {self.hessian!r}; choose one of {', '.join(_HESSIANS)}")
-        if self.merit not in _MERITS:
-            raise ValueError(f"unknown merit {self.merit!r}; choose one of {', '.join(_MERITS)}")
-        if self.max_iterations < 0 or min(self.tolerance, self.qp_tolerance, self.acceptable_tolerance) <= 0:
-            raise ValueError("max_iterations must be ≥ 0, the tolerances > 0")
-        if not 0 < self.crawl_shift_floor <= SHIFT_FLOOR:
-            raise ValueError(f"crawl_shift_floor must be in (0, {SHIFT_FLOOR:g}]: the crawl floor is the usual one "
-                             f"or lower")
-        tolerance = float(self.tolerance)
-        normalized = {"max_iterations": int(self.max_iterations), "tolerance": tolerance,
-                      "print_level": int(self.print_level), "fallback_qp_solver": fallback,
-                      "qp_tolerance": float(self.qp_tolerance),
-                      "second_order_correction": bool(self.second_order_correction),
-                      "acceptable_tolerance": max(float(self.acceptable_tolerance), tolerance),
-                      "crawl_shift_floor": float(self.crawl_shift_floor)}
-        for field_name, value in normalized.items():
-            object.__setattr__(self, field_name, value)
 
     def continuations(self) -> list[tuple[str, SQP]]:
         """After a solve that ran out of iterations, the same solver again from its last iterate, with the crawl
