@@ -132,6 +132,9 @@ def test_the_consistency_check_lists_every_finer_n_outside_the_tolerance():
         "forward", "OP-DC", 1.0, "40–90")
     assert row["deviation_percent"] == pytest.approx(30.0)
     assert (row["dearest_step"], row["dearest_step_excess"]) == (2, pytest.approx(0.6))  # step 2: 1.6 against 1.0
+    assert pd.isna(row["ground_at_dearest_step"])  # no ground was asked about
+    grounds = statistics.consistency_exceptions(acot, df, ground=lambda name, step: f"{name} step {step}")
+    assert grounds.set_index("N").loc[110, "ground_at_dearest_step"] == "forward step 2"
     key = df[(df["method"] == "OP-DC") & (df["N"] == 110)]["case_key"].iloc[0]
     assert row["case_keys"] == key
     assert statistics.inconsistent_keys(df, acot) == set(" ".join(exceptions["case_keys"]).split())

@@ -171,6 +171,26 @@ def test_terrain_clearance_sees_the_stairs_the_chord_does_not():
     assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=1e-12)
 
 
+def _passes_above_unrounded_ground(behind: float, ahead: float) -> bool:
+    """Whether some stance-leg angle lets straight legs cross with the swing foot above the unrounded ground on
+    both sides of the stance foot (just before and just after the crossing)."""
+    for q in np.linspace(-1.5, 1.5, 3001):
+        before = terrain_clearance(q, q - 1e-4, ahead, behind, eps=1e-12)
+        after = terrain_clearance(q, q + 1e-4, ahead, behind, eps=1e-12)
+        if before >= 0 and after >= 0:
+            return True
+    return False
+
+
+def test_a_leg_without_a_knee_swings_through_a_peak_but_not_through_a_dip():
+    bends = [STAIRS.bend(step) for step in range(1, len(STAIRS.steps) + 1)]
+    assert [step for step, bend in enumerate(bends, 1) if bend == "dips"] == [1, 3, 5, 8]
+    for step, bend in enumerate(bends, 1):
+        behind, ahead = STAIRS.ground_behind(step), STAIRS.steps[step - 1].theta
+        assert _passes_above_unrounded_ground(behind, ahead) == (bend != "dips"), step
+    assert {DOWNWARD.bend(step) for step in range(1, len(DOWNWARD.steps) + 1)} == {"even"}  # starts on its slope
+
+
 def test_stairs_start_on_a_level_floor_and_slopes_on_their_slope():
     assert STAIRS.ground_behind(1) == 0.0
     assert DOWNWARD.ground_behind(1) == -0.677

@@ -77,6 +77,13 @@ class Terrain:
             return self.steps[0].theta if self.start_inclination is None else float(self.start_inclination)
         return self.steps[step - 2].theta
 
+    def bend(self, step: int) -> str:
+        """How the ground bends under the stance foot of ``step``: ``dips`` where the chord ahead is steeper upward
+        than the one behind (a valley, through which a leg without a knee cannot swing above the ground, so that
+        only the clearance's rounding lets it pass: docs/model.md §4), ``peaks`` the other way, else ``even``."""
+        turn = self.steps[step - 1].theta - self.ground_behind(step)
+        return "dips" if turn > BEND_TOLERANCE else "peaks" if turn < -BEND_TOLERANCE else "even"
+
     @classmethod
     def flat(cls, chords: Iterable[float]) -> Terrain:
         return cls.slope(chords, 0.0)
@@ -129,6 +136,9 @@ def clearance(q_st: Any, q_sw: Any, theta: Any) -> Any:
     ns = _namespace(q_st, q_sw, theta)
     return ns.cos(q_st - theta) - ns.cos(q_sw - theta)
 
+
+BEND_TOLERANCE = 1e-9
+"""Inclinations (rad) closer than this are one straight ground."""
 
 TERRAIN_KINK_SMOOTHING = 1e-2
 """ε (in leg lengths) over which the ground profile's bend under the stance foot is rounded by default (the problem

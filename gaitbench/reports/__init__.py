@@ -104,7 +104,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     paired = st.paired_savings(savings, minima)
     tables = {
         "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "acot_spread": spread,
-        "savings": savings, "savings_paired": paired, "consistency": st.consistency_exceptions(acot, df),
+        "savings": savings, "savings_paired": paired,
+        "consistency": st.consistency_exceptions(acot, df, ground=_stance_ground(registry)),
         "published_acot": tb.published_comparison(minima, _thesis_bounds(minima, registry)),
         "published_savings": st.with_paired_savings(tb.published_savings(savings, info), paired, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
@@ -225,6 +226,27 @@ def _thesis_bounds(minima, registry: PluginRegistry | None) -> dict:
     held = set(minima["experiment"]) if not minima.empty else set()
     names = [name for name in thesis_values.EXPERIMENTS if name in held]
     return experiment_bounds(names, registry) if names else {}
+
+
+def _stance_ground(registry: PluginRegistry | None):
+    """``ground(experiment, step)``: how the ground bends under that step's stance foot (``Terrain.bend``), or None
+    for an experiment the registry cannot build."""
+    from functools import cache
+
+    from gaitbench.plugins import PluginConflictError, UnknownPluginError, load_registry
+
+    @cache
+    def terrain(name: str):
+        try:
+            return (registry or load_registry()).create("experiment", name).terrain
+        except (UnknownPluginError, PluginConflictError, ValueError):
+            return None
+
+    def ground(experiment: str, step: int) -> str | None:
+        found = terrain(experiment)
+        return found.bend(step) if found is not None and 1 <= step <= len(found.steps) else None
+
+    return ground
 
 
 def _partial_note(case) -> str:

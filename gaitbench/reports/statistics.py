@@ -22,7 +22,7 @@ from gaitbench.reports.case_frame import sweep_cases
 SPREAD_HALF_WIDTH = 10
 """Δ of the spread window: a cell's spread is over every complete walk at N − Δ … N + Δ (the thesis's grid step)."""
 CONSISTENCY_BAND = (40, 90)
-"""The coarser N whose median ACOT is a method's reference in the consistency check (issue 61's N = 40–90)."""
+"""The coarser N whose median ACOT is a method's reference in the consistency check."""
 CONSISTENCY_TOLERANCE = 0.15
 """A finer N's ACOT more than this fraction away from the reference median is an exception."""
 BOOTSTRAP_RESAMPLES = 10_000
@@ -35,7 +35,8 @@ PAIRED_SAVINGS_COLUMNS = ["experiment", "method", "baseline", "baseline_kind", "
                           "median_ci_low", "median_ci_high", "mean_percent", "mean_ci_low", "mean_ci_high",
                           "min_vs_min_percent", "published_min_vs_min_percent"]
 CONSISTENCY_COLUMNS = ["experiment", "method", "N", "acot", "reference_median", "reference_N", "ratio",
-                       "deviation_percent", "isolated", "dearest_step", "dearest_step_excess", "case_keys"]
+                       "deviation_percent", "isolated", "dearest_step", "dearest_step_excess", "ground_at_dearest_step",
+                       "case_keys"]
 
 
 # --- spread over neighbouring N ----------------------------------------------------------------------------------
@@ -133,7 +134,8 @@ def _published_saving(experiment: str, method: str | None, baseline: str | None)
 
 def consistency_exceptions(acot: pd.DataFrame, df: pd.DataFrame | None = None,
                            band: tuple[int, int] = CONSISTENCY_BAND, tolerance: float = CONSISTENCY_TOLERANCE,
-                           half_width: int = SPREAD_HALF_WIDTH) -> pd.DataFrame:
+                           half_width: int = SPREAD_HALF_WIDTH,
+                           ground: Callable[[str, int], str | None] | None = None) -> pd.DataFrame:
     """Every cell finer than ``band`` (N > band[1]) whose ACOT lies more than ``tolerance`` (a fraction) from the
     median ACOT of its experiment and method over the N in ``band``; a finer grid of the same problem should not
     cost much more or less than the coarser ones.
@@ -142,8 +144,10 @@ def consistency_exceptions(acot: pd.DataFrame, df: pd.DataFrame | None = None,
     single N that fell into another optimum, rather than a drift over a range of N. From the prepared cases ``df``,
     when given: ``dearest_step``, the step whose COT lies furthest above the median COT of the same step over the
     band's walks, and by how much (``dearest_step_excess``), which locates the cost; and ``case_keys``, the complete
-    walks of the cell: the cases to solve again. A method without a complete walk in the band has no reference and
-    is not checked; a cell without a complete walk has no ACOT.
+    walks of the cell: the cases to solve again. ``ground(experiment, step)``, when given, says how the ground
+    bends under that step's stance foot (``ground_at_dearest_step``: a dip is where fine grids charge a detour that
+    coarse ones step over). A method without a complete walk in the band has no reference and is not checked; a cell
+    without a complete walk has no ACOT.
     """
     low, high = band
     rows = []
@@ -168,6 +172,7 @@ def consistency_exceptions(acot: pd.DataFrame, df: pd.DataFrame | None = None,
                          "deviation_percent": 100 * float(ratios[i] - 1),
                          "isolated": bool(len(neighbours)) and bool((np.abs(neighbours - 1) <= tolerance).all()),
                          "dearest_step": dearest, "dearest_step_excess": excess,
+                         "ground_at_dearest_step": ground(experiment, dearest) if ground and dearest else None,
                          "case_keys": " ".join(keys.get((experiment, method, int(n_values[i])), []))})
     table = pd.DataFrame(rows, columns=CONSISTENCY_COLUMNS)
     table["dearest_step"] = table["dearest_step"].astype("Int64")
