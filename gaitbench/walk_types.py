@@ -26,6 +26,7 @@ from gaitbench.solver_result import SolverResult, checked
 
 if TYPE_CHECKING:
     from gaitbench.checkpoint import WalkCheckpoint
+    from gaitbench.fan_out import FanOut
 
 
 @dataclass(frozen=True)
@@ -281,6 +282,10 @@ class WalkProblem:
     cores: IdleCores | None = field(default=None, compare=False, repr=False)
     """The machine's ledger of the cores walks are using, when the walk may borrow idle ones (a suite's case, a
     `gaitbench solve`): a strategy whose solves are independent may spread them over the cores it can hold."""
+    fan_out: FanOut | None = field(default=None, compare=False, repr=False)
+    """The run's map over its workers, when the run's executor has workers beyond the walk's machine (a Dask
+    cluster, :mod:`gaitbench.fan_out`): a strategy with independent solves may send them there instead of to
+    local processes."""
     checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
     """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
     the walk resumes after them (:func:`walk_step_by_step`)."""

@@ -22,6 +22,7 @@ from concurrent.futures import TimeoutError as FutureTimeout
 
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
+from gaitbench.run.dask_fan_out import DaskFanOut
 from gaitbench.run.runner import CaseOutcome, failed_outcome, run_case
 from gaitbench.solve.parallel import ProcessExpired, WorkerPool
 
@@ -119,6 +120,9 @@ class DaskExecutor:
     """
 
     name = "dask"
+    fans_out = True
+    """A case's walk may spread its independent solves over every worker (:mod:`gaitbench.run.dask_fan_out`), so
+    a local cluster keeps its ``jobs`` workers however few cases there are."""
 
     def __init__(self, scheduler: str | None = None, jobs: int = 1) -> None:
         self.scheduler = scheduler
@@ -191,13 +195,6 @@ def _dask_outcome(future, case: Case) -> CaseOutcome:
         return failed_outcome(case, "error", f"Dask task failed: {type(error).__name__}: {error}")
 
 
-def _dask_outcome(future, case: Case) -> CaseOutcome:
-    try:
-        return future.result()
-    except Exception as error:  # the worker was lost (KilledWorker) or the task failed
-        return failed_outcome(case, "crashed", f"Dask task failed: {type(error).__name__}: {error}")
-
-
 class ExecutorError(Exception):
     """Cases cannot run where they were sent; the message says how to fix it."""
 
@@ -206,17 +203,44 @@ _POOLS = threading.local()
 
 
 def run_case_pooled(case: Case) -> CaseOutcome:
-    """The Dask task: ``case`` run in this worker thread's one-process pool, stopped past :func:`hard_limit`."""
-    if multiprocessing.current_process().daemon:  # a worker of an existing cluster that joined after the check
-        from distributed import get_worker
+    """The Dask task: ``case`` run in this worker thread's one-process pool, stopped past :func:`hard_limit`.
 
-        return failed_outcome(case, "error", _daemonic_message([get_worker().address]))
+    On a Dask worker the walk may fan its sections out over the cluster (:mod:`gaitbench.run.dask_fan_out`), and
+    this task secedes from the worker's threads while it waits: its thread is then free for sections, its own
+    case's or another's, instead of idling while they queue behind it."""
+    from distributed import get_worker, rejoin, secede
+
+    try:
+        worker = get_worker()
+    except ValueError:  # called outside a Dask worker (tests): no cluster to fan out to
+        worker = None
+    if multiprocessing.current_process().daemon:  # a worker of an existing cluster that joined after the check
+        return failed_outcome(case, "error", _daemonic_message([worker.address if worker else "?"]))
     if not hasattr(_POOLS, "pool"):
-        for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
-            os.environ.pop(name, None)
         # dies with the Dask worker: a case whose worker was killed is run again elsewhere, not twice at once
-        _POOLS.pool = WorkerPool(1, state=BuildCache, start="spawn", die_with_parent=True)
-    return _pool_outcome(_POOLS.pool.schedule(run_case, case, timeout=hard_limit(case)), case)
+        _POOLS.pool = spawned_pool(1, BuildCache)
+    fan_out = None if worker is None else DaskFanOut(worker.scheduler.address, case)
+    future = _POOLS.pool.schedule(_run_case_fanned_out, (case, fan_out), timeout=hard_limit(case))
+    if worker is None:
+        return _pool_outcome(future, case)
+    secede()
+    try:
+        return _pool_outcome(future, case)
+    finally:
+        rejoin()
+
+
+def spawned_pool(workers: int, state) -> WorkerPool:
+    """A pool of spawned processes for a Dask worker's cases or sections, dying with it, without the environment
+    only the Dask worker needs (:data:`DASK_ONLY_ENVIRONMENT`)."""
+    for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
+        os.environ.pop(name, None)
+    return WorkerPool(workers, state=state, start="spawn", die_with_parent=True)
+
+
+def _run_case_fanned_out(work: tuple[Case, DaskFanOut | None], builds: BuildCache) -> CaseOutcome:
+    case, fan_out = work
+    return run_case(case, builds, fan_out)
 
 
 def _daemonic() -> bool:
