@@ -56,10 +56,11 @@ class DaskFanOut:
                              case=self.case, task=task, state=state)
         try:
             return client.gather(futures)
-        except KilledWorker as error:
-            raise FanOutError(f"a fanned-out task's Dask workers all died while running it ({error})") from None
-        finally:
+        except BaseException as error:
             client.cancel(futures)  # a failed map leaves nothing running for it
+            if isinstance(error, KilledWorker):
+                raise FanOutError(f"a fanned-out task's Dask workers all died while running it ({error})") from None
+            raise
 
 
 def _client(scheduler: str):
