@@ -72,13 +72,20 @@ def _client(scheduler: str):
 
 
 def run_item(item: Any, case: Case, task: Callable[[Any, Any], Any], state: Callable[[WalkProblem], Any]) -> Any:
-    """The Dask task of one fanned-out item: ``task(item, state)`` in this Dask worker's section pool."""
+    """The Dask task of one fanned-out item: ``task(item, state)`` in this Dask worker's section pool, its process
+    stopped (and replaced) past the case's hard limit, as the case's own would be."""
+    from concurrent.futures import TimeoutError as FutureTimeout
+
     from gaitbench.solve.parallel import ProcessExpired
 
+    future = _section_pool().schedule(_run_in_worker, (item, case, task, state), timeout=case.hard_limit_s)
     try:
-        return _section_pool().schedule(_run_in_worker, (item, case, task, state)).result()
+        return future.result()
     except ProcessExpired as error:
         raise FanOutError(f"the section process of case {case.key} died (exit status {error.exitcode})") from None
+    except FutureTimeout:
+        raise FanOutError(f"a section of case {case.key} still ran {case.hard_limit_s:.0f} s after it started; "
+                          "its process was stopped") from None
 
 
 _POOL_LOCK = threading.Lock()
