@@ -108,12 +108,12 @@ class DaskExecutor:
 
     Each Dask worker runs each case in a one-process :class:`~gaitbench.solve.parallel.WorkerPool` of its own, as
     the local executor does, so a case that crashes or hangs costs that case and not the Dask worker, and the pool's
-    process keeps what its walks build for the next case; it dies with its Dask worker. A decrease-and-conquer case
-    fans its sectional solves out over the whole cluster (:mod:`gaitbench.run.dask_fan_out`). That process is a
-    child of the Dask worker, which Python allows only of processes that are not daemonic. A nanny makes its worker
-    daemonic unless ``distributed.worker.daemon`` is false, and reads that setting each time it (re)starts the worker:
-    the local cluster's nannies run in this process, which holds the setting false for the cluster's whole life; the
-    workers of an existing cluster need it where they start (:data:`DAEMONIC_FIX`).
+    process keeps what its walks build for the next case; it dies with its Dask worker. That process is a child of
+    the Dask worker, which Python allows only of processes that are not daemonic. A nanny makes its worker daemonic
+    unless ``distributed.worker.daemon`` is false, and reads that setting each time it (re)starts the worker: the
+    local cluster's nannies run in this process, which holds the setting false for the cluster's whole life; the
+    workers of an existing cluster need it where they start (:data:`DAEMONIC_FIX`). A decrease-and-conquer case
+    fans its sectional solves out over the whole cluster (:mod:`gaitbench.run.dask_fan_out`).
 
     A case whose worker dies is run again on another worker by the scheduler, up to its
     ``distributed.scheduler.allowed-failures`` (3 by default) deaths; after that it is recorded as ``crashed`` with
