@@ -4,9 +4,18 @@ Run:    .venv/bin/python benchmarks/scaling.py STORE [--suite SUITE.toml] [--wor
 
 For each W it computes the makespan of the runner's own schedule: the cases largest N first, suite order among
 equal N (:func:`gaitbench.run.runner.largest_first`), each handed to the first worker that frees up, as the local
-pool and the Dask executor do. Beside it, the bound no schedule beats: the longest case, or the total case time
-over W, whichever is larger. Past the W where the longest case dominates, more workers buy nothing: the next lever
-is that case's own time (docs/performance.md).
+pool does. Beside it, the bound no schedule beats: the longest case, or the total case time over W, whichever is
+larger.
+
+On Dask a decrease-and-conquer case also fans its sectional solves out over every worker
+(:mod:`gaitbench.run.dask_fan_out`), so the cluster's W cores share pieces of work, not whole cases. The model
+splits each D&C case into its steps as its saved walk records them: per step a serial part (the First Phase, the
+complete and the polishing solves, their ``solve_time_s``) and N − 3 sections, which share the rest of the case's
+time equally (so builds, synthesis and verification count as section time: the fan-out's share is an upper bound).
+The cases start as the runner starts them (largest first, at most W at once); a free core takes a waiting serial
+part first (the case's own process, which holds no Dask thread while it walks, starts it at once), else the
+section that has waited longest. Its bound is the longest case's critical path (serial parts, and each step's
+sections W at a time), or the total over W.
 
 The model takes each case's stored ``wall_time_s`` as what it costs on one worker. That holds where workers do
 not share a core (a Dask worker per core); case times measured beside other work are inflated, and the store's
@@ -18,7 +27,10 @@ from __future__ import annotations
 
 import argparse
 import heapq
+import json
+import math
 import sys
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,6 +73,97 @@ def scaling(cases: pd.DataFrame, workers: tuple[int, ...] = WORKERS) -> list[Sca
     return [Scaling(w, makespan(times, w), max(max(times, default=0.0), sum(times) / w)) for w in workers]
 
 
+@dataclass(frozen=True)
+class CaseWork:
+    """A case as pieces of work: per step, its serial seconds and its sections' seconds (none for a case that does
+    not fan out, which is one serial piece)."""
+
+    steps: tuple[tuple[float, tuple[float, ...]], ...]
+
+    @property
+    def total_s(self) -> float:
+        return sum(serial + sum(sections) for serial, sections in self.steps)
+
+    def critical_path(self, workers: int) -> float:
+        """The case alone on ``workers`` cores: its serial parts, and each step's sections ``workers`` at a time."""
+        return sum(serial + (math.ceil(len(sections) / workers) * max(sections) if sections else 0.0)
+                   for serial, sections in self.steps)
+
+
+def case_work(row: pd.Series, store: Path) -> CaseWork:
+    """``row``'s case as pieces: a D&C walk split by its saved steps (see the module's docstring), any other case
+    whole."""
+    wall = float(row["wall_time_s"])
+    walk_path = row.get("walk_path")
+    if row.get("strategy") != "decrease-and-conquer" or not isinstance(walk_path, str) \
+            or not (store / walk_path).exists():
+        return CaseWork(((wall, ()),))
+    steps = [step.get("details") or {} for step in json.loads((store / walk_path).read_text())["steps"]]
+    serial = [sum((details.get(part) or {}).get("solve_time_s") or 0.0
+                  for part in ("first_phase", "complete", "polished")) for details in steps]
+    sectioned = [details for details in steps if "candidates" in details]  # the steps that reached their sections
+    count = int(row["N"]) - 3
+    if not sectioned or count < 1:
+        return CaseWork(((wall, ()),))
+    section = max(wall - sum(serial), 0.0) / (len(sectioned) * count)
+    return CaseWork(tuple((time, (section,) * count if "candidates" in details else ())
+                          for time, details in zip(serial, steps, strict=True)))
+
+
+def fanned_makespan(cases: list[CaseWork], workers: int) -> float:
+    """When ``workers`` cores finish ``cases`` (in the runner's order, at most ``workers`` at once), each core
+    taking a waiting serial part first, else the section that has waited longest: a step's sections are ready when
+    its serial part ends."""
+    serials: deque[tuple[int, int, float]] = deque()  # (case, step, seconds)
+    sections_ready: deque[tuple[int, int, float]] = deque()
+    remaining: dict[tuple[int, int], int] = {}  # sections of a step still running or waiting
+    running: list[tuple[float, int, int, int, bool]] = []  # (ends at, sequence, case, step, is serial)
+    upcoming, started, now, sequence = iter(range(len(cases))), 0, 0.0, 0
+
+    def start_step(case: int, step: int) -> None:
+        nonlocal started
+        if step == len(cases[case].steps):  # the case is done: the runner hands out the next one
+            started -= 1
+            start_case()
+        else:
+            serials.append((case, step, cases[case].steps[step][0]))
+
+    def start_case() -> None:
+        nonlocal started
+        while started < workers and (case := next(upcoming, None)) is not None:
+            started += 1
+            start_step(case, 0)
+
+    start_case()
+    while serials or sections_ready or running:
+        while (serials or sections_ready) and len(running) < workers:
+            serial = bool(serials)
+            case, step, seconds = (serials or sections_ready).popleft()
+            heapq.heappush(running, (now + seconds, sequence, case, step, serial))
+            sequence += 1
+        now, _, case, step, serial = heapq.heappop(running)
+        if serial:
+            sections = cases[case].steps[step][1]
+            remaining[(case, step)] = len(sections)
+            sections_ready.extend((case, step, seconds) for seconds in sections)
+            if sections:
+                continue
+        else:
+            remaining[(case, step)] -= 1
+            if remaining[(case, step)]:
+                continue
+        del remaining[(case, step)]
+        start_step(case, step + 1)
+    return now
+
+
+def fanned_scaling(cases: list[CaseWork], workers: tuple[int, ...] = WORKERS) -> list[Scaling]:
+    """:func:`scaling` for a cluster on which D&C's sections fan out: ``cases`` in the runner's order."""
+    total = sum(case.total_s for case in cases)
+    return [Scaling(w, fanned_makespan(cases, w),
+                    max(max((case.critical_path(w) for case in cases), default=0.0), total / w)) for w in workers]
+
+
 def missing_cases(store: Path, suite_file: Path) -> list[str]:
     """The suite's cases the store does not hold, described."""
     from gaitbench.run.suite import load_suite
@@ -82,10 +185,20 @@ def report(store: Path, workers: tuple[int, ...], suite_file: Path | None) -> st
     if suite_file is not None:
         missing = missing_cases(store, suite_file)
         lines += [f"Not measured yet: {len(missing)} of the suite's cases (not in the model).", ""]
-    lines += ["| workers | wall time (schedule) | bound (longest case, or total / workers) | efficiency |",
-              "|---|---|---|---|"]
-    lines += [f"| {row.workers} | {row.makespan_s:,.0f} s | {row.bound_s:,.0f} s | {row.efficiency:.0%} |"
-              for row in rows]
+    ordered = schedule_order(cases)
+    works = [case_work(row, store) for _, row in ordered.iterrows()]
+    fanned = fanned_scaling(works, workers)
+    fanning = [(work, row) for work, (_, row) in zip(works, ordered.iterrows(), strict=True)
+               if any(sections for _, sections in work.steps)]
+    if fanning:
+        work, row = max(fanning, key=lambda pair: pair[0].total_s)
+        paths = ", ".join(f"{work.critical_path(w):,.0f} s on {w}" for w in workers)
+        lines += [f"The longest case whose sections fan out, {row['method']} {row['experiment']} N = {row['N']}: "
+                  f"{work.total_s:,.0f} s whole; alone on a cluster: {paths}.", ""]
+    lines += ["| workers | whole cases (local pool) | its bound | sections fanned out (Dask) | its bound |",
+              "|---|---|---|---|---|"]
+    lines += [f"| {row.workers} | {row.makespan_s:,.0f} s | {row.bound_s:,.0f} s | {fan.makespan_s:,.0f} s | "
+              f"{fan.bound_s:,.0f} s |" for row, fan in zip(rows, fanned, strict=True)]
     return "\n".join(lines) + "\n"
 
 

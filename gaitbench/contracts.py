@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import inspect
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
@@ -152,6 +152,22 @@ class Strategy(Protocol):
         failed, each with its status, trajectory and verification. Failures end the walk, never raise."""
 
 
+Item = TypeVar("Item")
+State = TypeVar("State")
+Result = TypeVar("Result")
+
+
+class FanOut(Protocol):
+    """A map over the run's workers for one walk (one case)."""
+
+    def map(self, task: Callable[[Item, State], Result], items: Sequence[Item],
+            state: Callable[[WalkProblem], State]) -> list[Result]:
+        """``task(item, state(problem))`` for every item, on the run's workers; the results in the items' order.
+        ``task`` and ``state`` are module-level (pickled); ``problem`` is this walk's, rebuilt on the worker.
+        Raises what a task raised, or :class:`~gaitbench.fan_out.FanOutError` when a task could not be run."""
+        ...
+
+
 class StepsOutOfRange(ValueError):
     """A walk asked for fewer than one step, or more than its experiment has."""
 
@@ -181,6 +197,10 @@ class WalkProblem:
     checkpoint: WalkCheckpoint | None = field(default=None, compare=False, repr=False)
     """Where the walk keeps its solved steps as it goes, and the steps an earlier, stopped run of it kept:
     the walk resumes after them (:func:`walk_step_by_step`)."""
+    fan_out: FanOut | None = field(default=None, compare=False, repr=False)
+    """The run's map over its workers, when the run's executor has workers beyond the walk's machine (a Dask
+    cluster, :mod:`gaitbench.fan_out`): a strategy with independent solves may send them there instead of to
+    local processes."""
     experiment_options: dict = field(default_factory=dict, compare=False, repr=False)
     """The options the experiment was built with, recorded in the walk (:attr:`WalkResult.experiment_options`)."""
     strategy_options: dict = field(default_factory=dict, compare=False, repr=False)

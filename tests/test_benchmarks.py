@@ -156,6 +156,28 @@ def test_the_scaling_model_schedules_as_the_runner_hands_out_cases():
     assert (eight.makespan_s, eight.bound_s, eight.efficiency) == (5.0, 5.0, 1.0)  # the longest case bounds it
 
 
+def test_the_fanned_out_model_shares_the_cores_between_sections_and_reads_d_and_c_walks(tmp_path):
+    import pandas as pd
+
+    model = _scaling_module()
+    # a D&C case (1 s serial, then 4 sections of 1 s) beside a 3 s case on 2 cores: the sections take the core the
+    # serial part frees at 1 s, then both cores from 3 s: done at 4 s, the bound (8 s of work over 2 cores)
+    dc, whole = model.CaseWork(((1.0, (1.0,) * 4),)), model.CaseWork(((3.0, ()),))
+    two, = model.fanned_scaling([dc, whole], (2,))
+    assert (two.makespan_s, two.bound_s) == (4.0, 4.0)
+    assert dc.critical_path(2) == 3.0 and model.fanned_makespan([dc, whole], 1) == 8.0
+    times = [5.0, 4.0, 3.0, 3.0, 3.0]  # cases that do not fan out: the local pool's schedule
+    assert model.fanned_makespan([model.CaseWork(((t, ()),)) for t in times], 2) == model.makespan(times, 2)
+
+    walk = {"steps": [{"details": {"first_phase": {"solve_time_s": 1.0}, "complete": {"solve_time_s": 1.0},
+                                   "polished": {"solve_time_s": 1.0}, "candidates": 3}}] * 2}
+    (tmp_path / "walk.json").write_text(json.dumps(walk))
+    row = pd.Series({"strategy": "decrease-and-conquer", "N": 5, "wall_time_s": 10.0, "walk_path": "walk.json"})
+    # 2 × 3 s serial; the other 4 s shared by 2 steps × (N − 3) sections
+    assert model.case_work(row, tmp_path).steps == ((3.0, (1.0, 1.0)), (3.0, (1.0, 1.0)))
+    assert model.case_work(row.drop("walk_path"), tmp_path).steps == ((10.0, ()),)
+
+
 def _completion_module():
     return _benchmark("completion")
 

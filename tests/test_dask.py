@@ -15,7 +15,7 @@ import pytest
 
 import gaitbench
 from gaitbench.run.case import Case, PluginChoice
-from gaitbench.run.executors import DaskExecutor
+from gaitbench.run.executors import DaskExecutor, InProcessExecutor
 from gaitbench.run.runner import run_suite
 
 SLOW_PLUGIN = '''
@@ -27,15 +27,18 @@ class Slow:
     """IPOPT after a pause: a case long enough for its worker to be killed while it runs."""
     name = "slow-ipopt"
 
-    def __init__(self, pause_s=3.0, log=None, **options):
+    def __init__(self, pause_s=3.0, log=None, pids=None, **options):
         from plugins.solvers.ipopt import Ipopt
-        self.pause_s, self.log, self.ipopt = pause_s, log, Ipopt(**options)
+        self.pause_s, self.log, self.pids, self.ipopt = pause_s, log, pids, Ipopt(**options)
 
     def solve(self, nlp, parameters, initial_guess):
         import os
         if self.log:  # the Dask worker whose case process this is
             with open(self.log, "a") as file:
                 file.write(f"{os.getppid()} ")
+        if self.pids:  # the process that solves, and its parent
+            with open(self.pids, "a") as file:
+                file.write(f"{os.getppid()}:{os.getpid()} ")
         time.sleep(self.pause_s)
         return self.ipopt.solve(nlp, parameters, initial_guess)
 
@@ -63,6 +66,12 @@ def register_solvers():
 def slow_case(n_nodes: int, plugin_dir: Path, solver: str = "slow-ipopt", **options) -> Case:
     return Case(PluginChoice("forward"), n_nodes, PluginChoice("hermite-simpson"), PluginChoice(solver, options),
                 PluginChoice("one-phase"), steps=1, method="OP-DC slow", time_limit_s=120,
+                plugin_dirs=(str(plugin_dir),))
+
+
+def dc_case(plugin_dir: Path, **options) -> Case:
+    return Case(PluginChoice("forward"), 8, PluginChoice("hermite-simpson"), PluginChoice("slow-ipopt", options),
+                PluginChoice("decrease-and-conquer", {"polish": False}), steps=1, method="DC", time_limit_s=120,
                 plugin_dirs=(str(plugin_dir),))
 
 
@@ -142,3 +151,25 @@ def test_a_case_whose_workers_keep_dying_is_crashed_with_the_cause_worker_died(t
     assert rows[fine.key]["status"] == "solved" and summary.solved == 1 and summary.failed == 1
     assert rows[deadly.key]["status"] == "crashed" and rows[deadly.key]["stop_cause"] == "crashed"
     assert rows[deadly.key]["message"].startswith("worker died: the 2 Dask workers that ran this case each died")
+
+
+@pytest.mark.slow
+def test_a_case_s_sections_fan_out_over_the_cluster_s_workers_with_the_walk_solved_here(tmp_path: Path) -> None:
+    """On Dask, decrease and conquer's sectional solves are tasks on every worker of the cluster, not solves in its
+    case's process, and the walk is the one solved in this process (same choices, candidate COTs, ACOTs)."""
+    plugins, pids = _plugin_dir(tmp_path), tmp_path / "solves.pids"
+    here = run_suite(_suite(tmp_path, [dc_case(plugins, pause_s=0.0)]), tmp_path / "here", InProcessExecutor())
+    fanned = run_suite(_suite(tmp_path, [dc_case(plugins, pause_s=0.0, pids=str(pids))]), tmp_path / "dask",
+                       DaskExecutor(jobs=2))
+    assert here.solved == fanned.solved == 1
+
+    local, = gaitbench.load_results(tmp_path / "here").to_dict("records")
+    dask, = gaitbench.load_results(tmp_path / "dask").to_dict("records")
+    for column in ("status", "acot", "claimed_acot", "cot_steps", "iterations", "strategy_details"):
+        assert dask[column] == local[column], column
+    solves = [tuple(int(pid) for pid in entry.split(":")) for entry in pids.read_text().split()]
+    (dask_worker, case_process), *_ = solves  # the First Phase is solved in the case's process
+    sections = [solve for solve in solves if solve[1] != case_process]
+    assert len(solves) == 2 + len(sections) and len(sections) == 8 - 3  # First Phase, complete here; N − 3 there
+    parents = {parent for parent, _ in sections}
+    assert len(parents) == 2 and dask_worker in parents  # both workers' section processes, not the case's

@@ -428,11 +428,10 @@ def test_a_cluster_of_daemonic_workers_is_refused_with_the_fix(tmp_path: Path) -
 
 @pytest.fixture
 def dask_task_pool():
-    """The Dask task's pool of this thread, closed after the test (a Dask worker thread keeps it for its life)."""
+    """The Dask tasks' case pools, closed after the test (a Dask worker keeps them for its life)."""
     yield
-    if hasattr(executors._POOLS, "pool"):
-        executors._POOLS.pool.close()
-        del executors._POOLS.pool
+    while executors._IDLE_CASE_POOLS:
+        executors._IDLE_CASE_POOLS.pop().close()
 
 
 def _environment(item: object, state: object) -> dict[str, str]:
@@ -445,7 +444,8 @@ def test_a_dask_task_s_process_lacks_the_nanny_s_malloc_trimming(dask_task_pool,
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
     assert executors.run_case_pooled(walk_case(8)).status == "solved"
-    environment = executors._POOLS.pool.schedule(_environment, None).result()
+    pool, = executors._IDLE_CASE_POOLS
+    environment = pool.schedule(_environment, None).result()
     assert "MALLOC_TRIM_THRESHOLD_" not in environment and environment["OPENBLAS_NUM_THREADS"] == "1"
     assert executors.run_case_pooled(walk_case(10)).status == "solved"
 

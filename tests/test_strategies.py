@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import pickle
+from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -14,6 +16,7 @@ from click.testing import CliRunner
 from gaitbench.cli.main import main
 from gaitbench.contracts import WalkProblem
 from gaitbench.cores import IdleCores
+from gaitbench.fan_out import WorkerStates
 from gaitbench.plugins import load_registry
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
@@ -386,6 +389,50 @@ def test_auto_workers_borrow_only_the_idle_cores_and_give_the_sequential_walk(fo
     assert solved_here[:2] == [2, 3] and widths == [2, 2]  # the rest of the step spread over both cores
     for walked in (borrowing, busy, freed):
         _assert_same_step(walked, sequential)
+
+
+class PickledFanOut:
+    """A run's fan-out without a cluster: each item and the task and state factory pickled as a Dask worker gets
+    them, and the state made from the walk's problem built afresh, as a worker rebuilds it
+    (:mod:`gaitbench.fan_out`)."""
+
+    def __init__(self, problem: Callable[[], WalkProblem]) -> None:
+        self.states, self.problem, self.items = WorkerStates(), problem, []
+
+    def map(self, task, items, state):
+        task, state = pickle.loads(pickle.dumps((task, state)))
+        self.items += [pickle.loads(pickle.dumps(item)) for item in items]
+        return [task(item, self.states.get("walk", state, self.problem)) for item in self.items[-len(items):]]
+
+
+def test_a_fanned_out_walk_s_sections_go_to_the_run_s_workers_and_give_the_walk_solved_here(forward, monkeypatch):
+    """With a run's fan-out, workers = "auto" sends every section of a step to it, a worker builds each section it
+    is sent once for the whole walk, and the walk is the one solved serially; a set number of workers keeps the
+    walk's own processes."""
+    from gaitbench.problem.transcription import Transcription
+
+    def problem(fan_out=None, builds=None):
+        return WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                           REGISTRY.create("solver", "ipopt"), 8, steps=2, fan_out=fan_out,
+                           builds=builds or BuildCache())
+
+    built, build = [], Transcription._build
+    sequential = DecreaseAndConquer(polish=False, workers=1).solve(problem())
+    worker_builds = BuildCache()
+    fan_out = PickledFanOut(lambda: problem(builds=worker_builds))
+    monkeypatch.setattr(Transcription, "_build",
+                        lambda self, structure: built.append(structure) or build(self, structure))
+    fanned = DecreaseAndConquer(polish=False).solve(problem(fan_out))
+    assert [k0 for k0, _, _ in fan_out.items] == [2, 3, 4, 5, 6] * 2  # every section of both steps
+    worker_sections = [structure for structure in built if structure.n_nodes < 8][5:]
+    assert len(worker_sections) == 5  # the walk's own five, then the worker's five, once for both steps
+    assert fanned.complete and fanned.strategy_details == sequential.strategy_details
+    for one, other in zip(fanned.steps, sequential.steps, strict=True):
+        assert one.details["candidate_cots"] == other.details["candidate_cots"]
+        np.testing.assert_array_equal(one.trajectory.q, other.trajectory.q)
+    fan_out.items.clear()
+    DecreaseAndConquer(polish=False, workers=1).solve(problem(fan_out))
+    assert fan_out.items == []
 
 
 def test_walks_sharing_a_build_cache_build_only_the_sections_not_built_yet(forward, monkeypatch):

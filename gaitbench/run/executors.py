@@ -18,10 +18,12 @@ import os
 import signal
 import threading
 from collections.abc import Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
+from gaitbench.run.dask_fan_out import DaskFanOut
 from gaitbench.run.runner import CaseOutcome, failed_outcome, run_case
 from gaitbench.solve.parallel import ProcessExpired, WorkerPool
 
@@ -104,13 +106,14 @@ def _pool_outcome(future, case: Case) -> CaseOutcome:
 class DaskExecutor:
     """Cases as tasks on a Dask cluster: an existing one at ``scheduler``, or a local one of ``jobs`` workers.
 
-    Each Dask worker thread runs its cases in a one-process :class:`~gaitbench.solve.parallel.WorkerPool` of its
-    own, as the local executor does, so a case that crashes or hangs costs that case and not the Dask worker, and
-    the pool's process keeps what its walks build for the next case; it dies with its Dask worker. That process is a
-    child of the Dask worker, which Python allows only of processes that are not daemonic. A nanny makes its worker
-    daemonic unless ``distributed.worker.daemon`` is false, and reads that setting each time it (re)starts the worker:
-    the local cluster's nannies run in this process, which holds the setting false for the cluster's whole life; the
-    workers of an existing cluster need it where they start (:data:`DAEMONIC_FIX`).
+    Each Dask worker runs each case in a one-process :class:`~gaitbench.solve.parallel.WorkerPool` of its own, as
+    the local executor does, so a case that crashes or hangs costs that case and not the Dask worker, and the pool's
+    process keeps what its walks build for the next case; it dies with its Dask worker. That process is a child of
+    the Dask worker, which Python allows only of processes that are not daemonic. A nanny makes its worker daemonic
+    unless ``distributed.worker.daemon`` is false, and reads that setting each time it (re)starts the worker: the
+    local cluster's nannies run in this process, which holds the setting false for the cluster's whole life; the
+    workers of an existing cluster need it where they start (:data:`DAEMONIC_FIX`). A decrease-and-conquer case
+    fans its sectional solves out over the whole cluster (:mod:`gaitbench.run.dask_fan_out`).
 
     A case whose worker dies is run again on another worker by the scheduler, up to its
     ``distributed.scheduler.allowed-failures`` (3 by default) deaths; after that it is recorded as ``crashed`` with
@@ -119,6 +122,9 @@ class DaskExecutor:
     """
 
     name = "dask"
+    fans_out = True
+    """A case's walk may spread its independent solves over every worker (:mod:`gaitbench.run.dask_fan_out`), so
+    a local cluster keeps its ``jobs`` workers however few cases there are."""
 
     def __init__(self, scheduler: str | None = None, jobs: int = 1) -> None:
         self.scheduler = scheduler
@@ -191,32 +197,70 @@ def _dask_outcome(future, case: Case) -> CaseOutcome:
         return failed_outcome(case, "error", f"Dask task failed: {type(error).__name__}: {error}")
 
 
-def _dask_outcome(future, case: Case) -> CaseOutcome:
-    try:
-        return future.result()
-    except Exception as error:  # the worker was lost (KilledWorker) or the task failed
-        return failed_outcome(case, "crashed", f"Dask task failed: {type(error).__name__}: {error}")
-
-
 class ExecutorError(Exception):
     """Cases cannot run where they were sent; the message says how to fix it."""
 
 
-_POOLS = threading.local()
+_IDLE_CASE_POOLS: list[WorkerPool] = []
+"""This Dask worker's one-process case pools not running a case now; each keeps its process's builds for the next."""
+_POOL_LOCK = threading.Lock()
+_POOL_STARTER = ThreadPoolExecutor(1, thread_name_prefix="gaitbench-pool-starter")
+"""The thread that starts the Dask worker's pools: it lives as long as the worker, and a pool's processes die with
+the thread that started them (``die_with_parent``), while a Dask worker's own threads come and go (a task that
+secedes is replaced by a new thread, and one of the two ends when it rejoins)."""
 
 
 def run_case_pooled(case: Case) -> CaseOutcome:
-    """The Dask task: ``case`` run in this worker thread's one-process pool, stopped past :func:`hard_limit`."""
-    if multiprocessing.current_process().daemon:  # a worker of an existing cluster that joined after the check
-        from distributed import get_worker
+    """The Dask task: ``case`` run in a one-process pool of this Dask worker's, stopped past :func:`hard_limit`.
 
-        return failed_outcome(case, "error", _daemonic_message([get_worker().address]))
-    if not hasattr(_POOLS, "pool"):
-        for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
-            os.environ.pop(name, None)
+    On a Dask worker the walk may fan its sections out over the cluster (:mod:`gaitbench.run.dask_fan_out`), and
+    this task secedes from the worker's threads while it waits: its thread is then free for sections, its own
+    case's or another's, instead of idling while they queue behind it."""
+    from distributed import get_worker, rejoin, secede
+
+    try:
+        worker = get_worker()
+    except ValueError:  # called outside a Dask worker (tests): no cluster to fan out to
+        worker = None
+    if multiprocessing.current_process().daemon:  # a worker of an existing cluster that joined after the check
+        return failed_outcome(case, "error", _daemonic_message([worker.address if worker else "?"]))
+    with _POOL_LOCK:
+        pool = _IDLE_CASE_POOLS.pop() if _IDLE_CASE_POOLS else None
+    if pool is None:
         # dies with the Dask worker: a case whose worker was killed is run again elsewhere, not twice at once
-        _POOLS.pool = WorkerPool(1, state=BuildCache, start="spawn", die_with_parent=True)
-    return _pool_outcome(_POOLS.pool.schedule(run_case, case, timeout=hard_limit(case)), case)
+        pool = spawned_pool(1, BuildCache)
+    try:
+        fan_out = None if worker is None else DaskFanOut(worker.scheduler.address, case)
+        future = pool.schedule(_run_case_fanned_out, (case, fan_out), timeout=hard_limit(case))
+        if worker is None:
+            return _pool_outcome(future, case)
+        secede()
+        try:
+            return _pool_outcome(future, case)
+        finally:
+            rejoin()
+    finally:
+        with _POOL_LOCK:
+            _IDLE_CASE_POOLS.append(pool)
+
+
+def spawned_pool(workers: int, state) -> WorkerPool:
+    """A pool of spawned processes for a Dask worker's cases or sections, dying with it, without the environment
+    only the Dask worker needs (:data:`DASK_ONLY_ENVIRONMENT`); started from :data:`_POOL_STARTER`."""
+    for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
+        os.environ.pop(name, None)
+
+    def started() -> WorkerPool:
+        pool = WorkerPool(workers, state=state, start="spawn", die_with_parent=True)
+        pool.start()
+        return pool
+
+    return _POOL_STARTER.submit(started).result()
+
+
+def _run_case_fanned_out(work: tuple[Case, DaskFanOut | None], builds: BuildCache) -> CaseOutcome:
+    case, fan_out = work
+    return run_case(case, builds, fan_out)
 
 
 def _daemonic() -> bool:

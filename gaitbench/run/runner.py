@@ -29,8 +29,9 @@ from gaitbench.run.store import LOCK_TIMEOUT_S, ResultStore, case_file, checkpoi
 from gaitbench.run.store_schema import StoreError
 
 if TYPE_CHECKING:
+    from gaitbench.contracts import FanOut, Strategy
     from gaitbench.plugins import PluginRegistry
-    from gaitbench.walk_types import WalkResult
+    from gaitbench.walk_types import WalkProblem, WalkResult
 
 WALK_FILE = "walk.json"
 TRACK_FILE = "track.json"
@@ -60,15 +61,16 @@ class CaseOutcome:
         return self.status != "solved"
 
 
-def run_case(case: Case, builds: BuildCache | None = None) -> CaseOutcome:
+def run_case(case: Case, builds: BuildCache | None = None, fan_out: FanOut | None = None) -> CaseOutcome:
     """Solve one case's walk (and track it if the case asks), in this process, keeping what its strategy builds in
-    ``builds`` for the next cases (a worker's) or, without it, for this case alone."""
+    ``builds`` for the next cases (a worker's) or, without it, for this case alone. ``fan_out``: the run's map over
+    its workers, given to the walk (``WalkProblem.fan_out``)."""
     started = time.perf_counter()
     metrics: dict[str, Any] = {}
     files: dict[str, bytes] = {}
     walk = None
     try:
-        walk = _solve_walk(case, builds or BuildCache())
+        walk = _solve_walk(case, builds or BuildCache(), fan_out)
         metrics |= walk_metrics(walk)
         files |= _walk_files(walk)
         status = "solved" if walk.complete else "incomplete"
@@ -90,22 +92,31 @@ def failed_outcome(case: Case, status: str, message: str, wall_time_s: float = 0
     return CaseOutcome(case, status, message, wall_time_s)
 
 
-def _solve_walk(case: Case, builds: BuildCache) -> WalkResult:
+def case_walk(case: Case, **walk: Any) -> tuple[Strategy, WalkProblem]:
+    """The strategy and the walk problem of ``case``, its plugins built from its plugin directories, each solve
+    limited to its share of the case's time limit; ``walk``: the problem's other fields (``builds``, ...). A worker
+    that solves part of the case's walk (:mod:`gaitbench.fan_out`) rebuilds its problem here too."""
     from gaitbench.solve.walk_assembly import assemble_walk
-    from gaitbench.solve.walk_verification import solve_verified
 
     solver = case.solver
     if case.time_limit_s is not None:
         solver = replace(solver, options={"time_limit_s": case.solve_time_limit_s, **solver.options})
+    return assemble_walk(
+        _registry(case).create, case.n_nodes, experiment=case.experiment, transcription=case.transcription,
+        solver=solver, strategy=case.strategy, objective=case.objective, steps=case.steps,
+        problem_options=case.problem_options, **walk)
+
+
+def _solve_walk(case: Case, builds: BuildCache, fan_out: FanOut | None = None) -> WalkResult:
+    from gaitbench.solve.walk_verification import solve_verified
+
     checkpoint = None if case.checkpoint is None else \
         WalkCheckpoint.open(case.checkpoint, {"case": case.key, "code": code_fingerprint()})
     earlier = checkpoint.elapsed_s if checkpoint is not None else 0.0  # the time limit is the whole walk's
     deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s - earlier
     cores = IdleCores.machine()
-    strategy, problem = assemble_walk(
-        _registry(case).create, case.n_nodes, experiment=case.experiment, transcription=case.transcription,
-        solver=solver, strategy=case.strategy, objective=case.objective, steps=case.steps,
-        problem_options=case.problem_options, builds=builds, deadline=deadline, checkpoint=checkpoint, cores=cores)
+    strategy, problem = case_walk(case, builds=builds, deadline=deadline, checkpoint=checkpoint, cores=cores,
+                                  fan_out=fan_out)
     with cores.occupy():  # this case's core; the walk may borrow the idle others
         walk = solve_verified(strategy, problem)
     if checkpoint is not None and checkpoint.discarded:
@@ -296,8 +307,9 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
     ones re-run with ``retry_failed``, stopped walks with ``retry_incomplete``, complete walks without a verified
     ACOT with ``retry_unverified``, and the stored cases whose keys are in ``rerun``), and a dead run's claims are
     taken over. Cases start largest N first (:func:`largest_first`), or smallest N first with ``smallest_first``.
-    An executor with more ``jobs`` than cases to run gets as many as there are cases. ``on_start(to_run, skipped)``
-    and ``on_outcome(outcome)`` feed a progress display.
+    An executor with more ``jobs`` than cases to run gets as many as there are cases, unless its
+    walks fan out over its workers (``fans_out``: Dask). ``on_start(to_run, skipped)`` and ``on_outcome(outcome)``
+    feed a progress display.
 
     The first store error (a claim, a recording or a worker's checkpoint that cannot be written; a write lock held
     past ``lock_timeout`` seconds) stops the run with that :class:`StoreError`: the outcomes the executor already
@@ -317,8 +329,8 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
             )
         pending = [case for case in suite.cases if case.key not in finished]
         pending = sorted(pending, key=lambda case: case.n_nodes) if smallest_first else largest_first(pending)
-        if 0 < len(pending) < executor.jobs:  # more workers would start only to idle (a resumed run's few cases)
-            executor.jobs = len(pending)
+        if 0 < len(pending) < executor.jobs and not getattr(executor, "fans_out", False):
+            executor.jobs = len(pending)  # more workers would start only to idle (a resumed run's few cases)
         if getattr(executor, "local_files", False):  # its workers can write in the store's directory
             pending = [replace(case, checkpoint=str(store.directory / checkpoint_file(case.key))) for case in pending]
         run_id = store.start_run({"run_id": _run_stem(suite.name), "suite": suite.name,

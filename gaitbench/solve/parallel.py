@@ -54,6 +54,11 @@ class WorkerPool(Generic[State]):
                                  initargs=(state, start == "fork" if die_with_parent is None else die_with_parent,
                                            os.getpid()))
 
+    def start(self) -> None:
+        """Start the workers now, from this thread (else the first :meth:`schedule` starts them, from its thread):
+        with ``die_with_parent`` they die with the thread that started them."""
+        self._pool.schedule(_call, (_nothing, None))
+
     def schedule(self, task: Callable[[Item, State], Result], item: Item,
                  timeout: float | None = None) -> Future[Result]:
         """``task(item, state)`` in a free worker. Past ``timeout`` seconds the worker is stopped (and replaced)
@@ -98,6 +103,10 @@ class WorkerPool(Generic[State]):
 
 _STATE: object = None
 """The state of this process when it is a pool's worker: set once as it starts, for :func:`_call`."""
+
+
+def _nothing(item: object, state: object) -> None:
+    return None
 
 
 def _call(task: Callable[[Item, object], Result], item: Item) -> Result:

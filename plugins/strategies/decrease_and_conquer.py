@@ -65,9 +65,9 @@ class DecreaseAndConquer:
     ``sectional_guess`` ("first-phase": each sectional problem starts from the First Phase trajectory's tail, as
     the thesis's initial conditions suggest; "complete": from the complete Second Phase trajectory's tail, closer
     to a 4-DOF solution), ``max_checks`` (budget of relation checks for the synthesis search), ``workers``
-    (processes for the sectional solves of a step, or "auto": the cores no other walk is using, asked for as each
-    section ends; see :class:`SectionalSolves`), ``rescue`` (True: a First Phase that every rung leaves unsolved
-    is seeded from coarser grids)."""
+    (processes for the sectional solves of a step, or "auto": the run's workers on a Dask cluster, else the cores
+    no other walk is using, asked for as each section ends; see :class:`SectionalSolves`), ``rescue`` (True: a
+    First Phase that every rung leaves unsolved is seeded from coarser grids)."""
 
     name = "decrease-and-conquer"
 
@@ -212,7 +212,9 @@ class SectionalSolves:
     """The sectional problems k0 = 2 … N−2 of a walk: each NLP built once (or kept from an earlier walk, through
     the walk's :class:`~gaitbench.problem.build_cache.BuildCache`), solved for every step.
 
-    With ``workers`` > 1 the solves of a step run in a pool of forked workers
+    With ``workers = "auto"`` on a run that fans out (``problem.fan_out``: a Dask cluster), the solves of a step
+    are tasks on the run's workers (:mod:`gaitbench.fan_out`), each of which builds the sections it is sent once
+    (:class:`SectionSolver`). Otherwise, with ``workers`` > 1 the solves of a step run in a pool of forked workers
     (:class:`~gaitbench.solve.parallel.WorkerPool`), each holding this object. Forking, rather than sending the
     problems to fresh processes, lets the workers inherit the built NLPs (CasADi functions and closures that do
     not pickle) and, for solvers that can ``prepare``, the built solvers too, so the build is paid once rather than
@@ -230,17 +232,20 @@ class SectionalSolves:
         self.built: dict[int, TranscribedStep] = {
             k0: builder.build(sectional_structure(structure, k0)) for k0 in self.starts}
         self.solver = problem.solver
+        self._fan_out = problem.fan_out if workers == "auto" and len(self.starts) > 1 else None
         forking = "fork" in multiprocessing.get_all_start_methods()
         self._cores = problem.cores if workers == "auto" and forking else None
         size = (self._cores.cores if self._cores is not None else 1) if workers == "auto" else int(workers)
         self._pool: WorkerPool[SectionalSolves] | None = None
-        if size > 1 and len(self.starts) > 1:
+        if size > 1 and len(self.starts) > 1 and self._fan_out is None:
             for built in self.built.values():  # built once here and inherited, not once per worker
                 prepare(self.solver, built.nlp)
             self._pool = WorkerPool(size, state=lambda: self, start="fork")  # forks on the first solve
 
     def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]]) -> list[SolverResult]:
         """Solve (k0, parameters, initial guess) tasks; results in the tasks' order."""
+        if self._fan_out is not None:
+            return self._fan_out.map(_solve_section, tasks, SectionSolver)
         if self._pool is None:
             return [self.solve_one(task) for task in tasks]
         if self._cores is None:
@@ -268,8 +273,27 @@ class SectionalSolves:
             self._pool.close()
 
 
-def _solve_section(task: tuple[int, np.ndarray, np.ndarray], sections: SectionalSolves) -> SolverResult:
-    """A sectional solve in a forked worker, which holds the walk's :class:`SectionalSolves`."""
+class SectionSolver:
+    """A fanned-out walk's sectional problems on a worker of the run, each built when the worker is first sent one
+    of its sections (a worker of a large cluster sees few of a walk's N−3), and kept for the walk's later steps."""
+
+    def __init__(self, problem: WalkProblem) -> None:
+        self.structure = problem.structure("second")
+        self.builder = problem.builds.builder(problem.transcription, self.structure)
+        self.solver = problem.solver
+        self.built: dict[int, TranscribedStep] = {}
+
+    def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
+        k0, parameters, guess = task
+        if k0 not in self.built:
+            self.built[k0] = self.builder.build(sectional_structure(self.structure, k0))
+        return self.solver.solve(self.built[k0].nlp, parameters, guess)
+
+
+def _solve_section(task: tuple[int, np.ndarray, np.ndarray], sections: SectionalSolves | SectionSolver
+                   ) -> SolverResult:
+    """A sectional solve in a worker (forked, holding the walk's :class:`SectionalSolves`, or one of the run's,
+    holding a :class:`SectionSolver`)."""
     return sections.solve_one(task)
 
 
