@@ -28,10 +28,11 @@ from typing import TYPE_CHECKING, Any
 from gaitbench.fan_out import FanOutError, WorkerStates
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
+from gaitbench.run.dask_pools import spawned_pool
 
 if TYPE_CHECKING:
+    from gaitbench.contracts import WalkProblem
     from gaitbench.solve.parallel import WorkerPool
-    from gaitbench.walk_types import WalkProblem
 
 _CLIENTS: dict[str, Any] = {}
 """This process's client of each scheduler it fanned out to: a case process serves many cases, connected once."""
@@ -98,7 +99,6 @@ def _section_pool() -> WorkerPool:
         if not _POOL:
             from distributed import get_worker
 
-            from gaitbench.run.executors import spawned_pool
 
             _POOL.append(spawned_pool(get_worker().state.nthreads, SectionProcess))
         return _POOL[0]

@@ -14,26 +14,19 @@ again on another worker first (:class:`DaskExecutor`).
 from __future__ import annotations
 
 import multiprocessing
-import os
 import signal
 import threading
 from collections.abc import Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.dask_fan_out import DaskFanOut
+from gaitbench.run.dask_pools import spawned_pool
 from gaitbench.run.runner import CaseOutcome, failed_outcome, run_case
 from gaitbench.solve.parallel import ProcessExpired, WorkerPool
 
 EXECUTORS = ("inprocess", "local", "dask")
-
-DASK_ONLY_ENVIRONMENT = ("MALLOC_TRIM_THRESHOLD_",)
-"""Variables a Dask nanny sets for its worker (``distributed.nanny.pre-spawn-environ``) that the process running
-its cases does not inherit. glibc trimming its heap at 64 kB lets Dask report a worker's memory, but it made the
-walks' many small allocations 5–30 % slower (docs/performance.md, "Executors")."""
-
 
 def hard_limit(case: Case) -> float | None:
     """Seconds after which a case's process is stopped (:attr:`Case.hard_limit_s`)."""
@@ -204,12 +197,6 @@ class ExecutorError(Exception):
 _IDLE_CASE_POOLS: list[WorkerPool] = []
 """This Dask worker's one-process case pools not running a case now; each keeps its process's builds for the next."""
 _POOL_LOCK = threading.Lock()
-_POOL_STARTER = ThreadPoolExecutor(1, thread_name_prefix="gaitbench-pool-starter")
-"""The thread that starts the Dask worker's pools: it lives as long as the worker, and a pool's processes die with
-the thread that started them (``die_with_parent``), while a Dask worker's own threads come and go (a task that
-secedes is replaced by a new thread, and one of the two ends when it rejoins)."""
-
-
 def run_case_pooled(case: Case) -> CaseOutcome:
     """The Dask task: ``case`` run in a one-process pool of this Dask worker's, stopped past :func:`hard_limit`.
 
@@ -242,20 +229,6 @@ def run_case_pooled(case: Case) -> CaseOutcome:
     finally:
         with _POOL_LOCK:
             _IDLE_CASE_POOLS.append(pool)
-
-
-def spawned_pool(workers: int, state) -> WorkerPool:
-    """A pool of spawned processes for a Dask worker's cases or sections, dying with it, without the environment
-    only the Dask worker needs (:data:`DASK_ONLY_ENVIRONMENT`); started from :data:`_POOL_STARTER`."""
-    for name in DASK_ONLY_ENVIRONMENT:  # read by glibc at start-up: the Dask worker keeps its setting
-        os.environ.pop(name, None)
-
-    def started() -> WorkerPool:
-        pool = WorkerPool(workers, state=state, start="spawn", die_with_parent=True)
-        pool.start()
-        return pool
-
-    return _POOL_STARTER.submit(started).result()
 
 
 def _run_case_fanned_out(work: tuple[Case, DaskFanOut | None], builds: BuildCache) -> CaseOutcome:

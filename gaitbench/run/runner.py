@@ -29,9 +29,9 @@ from gaitbench.run.store import LOCK_TIMEOUT_S, ResultStore, case_file, checkpoi
 from gaitbench.run.store_schema import StoreError
 
 if TYPE_CHECKING:
-    from gaitbench.contracts import FanOut, Strategy
+    from gaitbench.contracts import FanOut, Strategy, WalkProblem
     from gaitbench.plugins import PluginRegistry
-    from gaitbench.walk_types import WalkProblem, WalkResult
+    from gaitbench.walk_types import WalkResult
 
 WALK_FILE = "walk.json"
 TRACK_FILE = "track.json"
