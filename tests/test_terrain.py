@@ -6,6 +6,7 @@ import pytest
 
 from gaitbench.model.robot import InvalidParameterError
 from gaitbench.model.terrain import (
+    TERRAIN_KINK_SMOOTHING,
     THESIS_ANGLE_BOUNDS,
     StepGeometry,
     Terrain,
@@ -155,11 +156,13 @@ def test_terrain_clearance_is_the_height_above_the_ground_profile(behind, ahead)
     for q_st, q_sw in rng.uniform(-1.2, 1.2, size=(200, 2)):
         foot = convention_a_swing_foot([0.0, 0.0], q_st, q_sw, 1.0)
         ground = foot[0] * math.tan(ahead if foot[0] > 0 else behind)
-        bound = 0.28 * abs(math.tan(ahead) - math.tan(behind)) / 2 * 1e-2
+        bound = 0.28 * abs(math.tan(ahead) - math.tan(behind)) / 2 * TERRAIN_KINK_SMOOTHING
         assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(foot[1] - ground, abs=bound + 1e-12)
     assert terrain_clearance(0.3, 0.3, ahead, behind) == pytest.approx(0.0, abs=1e-15)  # legs crossing
     q_st, q_sw = heel_strike_configuration(1.2, ahead, 1.0)
-    assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=1e-12)  # landing
+    x = math.sin(q_sw) - math.sin(q_st)  # the rounding's error at the foothold: |δ| x (1 − tanh(x / ε))
+    off = abs(math.tan(ahead) - math.tan(behind)) / 2 * x * (1 - math.tanh(x / TERRAIN_KINK_SMOOTHING))
+    assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=off + 1e-12)  # landing
 
 
 def test_terrain_clearance_sees_the_stairs_the_chord_does_not():
@@ -168,7 +171,8 @@ def test_terrain_clearance_sees_the_stairs_the_chord_does_not():
     behind, ahead = STAIRS.ground_behind(6), STAIRS.steps[5].theta
     q_sw, q_st = heel_strike_configuration(STAIRS.steps[4].D, behind, 1.0)  # step 5's landing pose, roles swapped
     assert clearance(q_st, q_sw, ahead) < -0.1
-    assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=1e-12)
+    # on the ground up to the rounding's error at a foothold 1.2 l away, |δ| x (1 − tanh(x / ε)) < 1e-9
+    assert terrain_clearance(q_st, q_sw, ahead, behind) == pytest.approx(0.0, abs=1e-9)
 
 
 def _passes_above_unrounded_ground(behind: float, ahead: float) -> bool:

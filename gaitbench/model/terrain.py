@@ -140,9 +140,12 @@ def clearance(q_st: Any, q_sw: Any, theta: Any) -> Any:
 BEND_TOLERANCE = 1e-9
 """Inclinations (rad) closer than this are one straight ground."""
 
-TERRAIN_KINK_SMOOTHING = 1e-2
+TERRAIN_KINK_SMOOTHING = 0.1
 """ε (in leg lengths) over which the ground profile's bend under the stance foot is rounded by default (the problem
-option ``clearance_rounding``)."""
+option ``clearance_rounding``). Where the ground dips, only this rounding lets a leg without a knee swing through
+(:meth:`Terrain.bend`), and a grid must resolve it for the detour it asks to cost the same on every grid: ε is a
+few of the swing foot's advances per interval on the coarsest grids a sweep uses, and about a foot's length
+(docs/decisions/0019-clearance-rounding.md)."""
 
 
 def terrain_clearance(q_st: Any, q_sw: Any, theta: Any, theta_behind: Any,
@@ -153,7 +156,7 @@ def terrain_clearance(q_st: Any, q_sw: Any, theta: Any, theta_behind: Any,
     ``theta`` (the chord it lands on). With the foot at (x, y) from the stance foot, in leg lengths, the profile is
     s̄ x + δ |x| with s̄, δ the mean and half-difference of the two chords' slopes: exact on either side. |x| is
     rounded as x tanh(x / ε), exact at the crossing (x = y = 0, where the legs pass each other) and at the
-    footholds, and off by at most 0.28 |δ| ε in between (2 mm for a 1 m leg on the stairs): conservative where
+    footholds, and off by at most 0.28 |δ| ε in between (2 cm for a 1 m leg on the stairs at the default ε): conservative where
     the ground peaks, lenient where it dips. On a uniform slope (δ = 0) this is the chord clearance / cos θ.
     """
     ns = _namespace(q_st, q_sw, theta, theta_behind)
