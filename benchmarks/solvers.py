@@ -1,16 +1,19 @@
-"""Every solver plugin on the same 4-DOF gait steps: status, time, iterations and verified COT.
+"""Every solver plugin on the same 4-DOF gait steps: status, time, iterations, verified COT and performance profiles.
 
-Run: .venv/bin/python benchmarks/solvers.py [--time-limit S] [--solvers a,b] [--nodes 25,50,100]
-(writes benchmarks/results/solvers.json and .md). The steps are forward steps 1 and 2 and upward-slope step 1,
-Second Phase, with the thesis's cost and the walks' default problem options, each from the transcription's
-standard initial guess, for ``hermite-simpson`` and ``dmoc`` at N = 25, 50, 100. Step 2 starts from the heel-strike
-state of step 1 as IPOPT solves it, the same for every solver: the late steps are where solvers that converge on a
-first step fail. Each solver runs with its defaults, and :data:`VARIANTS` adds the named presets measured in
-docs/solvers.md. Every solve has the same time limit and iteration limit; times are wall-clock seconds of the solve
-call (including each solver's own build). A converged point is verified as a walk's step is (dynamics residual,
-re-simulation, COT recomputed from the trajectory). Each solve runs in a child process that is stopped at 1.5 × the
-time limit + 60 s, for solvers that cannot be interrupted (``killed`` rows). Rows are appended to ``solvers.jsonl``
-as they finish, and a rerun skips what is there.
+Run: .venv/bin/python benchmarks/solvers.py [--time-limit S] [--solvers a,b] [--experiments a,b] [--steps 1,2,6]
+[--transcriptions a,b] [--nodes 25,50,100] (writes benchmarks/results/solvers.jsonl, .json, .md and
+solvers_profiles.svg). The problems are steps 1, 2 and 6 of every thesis experiment (:data:`EXPERIMENTS`), Second
+Phase, with the thesis's cost and the walks' default problem options, each from the transcription's standard initial
+guess, for ``hermite-simpson`` and ``dmoc`` at N = 25, 50, 100: 72 problems; the flags pick a subset. A later step
+starts from the state where IPOPT's walk (with its retry ladder) leaves the robot, the same for every solver: the
+late steps are where solvers that converge on a first step fail. Each solver runs with its defaults, and
+:data:`VARIANTS` adds the named presets measured in docs/solvers.md. Every solve has the same time limit and
+iteration limit and is one first attempt (no retry ladder); times are wall-clock seconds of the solve call
+(including each solver's own build). A converged point is verified as a walk's step is (dynamics residual,
+re-simulation, objective gap: :mod:`gaitbench.acceptance`), and only a verified solve counts as solved in the
+Dolan–Moré profiles (:mod:`gaitbench.reports.profiles`) of time and of verified COT. Solves run one at a time in a
+child process that is stopped at :func:`hard_limit` for solvers that cannot be interrupted (``killed`` rows). Rows
+are appended to ``solvers.jsonl`` as they finish, and a rerun skips what is there.
 """
 
 from __future__ import annotations
@@ -29,82 +32,133 @@ from pebble import ProcessPool
 from gaitbench.plugins import load_registry
 from gaitbench.run.provenance import provenance
 
-STEPS = (("forward", 1), ("forward", 2), ("upward-slope", 1))
+EXPERIMENTS = ("forward", "downward-slope", "upward-slope", "stairs")
+STEPS = (1, 2, 6)
 TRANSCRIPTIONS = ("hermite-simpson", "dmoc")
 NODES = (25, 50, 100)
 VARIANTS = {"uno filtersqp": ("uno", {"preset": "filtersqp"}), "fatrop dense": ("fatrop", {"stagewise": False})}
-"""Labelled solver settings measured beside each solver's defaults: Uno's SQP preset (the open SQP that DECISIONS
-§10 names for the reference column) and FATROP on the NLP as one dense stage (its default until 2026-12-03, when
-the stage-wise form became it: the run of that day labels them "fatrop" and "fatrop stagewise")."""
+"""Labelled solver settings measured beside each solver's defaults: Uno's SQP preset (the open SQP that
+docs/decisions/0001-reference-column-sqp.md weighs for the reference column) and FATROP on the NLP as one dense
+stage (its default until the stage-wise form became it)."""
 OUT = Path(__file__).parent / "results"
-COMPARED_STEPS = (("forward", 2), ("upward-slope", 1))
-"""The steps whose optima the summary compares with IPOPT's: forward step 1 starts at rest, where the thesis cost's
+UNCOMPARED_STEPS = (("forward", 1),)
+"""Steps whose optima are not compared (summary, COT profile): forward step 1 starts at rest, where the thesis cost's
 optimum is a continuum near zero and converged solvers end anywhere on it."""
 SAME_COT = 5e-4
 """Relative difference of verified COTs counted as the same optimum in the summary."""
+CHAIN_LIMIT_S = 900.0
+"""Hard limit on IPOPT's walk to a late step's start (a step that climbs the whole retry ladder takes minutes)."""
 
 
-def solve_one(label: str, solver_name: str, options: dict, experiment_name: str, step: int,
-              transcription_name: str, n_nodes: int, time_limit_s: float, max_iterations: int) -> dict:
-    """Build the step's NLP and solve it once, then verify the result; runs in a child process so a solver that
-    ignores its limit can be stopped."""
-    from gaitbench.solve.walk import solve_and_verify
+def hard_limit(time_limit_s: float) -> float:
+    """When a solve's process is stopped: twice its own limit (build, verification, a solver late to check its
+    clock) plus a margin."""
+    return 2 * time_limit_s + 15
+
+
+def start_states(experiment_name: str, transcription_name: str, n_nodes: int, steps: list[int]) -> dict[int, list]:
+    """The state each of ``steps`` starts from: the experiment's start state, then IPOPT's walk with its retry
+    ladder; a step the walk cannot reach is left out."""
+    from gaitbench.solve.walk import solve_with_retries
+
+    problem = _problem(experiment_name, transcription_name, n_nodes, max(steps))
+    built = problem.transcription.build(problem.structure("second"))
+    state, states = problem.start_state(), {}
+    for index in range(1, max(steps) + 1):
+        if index in steps:
+            states[index] = [float(value) for value in state]
+        if index == max(steps):
+            break
+        outcome = solve_with_retries(problem, index, built, problem.step_data(index, state))
+        if outcome.next_state is None:
+            break
+        state = outcome.next_state
+    return states
+
+
+def _problem(experiment_name: str, transcription_name: str, n_nodes: int, steps: int):
     from gaitbench.walk_types import WalkProblem
 
     registry = load_registry()
-    ipopt = registry.create("solver", "ipopt")
-    problem = WalkProblem(registry.create("experiment", experiment_name),
-                          registry.create("transcription", transcription_name), ipopt, n_nodes, steps=step)
+    return WalkProblem(registry.create("experiment", experiment_name),
+                       registry.create("transcription", transcription_name), registry.create("solver", "ipopt"),
+                       n_nodes, steps=steps)
+
+
+def solve_one(label: str, solver_name: str, options: dict, experiment_name: str, step: int,
+              transcription_name: str, n_nodes: int, start: list[float], time_limit_s: float,
+              max_iterations: int) -> dict:
+    """Build the step's NLP (afresh, so no solver reuses another solve's build) and solve it once from the state
+    ``start``, then verify the result; runs in a child process so a solver that ignores its limit can be stopped."""
+    import numpy as np
+
+    from gaitbench.acceptance import Thresholds, step_failures
+    from gaitbench.solve.walk import solve_and_verify
+
+    problem = _problem(experiment_name, transcription_name, n_nodes, step)
     built = problem.transcription.build(problem.structure("second"))
-    state = problem.start_state()
-    for index in range(1, step):  # the start of a later step: IPOPT's walk up to it, the same for every solver
-        state = solve_and_verify(problem, index, built, problem.step_data(index, state)).next_state
-    data = problem.step_data(step, state)
-    solver = registry.create("solver", solver_name, time_limit_s=time_limit_s, max_iterations=max_iterations,
-                             **options)
+    data = problem.step_data(step, np.asarray(start))
+    solver = load_registry().create("solver", solver_name, time_limit_s=time_limit_s,
+                                    max_iterations=max_iterations, **options)
     started = time.perf_counter()
     outcome = solve_and_verify(problem, step, built, data, solver=solver)
+    call_s = time.perf_counter() - started
     result, verification = outcome.solver_result, outcome.verification
+    failures = step_failures(verification, Thresholds.for_nodes(n_nodes)) if verification else None
     return {"solver": label, "experiment": experiment_name, "step": step, "transcription": transcription_name,
             "N": n_nodes, "variables": built.nlp.n_variables, "status": result.status.value,
-            "message": result.message, "call_s": time.perf_counter() - started, "wall_time_s": result.wall_time_s,
+            "message": result.message, "call_s": call_s, "wall_time_s": result.wall_time_s,
             "function_time_s": result.function_time_s, "iterations": result.iterations, "cot": result.objective,
             "violation": result.constraint_violation,
             "verified_cot": verification.cot if verification else None,
-            "max_defect": verification.max_defect if verification else None}
+            "max_defect": verification.max_defect if verification else None,
+            "verified": failures == [], "verification_failures": failures}
 
 
-def run(solvers: dict[str, tuple[str, dict]], nodes, time_limit_s, max_iterations, log: Path) -> list[dict]:
-    """Every (step, transcription, N, solver) not yet in ``log`` (JSON lines, appended as each finishes), then all."""
+def run(solvers: dict[str, tuple[str, dict]], problems: list[tuple], time_limit_s: float, max_iterations: int,
+        log: Path, commit: str) -> list[dict]:
+    """Every (problem, solver) not yet in ``log`` (JSON lines, appended as each finishes), then all rows;
+    ``problems`` are (experiment, step, transcription, N), solved in that order, one solve at a time."""
     done = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
     seen = {_key(row) for row in done}
-    hard_limit = 1.5 * time_limit_s + 60  # the solve's own limit, plus the build and a margin
-    for experiment, step in STEPS:
-        for transcription in TRANSCRIPTIONS:
-            for n_nodes in nodes:
-                for label, (solver_name, options) in solvers.items():
-                    where = {"solver": label, "experiment": experiment, "step": step, "transcription": transcription,
-                             "N": n_nodes}
-                    if _key(where) in seen:
-                        continue
-                    with ProcessPool(max_workers=1, context=multiprocessing.get_context("spawn")) as pool:
-                        future = pool.schedule(solve_one, (label, solver_name, options, experiment, step,
-                                                           transcription, n_nodes, time_limit_s, max_iterations),
-                                               timeout=hard_limit)
-                        try:
-                            row = future.result()
-                        except FutureTimeout:
-                            row = where | {
-                                "variables": None, "status": "killed",
-                                "message": f"ignored its {time_limit_s:g} s time limit; stopped after {hard_limit:g} s",
-                                "call_s": hard_limit, "wall_time_s": None, "function_time_s": None,
-                                "iterations": None, "cot": None, "violation": None, "verified_cot": None,
-                                "max_defect": None}
-                    with log.open("a") as stream:
-                        stream.write(json.dumps(row) + "\n")
-                    print(json.dumps(row), flush=True)
-                    done.append(row)
+    todo = [(problem, label) for problem in problems for label in solvers if (label, *problem) not in seen]
+    starts: dict[tuple, dict[int, list]] = {}
+    with ProcessPool(max_workers=1, context=multiprocessing.get_context("spawn")) as pool:
+        for (experiment, step, transcription, n_nodes), label in todo:
+            walk = (experiment, transcription, n_nodes)
+            if walk not in starts:
+                steps = sorted({p[1] for p, _ in todo if (p[0], p[2], p[3]) == walk})
+                starts[walk] = pool.schedule(start_states, (*walk, steps), timeout=CHAIN_LIMIT_S).result()
+            if step not in starts[walk]:
+                print(f"{experiment} {transcription} N={n_nodes}: IPOPT's walk does not reach step {step}; skipped",
+                      flush=True)
+                continue
+            solver_name, options = solvers[label]
+            where = {"solver": label, "experiment": experiment, "step": step, "transcription": transcription,
+                     "N": n_nodes}
+            future = pool.schedule(solve_one, (label, solver_name, options, experiment, step, transcription,
+                                               n_nodes, starts[walk][step], time_limit_s, max_iterations),
+                                   timeout=hard_limit(time_limit_s))
+            try:
+                row = future.result()
+            except FutureTimeout:
+                row = _failed(where, "killed", f"ignored its {time_limit_s:g} s time limit; stopped after "
+                              f"{hard_limit(time_limit_s):g} s", hard_limit(time_limit_s))
+            except Exception as error:  # the child died (a crash in a solver's library) or raised
+                row = _failed(where, "crashed", f"{type(error).__name__}: {error}", None)
+            row["commit"] = commit
+            with log.open("a") as stream:
+                stream.write(json.dumps(row) + "\n")
+            print(json.dumps(row), flush=True)
+            done.append(row)
     return done
+
+
+def _failed(where: dict, status: str, message: str, call_s: float | None) -> dict:
+    return where | {"variables": None, "status": status, "message": message, "call_s": call_s,
+                    "wall_time_s": None, "function_time_s": None, "iterations": None, "cot": None,
+                    "violation": None, "verified_cot": None, "max_defect": None, "verified": False,
+                    "verification_failures": None}
 
 
 def _key(row: dict) -> tuple:
@@ -127,8 +181,8 @@ def markdown(results: dict) -> str:
              "| step | transcription | N | solver | status | time (s) | iterations | COT | verified COT | "
              "dynamics residual |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-    order = {step: i for i, step in enumerate(STEPS)}
-    rows = sorted(results["rows"], key=lambda r: (order.get((r["experiment"], r["step"]), 99), r["transcription"],
+    order = {experiment: i for i, experiment in enumerate(EXPERIMENTS)}
+    rows = sorted(results["rows"], key=lambda r: (order.get(r["experiment"], 99), r["step"], r["transcription"],
                                                   r["N"], r["solver"]))
     for r in rows:
         lines.append(f"| {r['experiment']} {r['step']} | {r['transcription']} | {r['N']} | {r['solver']} | "
@@ -140,7 +194,8 @@ def markdown(results: dict) -> str:
 
 def summary(rows: list[dict], reference: str = "ipopt") -> list[str]:
     """Per solver: how many steps it solved, its time against ``reference``'s where both converged, its verified
-    COT against ``reference``'s on :data:`COMPARED_STEPS`, and how the other solves ended; a Markdown table."""
+    COT against ``reference``'s on every step but :data:`UNCOMPARED_STEPS`, and how the other solves ended; a
+    Markdown table."""
     by_solver: dict[str, list[dict]] = {}
     for row in rows:
         by_solver.setdefault(row["solver"], []).append(row)
@@ -156,7 +211,7 @@ def summary(rows: list[dict], reference: str = "ipopt") -> list[str]:
         time_text = "—" if not ratios else "1×" if label == reference else (
             f"{statistics.median(ratios):.1f}× ({min(ratios):.1f}–{max(ratios):.1f}×)")
         changes = [row["verified_cot"] / ref["verified_cot"] - 1 for row, ref in both
-                   if (row["experiment"], row["step"]) in COMPARED_STEPS and row.get("verified_cot")
+                   if (row["experiment"], row["step"]) not in UNCOMPARED_STEPS and row.get("verified_cot")
                    and ref.get("verified_cot")]
         ends = Counter(row["status"] for row in solved if row["status"] != "converged")
         lines.append(f"| `{label}` | {len(solved) - sum(ends.values())} of {len(solved)} | {time_text} | "
@@ -189,21 +244,35 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--solvers", help="comma-separated solver names or VARIANTS labels "
                         "(default: every registered solver and every variant)")
+    parser.add_argument("--experiments", default=",".join(EXPERIMENTS), help="comma-separated experiments")
+    parser.add_argument("--steps", default=",".join(map(str, STEPS)), help="comma-separated step numbers")
+    parser.add_argument("--transcriptions", default=",".join(TRANSCRIPTIONS), help="comma-separated transcriptions")
     parser.add_argument("--nodes", default=",".join(map(str, NODES)), help="comma-separated N values")
-    parser.add_argument("--time-limit", type=float, default=60.0, help="seconds per solve")
+    parser.add_argument("--time-limit", type=float, default=15.0, help="seconds per solve")
     parser.add_argument("--max-iterations", type=int, default=3000)
     parser.add_argument("--out", default="solvers", help="file stem under benchmarks/results")
     parser.add_argument("--note", help="a line for the summary, e.g. what else ran on the machine")
+    parser.add_argument("--render-only", action="store_true",
+                        help="rewrite the .md and the figure from the recorded .json, solving nothing")
     args = parser.parse_args()
-    solvers = {name: (name, {}) for name in load_registry().names("solver")} | VARIANTS
-    if args.solvers:
-        solvers = {label: solvers.get(label, (label, {})) for label in args.solvers.split(",")}
-    nodes = [int(n) for n in args.nodes.split(",")]
-    OUT.mkdir(exist_ok=True)
-    rows = run(solvers, nodes, args.time_limit, args.max_iterations, OUT / f"{args.out}.jsonl")
-    results = {"machine": provenance(), "limits": {"time_limit_s": args.time_limit,
-                                                "max_iterations": args.max_iterations},
-               "note": args.note, "rows": rows}
+    if args.render_only:
+        results = json.loads((OUT / f"{args.out}.json").read_text())
+        results["note"] = args.note or results.get("note")
+    else:
+        solvers = {name: (name, {}) for name in load_registry().names("solver")} | VARIANTS
+        if args.solvers:
+            solvers = {label: solvers.get(label, (label, {})) for label in args.solvers.split(",")}
+        problems = [(experiment, int(step), transcription, int(n_nodes)) for n_nodes in args.nodes.split(",")
+                    for experiment in args.experiments.split(",") for step in args.steps.split(",")
+                    for transcription in args.transcriptions.split(",")]
+        machine = provenance()
+        OUT.mkdir(exist_ok=True)
+        started = time.perf_counter()
+        rows = run(solvers, problems, args.time_limit, args.max_iterations, OUT / f"{args.out}.jsonl",
+                   machine["git_commit"])
+        results = {"machine": machine, "limits": {"time_limit_s": args.time_limit,
+                                                  "max_iterations": args.max_iterations},
+                   "note": args.note, "run_wall_s": time.perf_counter() - started, "rows": rows}
     (OUT / f"{args.out}.json").write_text(json.dumps(results, indent=2))
     (OUT / f"{args.out}.md").write_text(markdown(results))
 
