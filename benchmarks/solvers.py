@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import multiprocessing
+import resource
 import statistics
 import time
 from collections import Counter
@@ -30,6 +32,7 @@ from pathlib import Path
 from pebble import ProcessPool
 
 from gaitbench.plugins import load_registry
+from gaitbench.reports.profiles import performance_ratios, profile, profile_svg
 from gaitbench.run.provenance import provenance
 
 EXPERIMENTS = ("forward", "downward-slope", "upward-slope", "stairs")
@@ -46,6 +49,10 @@ UNCOMPARED_STEPS = (("forward", 1),)
 optimum is a continuum near zero and converged solvers end anywhere on it."""
 SAME_COT = 5e-4
 """Relative difference of verified COTs counted as the same optimum in the summary."""
+TIME_TAUS = (1.0, 2.0, 4.0, 8.0, 16.0)
+COT_TAUS = (1 + SAME_COT, 1.05, 1.25, 2.0)
+"""The τ at which the Markdown table reads each profile."""
+PROFILE_FIGURE = "{stem}_profiles.svg"
 CHAIN_LIMIT_S = 900.0
 """Hard limit on IPOPT's walk to a late step's start (a step that climbs the whole retry ladder takes minutes)."""
 
@@ -100,19 +107,26 @@ def solve_one(label: str, solver_name: str, options: dict, experiment_name: str,
     data = problem.step_data(step, np.asarray(start))
     solver = load_registry().create("solver", solver_name, time_limit_s=time_limit_s,
                                     max_iterations=max_iterations, **options)
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), cpu_seconds()
     outcome = solve_and_verify(problem, step, built, data, solver=solver)
-    call_s = time.perf_counter() - started
+    call_s, cpu_s = time.perf_counter() - started, cpu_seconds() - cpu_started
     result, verification = outcome.solver_result, outcome.verification
     failures = step_failures(verification, Thresholds.for_nodes(n_nodes)) if verification else None
     return {"solver": label, "experiment": experiment_name, "step": step, "transcription": transcription_name,
             "N": n_nodes, "variables": built.nlp.n_variables, "status": result.status.value,
-            "message": result.message, "call_s": call_s, "wall_time_s": result.wall_time_s,
+            "message": result.message, "call_s": call_s, "cpu_s": cpu_s, "wall_time_s": result.wall_time_s,
             "function_time_s": result.function_time_s, "iterations": result.iterations, "cot": result.objective,
             "violation": result.constraint_violation,
             "verified_cot": verification.cot if verification else None,
             "max_defect": verification.max_defect if verification else None,
             "verified": failures == [], "verification_failures": failures}
+
+
+def cpu_seconds() -> float:
+    """CPU seconds this process and its finished children (an NL executable) have used: unlike wall time, not
+    stretched by other processes on a shared machine."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def run(solvers: dict[str, tuple[str, dict]], problems: list[tuple], time_limit_s: float, max_iterations: int,
@@ -155,7 +169,7 @@ def run(solvers: dict[str, tuple[str, dict]], problems: list[tuple], time_limit_
 
 
 def _failed(where: dict, status: str, message: str, call_s: float | None) -> dict:
-    return where | {"variables": None, "status": status, "message": message, "call_s": call_s,
+    return where | {"variables": None, "status": status, "message": message, "call_s": call_s, "cpu_s": None,
                     "wall_time_s": None, "function_time_s": None, "iterations": None, "cot": None,
                     "violation": None, "verified_cot": None, "max_defect": None, "verified": False,
                     "verification_failures": None}
@@ -165,31 +179,84 @@ def _key(row: dict) -> tuple:
     return row["solver"], row["experiment"], row["step"], row["transcription"], row["N"]
 
 
-def markdown(results: dict) -> str:
+def markdown(results: dict, figure: str = PROFILE_FIGURE.format(stem="solvers")) -> str:
     limits, machine = results["limits"], results["machine"]
     packages = ", ".join(f"{name} {ver}" for name, ver in machine["packages"].items() if ver)
-    lines = ["# Solvers on 4-DOF gait steps (forward steps 1–2, upward-slope step 1; thesis cost)", "",
-             f"Machine: {machine['cpus']} CPUs, {machine['platform']}, Python {machine['python']}; gaitbench "
-             f"{machine['gaitbench']} at {machine['git_commit']}; {packages}.", "",
-             *([results["note"], ""] if results.get("note") else []),
+    rows = results["rows"]
+    lines = ["# Solvers on 4-DOF gait steps (steps 1, 2 and 6 of each experiment; thesis cost)", "",
+             f"Machine: {machine['cpus']} CPUs ({machine.get('cpu', '?')}), {machine['platform']}, Python "
+             f"{machine['python']}; gaitbench {machine['gaitbench']} at {machine['git_commit']}; {packages}.", "",
+             f"Problems: {_problem_set(rows)}; {len({_step(row) for row in rows})} problems × "
+             f"{len({row['solver'] for row in rows})} solvers, {len(rows)} solves"
+             + (f" in {results['run_wall_s'] / 60:.0f} min of wall time." if results.get("run_wall_s") else "."),
+             "", *([results["note"], ""] if results.get("note") else []),
              f"Limits per solve: {limits['time_limit_s']} s, {limits['max_iterations']} iterations. "
              "`COT` is the optimizer's objective at the returned point, `verified COT` the COT recomputed from the "
-             "decoded trajectory of a converged solve, with its largest dynamics residual; time is the wall-clock "
-             "time of the solve call; `killed`: the solver ignored its time limit and its process was stopped. "
-             "Step 2 starts where IPOPT's step 1 ends.", "", *summary(results["rows"]), "",
+             "decoded trajectory of a converged solve, with its largest dynamics residual; `verified`: the solve "
+             "passed the walks' verification (gaitbench/acceptance.py), or why not; time is the wall-clock time of "
+             "the solve call; `killed`: the solver ignored its time limit and its process was stopped. Steps 2 and "
+             "6 start where IPOPT's walk (with its retry ladder) leaves the robot.", "", *summary(rows), "",
              f"Verified COTs within {100 * SAME_COT:g} % of each other count as the same optimum.", "",
+             *profile_section(rows, figure), "",
              "| step | transcription | N | solver | status | time (s) | iterations | COT | verified COT | "
-             "dynamics residual |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "dynamics residual | verified |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     order = {experiment: i for i, experiment in enumerate(EXPERIMENTS)}
-    rows = sorted(results["rows"], key=lambda r: (order.get(r["experiment"], 99), r["step"], r["transcription"],
-                                                  r["N"], r["solver"]))
-    for r in rows:
+    for r in sorted(rows, key=lambda r: (order.get(r["experiment"], 99), r["step"], r["transcription"], r["N"],
+                                         r["solver"])):
+        verdict = "yes" if r.get("verified") else "; ".join(r.get("verification_failures") or []) or "—"
         lines.append(f"| {r['experiment']} {r['step']} | {r['transcription']} | {r['N']} | {r['solver']} | "
-                     f"{r['status']} | {r['call_s']:.2f} | {_number(r['iterations'], 'd')} | "
+                     f"{r['status']} | {_number(r['call_s'], '.2f')} | {_number(r['iterations'], 'd')} | "
                      f"{_number(r['cot'], '.4g')} | {_number(r.get('verified_cot'), '.4g')} | "
-                     f"{_number(r.get('max_defect'), '.1e')} |")
+                     f"{_number(r.get('max_defect'), '.1e')} | {verdict} |")
     return "\n".join(lines) + "\n"
+
+
+def _problem_set(rows: list[dict]) -> str:
+    """The experiments, steps, transcriptions and N of ``rows``, each as a list."""
+    def listed(field: str) -> str:
+        return ", ".join(map(str, sorted({row[field] for row in rows}, key=str)))
+    return (f"experiments {listed('experiment')}; steps {listed('step')}; {listed('transcription')}; "
+            f"N = {', '.join(map(str, sorted({row['N'] for row in rows})))}")
+
+
+def profile_ratios(rows: list[dict]) -> tuple[int, int, dict[str, dict]]:
+    """The Dolan–Moré ratios of time and of verified COT over the problems every solver ran (a solve counts when it
+    converged and was verified; COT on every step but :data:`UNCOMPARED_STEPS`): the two problem counts and, per
+    panel label, each solver's ratios."""
+    solvers = sorted({row["solver"] for row in rows})
+    by_key = {_key(row): row for row in rows}
+    problems = sorted({_step(row) for row in rows if all((solver, *_step(row)) in by_key for solver in solvers)},
+                      key=str)
+    compared = [problem for problem in problems if (problem[0], problem[1]) not in UNCOMPARED_STEPS]
+
+    def measures(field: str, among: list[tuple]) -> dict[str, list]:
+        return {solver: [by_key[(solver, *problem)][field] if by_key[(solver, *problem)].get("verified") else None
+                         for problem in among] for solver in solvers}
+
+    return len(problems), len(compared), {
+        "time ratio τ (CPU time / best CPU time on the problem)": performance_ratios(measures("cpu_s", problems)),
+        "COT ratio τ (verified COT / best verified COT)": performance_ratios(measures("verified_cot", compared))}
+
+
+def profile_section(rows: list[dict], figure: str = PROFILE_FIGURE.format(stem="solvers")) -> list[str]:
+    """The profiles' figure and their values at a few τ, as Markdown lines."""
+    n_time, n_cot, panels = profile_ratios(rows)
+    time_ratios, cot_ratios = panels.values()
+    lines = [f"Performance profiles (Dolan–Moré): the share of problems a solver solved (converged and verified) "
+             f"within τ × the best solver's time ({n_time} problems that every solver ran), and within τ × the best "
+             f"verified COT ({n_cot} of them, forward step 1 left out). A solver's curve starts at the share where "
+             "it was best and ends at the share it solved.", "", f"![performance profiles]({figure})", "",
+             "| solver | verified | " + " | ".join(f"time ≤ {tau:g}×" for tau in TIME_TAUS) + " | "
+             + " | ".join(f"COT ≤ {tau:g}×" for tau in COT_TAUS) + " |",
+             "|---|---|" + "---|" * (len(TIME_TAUS) + len(COT_TAUS))]
+    ranked = sorted(time_ratios, key=lambda solver: (-profile(time_ratios[solver], [math.inf])[0], solver))
+    for solver in ranked:
+        shares = [*profile(time_ratios[solver], TIME_TAUS), *profile(cot_ratios[solver], COT_TAUS)]
+        solved = int(profile(time_ratios[solver], [math.inf])[0] * n_time + 0.5)
+        lines.append(f"| `{solver}` | {solved} of {n_time} | " + " | ".join(f"{100 * share:.0f} %" for share in shares)
+                     + " |")
+    return lines
 
 
 def summary(rows: list[dict], reference: str = "ipopt") -> list[str]:
@@ -248,7 +315,7 @@ def main() -> None:
     parser.add_argument("--steps", default=",".join(map(str, STEPS)), help="comma-separated step numbers")
     parser.add_argument("--transcriptions", default=",".join(TRANSCRIPTIONS), help="comma-separated transcriptions")
     parser.add_argument("--nodes", default=",".join(map(str, NODES)), help="comma-separated N values")
-    parser.add_argument("--time-limit", type=float, default=15.0, help="seconds per solve")
+    parser.add_argument("--time-limit", type=float, default=20.0, help="seconds per solve")
     parser.add_argument("--max-iterations", type=int, default=3000)
     parser.add_argument("--out", default="solvers", help="file stem under benchmarks/results")
     parser.add_argument("--note", help="a line for the summary, e.g. what else ran on the machine")
@@ -274,7 +341,8 @@ def main() -> None:
                                                   "max_iterations": args.max_iterations},
                    "note": args.note, "run_wall_s": time.perf_counter() - started, "rows": rows}
     (OUT / f"{args.out}.json").write_text(json.dumps(results, indent=2))
-    (OUT / f"{args.out}.md").write_text(markdown(results))
+    (OUT / f"{args.out}.md").write_text(markdown(results, PROFILE_FIGURE.format(stem=args.out)))
+    (OUT / PROFILE_FIGURE.format(stem=args.out)).write_text(profile_svg(profile_ratios(results["rows"])[2]))
 
 
 if __name__ == "__main__":
