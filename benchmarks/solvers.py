@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import multiprocessing
 import resource
 import statistics
@@ -29,6 +28,7 @@ from collections import Counter
 from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 
+import numpy as np
 from pebble import ProcessPool
 
 from gaitbench.plugins import load_registry
@@ -194,22 +194,38 @@ def markdown(results: dict, figure: str = PROFILE_FIGURE.format(stem="solvers"))
              "`COT` is the optimizer's objective at the returned point, `verified COT` the COT recomputed from the "
              "decoded trajectory of a converged solve, with its largest dynamics residual; `verified`: the solve "
              "passed the walks' verification (gaitbench/acceptance.py), or why not; time is the wall-clock time of "
-             "the solve call; `killed`: the solver ignored its time limit and its process was stopped. Steps 2 and "
-             "6 start where IPOPT's walk (with its retry ladder) leaves the robot.", "", *summary(rows), "",
+             "the solve call, CPU the CPU time of its process and of the executable it ran (the profiles' measure, "
+             "less stretched by other processes on a shared machine); `killed`: the solver ignored its time limit "
+             "and its process was stopped. Steps 2 and 6 start where IPOPT's walk (with its retry ladder) leaves "
+             "the robot.", "", *_load_note(rows, limits["time_limit_s"]), *summary(rows), "",
              f"Verified COTs within {100 * SAME_COT:g} % of each other count as the same optimum.", "",
              *profile_section(rows, figure), "",
-             "| step | transcription | N | solver | status | time (s) | iterations | COT | verified COT | "
+             "| step | transcription | N | solver | status | time (s) | CPU (s) | iterations | COT | verified COT | "
              "dynamics residual | verified |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     order = {experiment: i for i, experiment in enumerate(EXPERIMENTS)}
     for r in sorted(rows, key=lambda r: (order.get(r["experiment"], 99), r["step"], r["transcription"], r["N"],
                                          r["solver"])):
         verdict = "yes" if r.get("verified") else "; ".join(r.get("verification_failures") or []) or "—"
         lines.append(f"| {r['experiment']} {r['step']} | {r['transcription']} | {r['N']} | {r['solver']} | "
-                     f"{r['status']} | {_number(r['call_s'], '.2f')} | {_number(r['iterations'], 'd')} | "
+                     f"{r['status']} | {_number(r['call_s'], '.2f')} | {_number(r.get('cpu_s'), '.2f')} | "
+                     f"{_number(r['iterations'], 'd')} | "
                      f"{_number(r['cot'], '.4g')} | {_number(r.get('verified_cot'), '.4g')} | "
                      f"{_number(r.get('max_defect'), '.1e')} | {verdict} |")
     return "\n".join(lines) + "\n"
+
+
+def _load_note(rows: list[dict], time_limit_s: float) -> list[str]:
+    """How much of a core the solves got (their CPU time over their wall time, median over the rows that have
+    both), and so what CPU time the wall-clock limit allowed; nothing when the solves had a core each."""
+    shares = sorted(row["cpu_s"] / row["call_s"] for row in rows if row.get("cpu_s") and row.get("call_s"))
+    share = statistics.median(shares) if shares else 1.0
+    if share > 0.9:
+        return []
+    return [f"The solves got a median {100 * share:.0f} % of a core (CPU time over wall time; other processes "
+            f"shared the machine), so the {time_limit_s:g} s wall-clock limit allowed about {share * time_limit_s:.0f}"
+            " CPU seconds: `time_limit` and `killed` rows depend on that load, statuses of finished solves, "
+            "iterations and COTs do not.", ""]
 
 
 def _problem_set(rows: list[dict]) -> str:
@@ -250,41 +266,46 @@ def profile_section(rows: list[dict], figure: str = PROFILE_FIGURE.format(stem="
              "| solver | verified | " + " | ".join(f"time ≤ {tau:g}×" for tau in TIME_TAUS) + " | "
              + " | ".join(f"COT ≤ {tau:g}×" for tau in COT_TAUS) + " |",
              "|---|---|" + "---|" * (len(TIME_TAUS) + len(COT_TAUS))]
-    ranked = sorted(time_ratios, key=lambda solver: (-profile(time_ratios[solver], [math.inf])[0], solver))
-    for solver in ranked:
+    solved = {solver: int(np.isfinite(ratios).sum()) for solver, ratios in time_ratios.items()}
+    for solver in sorted(time_ratios, key=lambda solver: (-solved[solver], solver)):
         shares = [*profile(time_ratios[solver], TIME_TAUS), *profile(cot_ratios[solver], COT_TAUS)]
-        solved = int(profile(time_ratios[solver], [math.inf])[0] * n_time + 0.5)
-        lines.append(f"| `{solver}` | {solved} of {n_time} | " + " | ".join(f"{100 * share:.0f} %" for share in shares)
-                     + " |")
+        lines.append(f"| `{solver}` | {solved[solver]} of {n_time} | "
+                     + " | ".join(f"{100 * share:.0f} %" for share in shares) + " |")
     return lines
 
 
 def summary(rows: list[dict], reference: str = "ipopt") -> list[str]:
-    """Per solver: how many steps it solved, its time against ``reference``'s where both converged, its verified
-    COT against ``reference``'s on every step but :data:`UNCOMPARED_STEPS`, and how the other solves ended; a
-    Markdown table."""
+    """Per solver: how many steps it solved and how many of those passed verification, its CPU time against
+    ``reference``'s where both converged, its verified COT against ``reference``'s on every step but
+    :data:`UNCOMPARED_STEPS`, and how the other solves ended; a Markdown table."""
     by_solver: dict[str, list[dict]] = {}
     for row in rows:
         by_solver.setdefault(row["solver"], []).append(row)
     theirs = {_step(row): row for row in by_solver.get(reference, []) if row["status"] == "converged"}
-    lines = [f"| solver | converged | time against `{reference}` where both converged (median, range) | verified COT "
-             f"against `{reference}` on forward step 2 and upward step 1 | how the others end |",
-             "|---|---|---|---|---|"]
+    lines = [f"| solver | converged | verified | CPU time against `{reference}` where both converged (median, range) "
+             f"| verified COT against `{reference}` (all but forward step 1) | how the others end |",
+             "|---|---|---|---|---|---|"]
     ranked = sorted(by_solver.items(), key=lambda item: (item[0] != reference,
                                                          -sum(r["status"] == "converged" for r in item[1]), item[0]))
     for label, solved in ranked:
         both = [(row, theirs[_step(row)]) for row in solved if row["status"] == "converged" and _step(row) in theirs]
-        ratios = [row["call_s"] / ref["call_s"] for row, ref in both]
+        ratios = [_seconds(row) / _seconds(ref) for row, ref in both]
         time_text = "—" if not ratios else "1×" if label == reference else (
             f"{statistics.median(ratios):.1f}× ({min(ratios):.1f}–{max(ratios):.1f}×)")
         changes = [row["verified_cot"] / ref["verified_cot"] - 1 for row, ref in both
                    if (row["experiment"], row["step"]) not in UNCOMPARED_STEPS and row.get("verified_cot")
                    and ref.get("verified_cot")]
         ends = Counter(row["status"] for row in solved if row["status"] != "converged")
-        lines.append(f"| `{label}` | {len(solved) - sum(ends.values())} of {len(solved)} | {time_text} | "
+        lines.append(f"| `{label}` | {len(solved) - sum(ends.values())} of {len(solved)} | "
+                     f"{sum(bool(row.get('verified')) for row in solved)} | {time_text} | "
                      f"{'—' if label == reference else _cot_changes(changes)} | "
                      f"{', '.join(f'{status} {count}' for status, count in sorted(ends.items())) or '—'} |")
     return lines
+
+
+def _seconds(row: dict) -> float:
+    """A solve's CPU time, or its wall time in rows recorded without it."""
+    return row["cpu_s"] if row.get("cpu_s") is not None else row["call_s"]
 
 
 def _step(row: dict) -> tuple:

@@ -57,7 +57,7 @@ def largest_ratio(ratios: Mapping[str, np.ndarray]) -> float:
 def _ticks(right: float) -> list[float]:
     """τ ticks up to ``right``: powers of two, and below 4 the fine ratios that tell near-ties apart."""
     powers = [2.0 ** k for k in range(int(math.log2(right)) + 1)]
-    fine = [tick for tick in (1.01, 1.05, 1.1, 1.25, 1.5) if tick <= right] if right < 4 else []
+    fine = [tick for tick in (1.05, 1.1, 1.25, 1.5) if tick <= right] if right < 4 else []
     return sorted({*powers, *fine})
 
 
@@ -72,7 +72,7 @@ def profile_svg(panels: Mapping[str, Mapping[str, np.ndarray]], title: str = "")
 
     solvers = sorted({solver for ratios in panels.values() for solver in ratios})
     colors = dict(zip(solvers, plt.get_cmap("tab10").colors, strict=False))
-    styles = dict(zip(solvers, ["-", "--", "-.", ":"] * 3, strict=False))
+    styles = dict(zip(solvers, [(0, ()), (0, (5, 2)), (0, (5, 2, 1, 2)), (0, (1, 1.5))] * 3, strict=False))
     with plt.rc_context({"svg.fonttype": "none", "svg.hashsalt": "gaitbench", "font.size": 9, "axes.grid": True,
                          "grid.alpha": 0.3}):
         figure, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.0), squeeze=False)
@@ -82,7 +82,7 @@ def profile_svg(panels: Mapping[str, Mapping[str, np.ndarray]], title: str = "")
                 steps = np.sort(values[np.isfinite(values)])
                 taus = np.concatenate([[1.0], steps, [right]])
                 axis.step(taus, profile(values, taus), where="post", label=solver, color=colors[solver],
-                          linestyle=styles[solver], linewidth=1.4)
+                          linestyle=styles[solver], linewidth=1.6)
             axis.set_xscale("log", base=2)
             axis.set_xlim(1.0, right)
             axis.set_xticks(_ticks(right), [f"{tick:g}" for tick in _ticks(right)])
@@ -90,10 +90,12 @@ def profile_svg(panels: Mapping[str, Mapping[str, np.ndarray]], title: str = "")
             axis.set_ylim(0.0, 1.02)
             axis.set_xlabel(label)
             axis.set_ylabel("share of problems solved within τ × best")
-        axes[0][-1].legend(loc="lower right", fontsize=8)
+        handles, labels = axes[0][0].get_legend_handles_labels()
+        figure.legend(handles, labels, loc="lower center", ncol=min(len(solvers), 4), fontsize=8, frameon=False)
         if title:
             figure.suptitle(title)
-        figure.tight_layout()
+        rows_of_legend = -(-len(solvers) // 4)
+        figure.tight_layout(rect=(0, 0.05 * rows_of_legend + 0.02, 1, 1))
         buffer = io.StringIO()
         figure.savefig(buffer, format="svg", metadata={"Date": None})
         plt.close(figure)
