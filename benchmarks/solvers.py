@@ -185,10 +185,12 @@ def markdown(results: dict, figure: str = PROFILE_FIGURE.format(stem="solvers"))
     rows = results["rows"]
     lines = ["# Solvers on 4-DOF gait steps (steps 1, 2 and 6 of each experiment; thesis cost)", "",
              f"Machine: {machine['cpus']} CPUs ({machine.get('cpu', '?')}), {machine['platform']}, Python "
-             f"{machine['python']}; gaitbench {machine['gaitbench']} at {machine['git_commit']}; {packages}.", "",
+             f"{machine['python']}; gaitbench {machine['gaitbench']}, measured at "
+             f"{', '.join(sorted({row.get('commit') or machine['git_commit'] for row in rows}))}; {packages}.", "",
              f"Problems: {_problem_set(rows)}; {len({_step(row) for row in rows})} problems × "
              f"{len({row['solver'] for row in rows})} solvers, {len(rows)} solves"
-             + (f" in {results['run_wall_s'] / 60:.0f} min of wall time." if results.get("run_wall_s") else "."),
+             + (f" (the last invocation: {results['run_wall_s'] / 60:.0f} min of wall time)."
+                if results.get("run_wall_s") else "."),
              "", *([results["note"], ""] if results.get("note") else []),
              f"Limits per solve: {limits['time_limit_s']} s, {limits['max_iterations']} iterations. "
              "`COT` is the optimizer's objective at the returned point, `verified COT` the COT recomputed from the "
@@ -355,12 +357,13 @@ def main() -> None:
                     for transcription in args.transcriptions.split(",")]
         machine = provenance()
         OUT.mkdir(exist_ok=True)
+        log = OUT / f"{args.out}.jsonl"
+        recorded = len(log.read_text().splitlines()) if log.exists() else 0
         started = time.perf_counter()
-        rows = run(solvers, problems, args.time_limit, args.max_iterations, OUT / f"{args.out}.jsonl",
-                   machine["git_commit"])
+        rows = run(solvers, problems, args.time_limit, args.max_iterations, log, machine["git_commit"])
         results = {"machine": machine, "limits": {"time_limit_s": args.time_limit,
-                                                  "max_iterations": args.max_iterations},
-                   "note": args.note, "run_wall_s": time.perf_counter() - started, "rows": rows}
+                                                  "max_iterations": args.max_iterations}, "note": args.note,
+                   "run_wall_s": time.perf_counter() - started if len(rows) > recorded else None, "rows": rows}
     (OUT / f"{args.out}.json").write_text(json.dumps(results, indent=2))
     (OUT / f"{args.out}.md").write_text(markdown(results, PROFILE_FIGURE.format(stem=args.out)))
     (OUT / PROFILE_FIGURE.format(stem=args.out)).write_text(profile_svg(profile_ratios(results["rows"])[2]))
