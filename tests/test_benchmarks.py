@@ -307,21 +307,36 @@ def _solvers_module():
     return _benchmark("solvers")
 
 
-def _solve(solver, experiment, step, status, seconds, cot=None):
+def _solve(solver, experiment, step, status, seconds, cot=None, verified=None):
     return {"solver": solver, "experiment": experiment, "step": step, "transcription": "dmoc", "N": 25,
-            "status": status, "call_s": seconds, "verified_cot": cot}
+            "status": status, "call_s": 2 * seconds, "cpu_s": seconds, "verified_cot": cot,
+            "verified": cot is not None if verified is None else verified}
 
 
 def test_the_solver_summary_compares_time_and_optimum_with_ipopt_where_both_converged():
     solvers = _solvers_module()
     rows = [_solve("ipopt", "forward", 1, "converged", 1.0, 1e-4), _solve("ipopt", "forward", 2, "converged", 2.0, 1.0),
             _solve("ipopt", "upward-slope", 1, "iteration_limit", 5.0),
-            _solve("sqp", "forward", 1, "converged", 3.0, 9e-4), _solve("sqp", "forward", 2, "converged", 8.0, 0.95),
+            _solve("sqp", "forward", 1, "converged", 3.0, 9e-4, verified=False),
+            _solve("sqp", "forward", 2, "converged", 8.0, 0.95),
             _solve("sqp", "upward-slope", 1, "time_limit", 60.0)]
     table = solvers.summary(rows)
-    assert table[2] == "| `ipopt` | 2 of 3 | 1× | — | iteration_limit 1 |"
+    assert table[2] == "| `ipopt` | 2 of 3 | 2 | 1× | — | iteration_limit 1 |"
     # forward step 1's COTs (a continuum of optima near zero) are not compared; step 2 is 5 % lower
-    assert table[3] == "| `sqp` | 2 of 3 | 3.5× (3.0–4.0×) | -5.0 % on 1 | time_limit 1 |"
+    assert table[3] == "| `sqp` | 2 of 3 | 1 | 3.5× (3.0–4.0×) | -5.0 % on 1 | time_limit 1 |"
+
+
+def test_the_solver_profiles_count_verified_solves_on_the_problems_every_solver_ran():
+    solvers = _solvers_module()
+    rows = [_solve("ipopt", "forward", 1, "converged", 1.0, 1e-4), _solve("sqp", "forward", 1, "converged", 2.0, 1e-5),
+            _solve("ipopt", "forward", 2, "converged", 2.0, 1.0),
+            _solve("sqp", "forward", 2, "converged", 1.0, 0.5, verified=False),
+            _solve("ipopt", "stairs", 6, "converged", 1.0, 1.0)]  # sqp did not run it: left out
+    n_time, n_cot, panels = solvers.profile_ratios(rows)
+    time_ratios, cot_ratios = panels.values()
+    assert (n_time, n_cot) == (2, 1)
+    assert time_ratios["ipopt"].tolist() == [1.0, 1.0] and time_ratios["sqp"].tolist() == [2.0, float("inf")]
+    assert cot_ratios["ipopt"].tolist() == [1.0] and cot_ratios["sqp"].tolist() == [float("inf")]  # not forward 1
 
 
 def test_the_recorded_solver_table_is_the_rendering_of_the_recorded_results():

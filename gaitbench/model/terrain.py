@@ -155,9 +155,10 @@ def terrain_clearance(q_st: Any, q_sw: Any, theta: Any, theta_behind: Any,
     The stance foot stands where the ground bends from ``theta_behind`` (the chord the swing foot comes from) to
     ``theta`` (the chord it lands on). With the foot at (x, y) from the stance foot, in leg lengths, the profile is
     s̄ x + δ |x| with s̄, δ the mean and half-difference of the two chords' slopes: exact on either side. |x| is
-    rounded as x tanh(x / ε), exact at the crossing (x = y = 0, where the legs pass each other) and at the
-    footholds, and off by at most 0.28 |δ| ε in between (2 cm for a 1 m leg on the stairs at the default ε): conservative where
-    the ground peaks, lenient where it dips. On a uniform slope (δ = 0) this is the chord clearance / cos θ.
+    rounded as x tanh(x / ε), exact at the crossing (x = y = 0, where the legs pass each other), nearly so at the
+    footholds (|δ| x (1 − tanh(x / ε))), and off by at most 0.28 |δ| ε in between (2 cm for a 1 m leg on the stairs
+    at the default ε): conservative where the ground peaks, lenient where it dips. On a uniform slope (δ = 0) this
+    is the chord clearance / cos θ.
     """
     ns = _namespace(q_st, q_sw, theta, theta_behind)
     x = ns.sin(q_sw) - ns.sin(q_st)
