@@ -5,7 +5,8 @@ Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/section_pruning.py EX
 Writes benchmarks/results/section_pruning/<experiment>-<transcription>-<N>-<steps>.json, per step:
 
 - ``sections``: every sectional solve (k0, status, iterations) and, for a failed one, the constraint blocks it
-  leaves violated (largest violation per block) at the point IPOPT stops at;
+  leaves violated (largest violation per block) at the point IPOPT stops at, and those its initial guess (the
+  strategy's, slacks settled) violates;
 - ``removable``: the converged sections whose omission (as if they had failed) leaves the chosen trajectory
   bit-identical, found by re-running the synthesis, completion and final choice without each in turn — what an
   oracle that knew every solution could prune, the ceiling for any exact rule;
@@ -17,7 +18,12 @@ Writes benchmarks/results/section_pruning/<experiment>-<transcription>-<N>-<step
   Phase solution's tail (``sectional_guess = "complete"``), and IPOPT's feasibility problem (zero objective) from
   the same guess as the strategy's, with all its constraints and with one group relaxed (torque limits ×10; no
   lift-off; no clearance and leg-angle windows): which constraints a certificate of infeasibility would have to
-  reason about;
+  reason about; and ``reachability``: whether a sound certificate of the kind "the lift-off condition cannot be
+  met from the section's start state" could exist in its cheapest form, each leg angle a double integrator
+  |q̈_i| ≤ A_i from the fixed start state to the fixed heel-strike pose in (N − k0) h, with A_i the torque limit's
+  share alone (less than any sound bound: ``torque_only``) and with gravity and Coriolis at the velocities the
+  torques could reach (``sampled``, still no upper bound); a certificate needs ``max_lift_off`` below the lift-off
+  rate, and must not be met by any section that converges or is feasible after all (computed for every section);
 - ``zero_cost_nodes``: synthesized nodes whose point cost is exactly 0, the only nodes where a section with no
   positive per-node bound could be ranked after the synthesized candidate.
 
@@ -35,9 +41,9 @@ import casadi as ca
 import numpy as np
 
 from gaitbench.model.energetics import candidate_cot
-from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.mechanics import BipedModel, biped_functions
 from gaitbench.plugins import load_registry
-from gaitbench.problem.gait_problem import ProblemOptions
+from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector, roles_to_legs
 from gaitbench.solve.synthesis import synthesize
 from gaitbench.walk_types import WalkProblem
 
@@ -82,6 +88,13 @@ def analyse(experiment_name: str, transcription: str, n_nodes: int, steps: int) 
     record: dict = {"experiment": experiment_name, "transcription": transcription, "N": n_nodes, "steps": []}
     pending: dict = {"sections": []}
     solve_one, node_values_of = dc.SectionalSolves.solve_one, dc.NodeValues.__dict__["of"]
+    solve_with_retries = dc.solve_with_retries
+
+    def recorded_solve(*args, **kwargs):
+        outcome = solve_with_retries(*args, **kwargs)
+        if kwargs.get("phase") == "first":
+            pending["first"] = outcome.trajectory
+        return outcome
 
     def recorded_section(sections, task):
         k0, parameters, _ = task
@@ -90,6 +103,9 @@ def analyse(experiment_name: str, transcription: str, n_nodes: int, steps: int) 
         if not result.converged:
             violations = sections.built[k0].nlp.block_violations(result.x, parameters)
             entry["violated"] = {name: value for name, value in violations.items() if value > 1e-6}
+            at_guess = sections.built[k0].nlp.block_violations(sections.built[k0].settle_slacks(task[2], parameters),
+                                                               parameters)
+            entry["guess_violates"] = {name: value for name, value in at_guess.items() if value > 1e-6}
             pending.setdefault("failed", []).append((entry, sections.built[k0], task))
         pending["sections"].append(entry)
         return result
@@ -106,14 +122,18 @@ def analyse(experiment_name: str, transcription: str, n_nodes: int, steps: int) 
             record["steps"].append(step_record(problem, step, pending, strategy.max_checks))
             for entry, built, task in pending.get("failed", []):
                 entry["probes"] = probes(problem, built, task, pending["candidates"][0])
+            for entry in pending["sections"]:  # converged ones too: a certificate must pass every one of them
+                entry["reachability"] = reachability(problem, step.index, pending["first"], entry["k0"])
         pending.clear()
         pending["sections"] = []
 
     dc.SectionalSolves.solve_one, dc.NodeValues.of = recorded_section, classmethod(recorded_nodes)
+    dc.solve_with_retries = recorded_solve
     try:
         walk = strategy.solve(problem, on_step=on_step)
     finally:
         dc.SectionalSolves.solve_one, dc.NodeValues.of = solve_one, node_values_of
+        dc.solve_with_retries = solve_with_retries
     record |= {"complete": walk.complete, "verified_acot": walk.acot}
     return record
 
@@ -146,6 +166,54 @@ def probes(problem: WalkProblem, built, task, complete) -> dict:
         stats = feasibility.stats()
         result[label] = {"feasible_point_found": bool(stats["success"]), "iterations": int(stats["iter_count"])}
     return result
+
+
+def reachability(problem: WalkProblem, index: int, first, k0: int) -> dict:
+    """The double-integrator relaxation of a section's lift-off condition (see the module's docstring)."""
+    experiment, n = problem.experiment, problem.n_nodes
+    data = problem.step_data(index, np.r_[first.q[0], first.dq[0]])
+    limits, h, stance, robot = problem.options.limits, data.time_step, data.stance, data.robot
+    roles = role_robot_vector(robot, stance)
+    alpha = np.arcsin(data.chord / (2 * robot.l))
+    end_roles = np.array([data.slope - alpha, data.slope + alpha])
+    model4, rates, impulse = biped_functions(4, 1), ca.SX.sym("rates", 2), ca.SX.sym("impulse")
+    pose = ca.vertcat(end_roles, 0, 0)
+    after, _ = model4.heel_strike(pose, model4.push_off(pose, ca.vertcat(rates, 0, 0), impulse, roles), roles)
+    lift = (-np.sin(data.slope) * after[2] + np.cos(data.slope) * after[3]) / robot.l  # linear in (rates, impulse)
+    gradient = np.array(ca.Function("g", [rates, impulse], [ca.jacobian(lift, ca.vertcat(rates, impulse))])(0, 0))
+    offset = float(ca.Function("c", [rates, impulse], [lift])(0, 0))
+    slope = roles_to_legs(gradient.ravel()[:2], stance)
+    best_impulse = max(0.0, float(gradient.ravel()[2]) * limits.push_off_max)
+    model, duration = BipedModel(robot, 2), (n - k0) * h
+    poses, start_q, start_dq = first.q[k0 - 1:], first.q[k0 - 1], first.dq[k0 - 1]
+    end_q = np.asarray(experiment.heel_strike_configuration(index))
+    torque_only = np.min([limits.tau_max * np.abs(np.linalg.inv(np.asarray(model.mass_matrix(q, stance), float)))
+                          .sum(axis=1) for q in poses], axis=0)
+    sampled = np.zeros(2)
+    for q in poses:
+        for signs in np.array(np.meshgrid(*[(-1, 1)] * 4)).reshape(4, -1).T:
+            dq = start_dq + duration * torque_only * signs[:2]
+            accelerations = model.forward_dynamics(q, dq, limits.tau_max * signs[2:], stance)[0]
+            sampled = np.maximum(sampled, np.abs(np.asarray(accelerations, float).ravel()[:2]))
+    result = {"lift_off_rate": problem.options.lift_off_rate}
+    for label, bound in (("torque_only", torque_only), ("sampled", sampled)):
+        ranges = [_end_rate_range(start_dq[i], end_q[i] - start_q[i], duration, bound[i]) for i in range(2)]
+        if None in ranges:
+            result[label] = {"max_lift_off": None, "certifies": True}
+            continue
+        most = offset + best_impulse + sum(slope[i] * ranges[i][1 if slope[i] > 0 else 0] for i in range(2))
+        result[label] = {"max_lift_off": most, "certifies": bool(most < problem.options.lift_off_rate)}
+    return result
+
+
+def _end_rate_range(rate: float, distance: float, duration: float, bound: float) -> tuple[float, float] | None:
+    """The end rates of x'' ∈ [−bound, bound] that cover ``distance`` in ``duration`` from ``rate`` (bang-bang with one
+    switch); None where the distance cannot be covered."""
+    drift = (distance - rate * duration) / bound
+    if abs(drift) > duration ** 2 / 2:
+        return None
+    return (rate - bound * (2 * np.sqrt(duration ** 2 / 2 - drift) - duration),
+            rate + bound * (2 * np.sqrt(duration ** 2 / 2 + drift) - duration))
 
 
 def step_record(problem: WalkProblem, step, pending: dict, max_checks: int) -> dict:
@@ -209,9 +277,15 @@ def failed_row(record: dict) -> str | None:
                 or s["probes"]["as posed"]["feasible_point_found"]]
     rest = [s for s in failed if s not in feasible]
     counts = [sum(s["probes"][label]["feasible_point_found"] for s in rest) for label in list(RELAXATIONS)[1:]]
+    certified = {label: [s for s in failed if s["reachability"][label]["certifies"]]
+                 for label in ("torque_only", "sampled")}
+    wrongly = {label: sum(s["reachability"][label]["certifies"] for step in record["steps"] for s in step["sections"]
+                          if s["status"] == "converged" or s in feasible) for label in certified}
     return (f"| {record['experiment']} {record['transcription']} N = {record['N']} | {len(failed)} | "
             f"{sum(s['iterations'] for s in failed)} | {len(feasible)} ({sum(s['iterations'] for s in feasible)}) | "
-            f"{len(rest)} | " + " | ".join(str(count) for count in counts) + " |")
+            f"{len(rest)} | " + " | ".join(str(count) for count in counts) + " | " +
+            " | ".join(f"{len(found)} ({sum(s['iterations'] for s in found)}; {wrongly[label]} feasible)"
+                       for label, found in certified.items()) + " |")
 
 
 def main(argv: list[str]) -> None:
@@ -223,8 +297,9 @@ def main(argv: list[str]) -> None:
         for record in records:
             print(summary_row(record))
         print("\n| walk | failed sections | their iterations | feasible after all (their iterations) | not shown "
-              "feasible | of these, feasible with: " + " | ".join(list(RELAXATIONS)[1:]) + " |\n"
-              "|---|---|---|---|---|---|---|---|")
+              "feasible | of these, feasible with: " + " | ".join(list(RELAXATIONS)[1:]) + " | double integrator "
+              "certifies, A = torque part (iterations; feasible sections it would also skip) | A = sampled |\n"
+              "|---|---|---|---|---|---|---|---|---|---|")
         for row in filter(None, map(failed_row, records)):
             print(row)
         return
