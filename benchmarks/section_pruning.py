@@ -14,16 +14,16 @@ Writes benchmarks/results/section_pruning/<experiment>-<transcription>-<N>-<step
   0014-section-pruning.md): the completed candidate's COT with the section's own point costs replaced by the
   energy it must at least supply, max(0, V_end − V_start − K_start) / h, exceeds the chosen option's; and which
   of those the output does depend on (``energy_flagged_needed``), where skipping would have changed it;
-- for each failed section, ``probes``: whether it is feasible after all — solved again from the complete Second
-  Phase solution's tail (``sectional_guess = "complete"``), and IPOPT's feasibility problem (zero objective) from
-  the same guess as the strategy's, with all its constraints and with one group relaxed (torque limits ×10; no
-  lift-off; no clearance and leg-angle windows): which constraints a certificate of infeasibility would have to
-  reason about; and ``reachability``: whether a sound certificate of the kind "the lift-off condition cannot be
-  met from the section's start state" could exist in its cheapest form, each leg angle a double integrator
-  |q̈_i| ≤ A_i from the fixed start state to the fixed heel-strike pose in (N − k0) h, with A_i the torque limit's
-  share alone (less than any sound bound: ``torque_only``) and with gravity and Coriolis at the velocities the
-  torques could reach (``sampled``, still no upper bound); a certificate needs ``max_lift_off`` below the lift-off
-  rate, and must not be met by any section that converges or is feasible after all (computed for every section);
+- for each failed section, ``probes``: whether it is feasible after all — solved again from the complete Second Phase
+  solution's tail (``sectional_guess = "complete"``), and IPOPT's feasibility problem (zero objective) from the same
+  guess as the strategy's, with all its constraints and with one group relaxed (torque limits ×10; no lift-off; no
+  clearance and leg-angle windows): which constraints a certificate of infeasibility would have to reason about; and
+  ``reachability``: whether a sound certificate of the kind "the lift-off condition cannot be met from the section's
+  start state" could exist in its cheapest form, each leg angle a continuous-time double integrator |q̈_i| ≤ A_i from
+  the fixed start state to the fixed heel-strike pose in (N − k0) h, with A_i the torque limit's share alone (less
+  than any sound bound: ``torque_only``) and with gravity and Coriolis at the velocities the torques could reach
+  (``sampled``, still no upper bound); a certificate needs ``max_lift_off`` below the lift-off rate, and must not be
+  met by any section that converges or is feasible after all (computed for every section);
 - ``zero_cost_nodes``: synthesized nodes whose point cost is exactly 0, the only nodes where a section with no
   positive per-node bound could be ranked after the synthesized candidate.
 
@@ -51,7 +51,8 @@ OUT = Path(__file__).parent / "results" / "section_pruning"
 
 
 def choose(nodes, starts: list[int], n: int, mass: float, chord: float, g: float, max_checks: int):
-    """The strategy's synthesis, completion and final choice by candidate COT: (label, chosen patch, cots)."""
+    """The strategy's synthesis, completion and final choice by candidate COT: (label, chosen patch, candidate COTs,
+    synthesis)."""
     import plugins.strategies.decrease_and_conquer as dc
 
     synthesis = synthesize(nodes.pcot, nodes.values, max_checks=max_checks)
@@ -92,7 +93,7 @@ def analyse(experiment_name: str, transcription: str, n_nodes: int, steps: int) 
 
     def recorded_solve(*args, **kwargs):
         outcome = solve_with_retries(*args, **kwargs)
-        if kwargs.get("phase") == "first":
+        if kwargs.get("phase") == "first" and outcome.solved:  # the First Phase the sections start from
             pending["first"] = outcome.trajectory
         return outcome
 
