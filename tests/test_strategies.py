@@ -88,6 +88,36 @@ def test_the_search_budget_falls_back_to_the_reference():
     assert budget.exhausted and budget.selection == [0, 0, 0]
 
 
+def test_a_candidate_dearest_at_every_node_is_still_chosen_where_it_alone_keeps_the_relation():
+    """Why no bound on a section's cost can rule it out of the synthesis (docs/decisions/0014-section-pruning.md):
+    candidate 2 costs most at every node, yet it is the only way on after the cheapest choice at node 1."""
+    values = _values([0, 1, 2, 3], [NAN, 5.0, 0.5, 4.5], [NAN, NAN, 6.0, 7.0])
+    costs = np.array([[1, 3, 5, 5], [NAN, 1, 1, 1], [NAN, NAN, 9, 9]], dtype=float)
+    assert synthesize(costs, values).selection == [0, 1, 2, 2]
+    assert synthesize(costs[:2], values[:2]).selection == [0, 0, 0, 1]  # without it: another path altogether
+
+
+def test_the_synthesis_is_unchanged_by_leaving_out_a_candidate_it_did_not_select():
+    """The search returns the first path in rank order that keeps the relation, so a candidate off that path changes
+    nothing when left out, within the check budget: what decision 0014's replay of the choice relies on."""
+    rng = np.random.default_rng(11)
+    compared = 0
+    for trial in range(200):
+        n_candidates, n_nodes = rng.integers(3, 8), rng.integers(3, 12)
+        starts = np.r_[0, np.sort(rng.integers(1, n_nodes - 1, n_candidates - 1))]
+        values = np.cumsum(rng.normal(size=(n_candidates, n_nodes, 2)), axis=1)
+        costs = rng.random((n_candidates, n_nodes))
+        for j, start in enumerate(starts):
+            values[j, :start], costs[j, :start] = NAN, NAN
+        found = synthesize(costs, values)
+        for left_out in set(range(1, n_candidates)) - set(found.selection):
+            keep = [j for j in range(n_candidates) if j != left_out]
+            again = synthesize(costs[keep], values[keep])
+            assert [keep[j] for j in again.selection] == found.selection, trial
+            compared += 1
+    assert compared > 200
+
+
 def _search_one_check_at_a_time(costs, values, max_checks):
     """The synthesis as the thesis describes it, one relation check at a time: what the batched search must equal."""
     n_nodes = costs.shape[1]
