@@ -40,12 +40,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from gaitbench.contracts import WalkProblem
 from gaitbench.model.energetics import candidate_cot
 from gaitbench.model.mechanics import BipedModel, biped_functions
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector, roles_to_legs
 from gaitbench.solve.synthesis import synthesize
-from gaitbench.walk_types import WalkProblem
 
 OUT = Path(__file__).parent / "results" / "section_pruning"
 
