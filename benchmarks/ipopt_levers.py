@@ -1,0 +1,242 @@
+"""IPOPT option levers, paired: the same problems solved with IPOPT's defaults (A) and with a variant (B), A and B
+interleaved, so that a shared machine's load falls on both alike.
+
+Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/ipopt_levers.py steps VARIANT [--nodes 20 60 120]
+        OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/ipopt_levers.py sections VARIANT [--nodes 20 60]
+        OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/ipopt_levers.py walks VARIANT [--nodes 20 60]
+        OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/ipopt_levers.py fatrop --nodes 100 --repeats 3
+
+- ``steps``: step 1 of every experiment (the standard guess), per transcription and N: status, iterations,
+  objective and wall time (min of ``--repeats`` paired solves).
+- ``sections``: decrease and conquer's sectional NLPs of step 1 of every experiment, from the First Phase's tail
+  (as the strategy starts them): converged count, iterations, wall time and how many end with a lower objective.
+- ``walks``: whole cases through the suite runner's ``run_case`` (one-phase and decrease and conquer, 2 steps, one
+  sectional worker): status, verified ACOT, whether the walk verifies, iterations of every solve (sections
+  included) and wall time.
+- ``fatrop``: forward step 1, IPOPT (A) against FATROP on the stage-wise form (B, :mod:`gaitbench.problem.stagewise`).
+
+``VARIANT`` names an entry of :data:`VARIANTS`: the solver options of B (A has none). Rows are appended to
+``benchmarks/results/ipopt_levers.jsonl`` with the commit; the paired summary is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gaitbench.plugins import load_registry
+from gaitbench.problem.build_cache import BuildCache
+from gaitbench.problem.gait_problem import StepData, sectional_structure
+from gaitbench.run.case import Case, PluginChoice
+from gaitbench.run.provenance import provenance
+from gaitbench.run.runner import run_case
+from gaitbench.solve.solver import prepare, section_solver
+from gaitbench.solve.walk import solve_and_verify
+from gaitbench.walk_types import WalkProblem
+
+RESULTS = Path(__file__).parent / "results" / "ipopt_levers.jsonl"
+EXPERIMENTS = ("forward", "downward-slope", "upward-slope", "stairs")
+TRANSCRIPTIONS = ("hermite-simpson", "dmoc")
+ADAPTIVE = {"mu_strategy": "adaptive"}
+VARIANTS: dict[str, dict] = {
+    "adaptive-qf": ADAPTIVE | {"mu_oracle": "quality-function"},
+    "adaptive-probing": ADAPTIVE | {"mu_oracle": "probing"},
+    "sections-adaptive-qf": {"section_options": ADAPTIVE | {"mu_oracle": "quality-function"}},
+    "sections-adaptive-probing": {"section_options": ADAPTIVE | {"mu_oracle": "probing"}},
+    "sections-objective": {"section_options": {"nlp_scaling_obj_target_gradient": 1.0}},
+    "mumps-amd": {"mumps_pivot_order": 0},
+    "mumps-metis": {"mumps_pivot_order": 5},
+    "mumps-pord": {"mumps_pivot_order": 4},
+    "mumps-noscaling": {"mumps_permuting_scaling": 0, "mumps_scaling": 0},
+    "spral": {"linear_solver": "spral"},
+}
+"""Solver options of the B side, by name."""
+
+
+def step_problem(registry, experiment: str, transcription: str, n_nodes: int, options: dict):
+    """Step 1 of ``experiment`` from its initial state, solved by IPOPT with ``options``."""
+    made = registry.create("experiment", experiment)
+    problem = WalkProblem(made, registry.create("transcription", transcription),
+                          registry.create("solver", "ipopt", **options), n_nodes)
+    return problem, problem.step_data(1, np.asarray(made.initial_state)[[0, 1, 4, 5]])
+
+
+def steps_part(registry, options: dict, experiments, nodes, repeats: int) -> list[dict]:
+    rows = []
+    for experiment in experiments:
+        for transcription in TRANSCRIPTIONS:
+            for n_nodes in nodes:
+                sides = {side: step_problem(registry, experiment, transcription, n_nodes, opts)
+                         for side, opts in (("A", {}), ("B", options))}
+                built = sides["A"][0].transcription.build(sides["A"][0].structure("second"))
+                data = sides["A"][1]
+                for problem, _ in sides.values():
+                    prepare(problem.solver, built.nlp)
+                results = {"A": [], "B": []}
+                for _ in range(repeats):
+                    for side, (problem, _) in sides.items():
+                        results[side].append(problem.solver.solve(built.nlp, data.parameter_vector(),
+                                                                  built.initial_guess(data)))
+                row = {"part": "steps", "experiment": experiment, "transcription": transcription, "N": n_nodes}
+                for side, solved in results.items():
+                    last = solved[-1]
+                    row[side] = {"status": last.status.value, "iterations": last.iterations,
+                                 "objective": last.objective, "wall_s": min(r.wall_time_s for r in solved)}
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    return rows
+
+
+def sections_part(registry, options: dict, experiments, nodes) -> list[dict]:
+    rows = []
+    for experiment in experiments:
+        for transcription in TRANSCRIPTIONS:
+            for n_nodes in nodes:
+                problem, data = step_problem(registry, experiment, transcription, n_nodes, {})
+                first = solve_and_verify(problem, 1, problem.transcription.build(problem.structure("first")), data,
+                                         phase="first")
+                if not first.solved:
+                    continue
+                solvers = {"A": section_solver(problem.solver),
+                           "B": section_solver(registry.create("solver", "ipopt", **options))}
+                results = {"A": [], "B": []}
+                for k0 in range(2, n_nodes - 1):
+                    built = problem.transcription.build(sectional_structure(problem.structure("second"), k0))
+                    section = StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
+                                                                      first.trajectory.dq[k0 - 1]],
+                                       data.chord, data.slope, data.time_step)
+                    x0 = built.initial_guess(section, first.trajectory.seed((k0 - 1) * data.time_step))
+                    for side, solver in solvers.items():
+                        prepare(solver, built.nlp)
+                        results[side].append(solver.solve(built.nlp, section.parameter_vector(), x0))
+                row = {"part": "sections", "experiment": experiment, "transcription": transcription, "N": n_nodes}
+                for side, solved in results.items():
+                    converged = [r for r in solved if r.converged]
+                    row[side] = {"sections": len(solved), "converged": len(converged),
+                                 "iterations": int(sum(r.iterations for r in solved)),
+                                 "converged_iterations": int(sum(r.iterations for r in converged)),
+                                 "wall_s": float(sum(r.wall_time_s for r in solved))}
+                pairs = [(a, b) for a, b in zip(results["A"], results["B"], strict=True) if a.converged and b.converged]
+                row["B_lower_objective"] = sum(b.objective < a.objective * (1 - 1e-9) for a, b in pairs)
+                row["B_higher_objective"] = sum(b.objective > a.objective * (1 + 1e-9) for a, b in pairs)
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    return rows
+
+
+def fatrop_part(registry, nodes, repeats: int) -> list[dict]:
+    """Forward step 1 from the standard guess, IPOPT (A) against FATROP on the stage-wise form (B), interleaved."""
+    rows = []
+    for transcription in TRANSCRIPTIONS:
+        for n_nodes in nodes:
+            problem, data = step_problem(registry, "forward", transcription, n_nodes, {})
+            built = problem.transcription.build(problem.structure("second"))
+            solvers = {"A": problem.solver, "B": registry.create("solver", "fatrop", stagewise=True)}
+            started = time.perf_counter()
+            for solver in solvers.values():
+                prepare(solver, built.nlp)
+            build_s = time.perf_counter() - started
+            results = {"A": [], "B": []}
+            for _ in range(repeats):
+                for side, solver in solvers.items():
+                    results[side].append(solver.solve(built.nlp, data.parameter_vector(), built.initial_guess(data)))
+            row = {"part": "fatrop", "experiment": "forward", "transcription": transcription, "N": n_nodes,
+                   "build_both_s": build_s}
+            for side, solved in results.items():
+                last = solved[-1]
+                row[side] = {"status": last.status.value, "message": last.message, "iterations": last.iterations,
+                             "objective": last.objective, "violation": last.constraint_violation,
+                             "wall_s": sorted(r.wall_time_s for r in solved)}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    return rows
+
+
+class SolveCounter:
+    """Every IPOPT solve's iterations and time in this process, sectional and other (the walks' effort)."""
+
+    def __init__(self) -> None:
+        from plugins.solvers.ipopt import Ipopt
+
+        self.totals = {"iterations": 0, "wall_s": 0.0}
+        original = Ipopt.solve
+
+        def solve(solver, nlp, parameters, initial_guess):
+            result = original(solver, nlp, parameters, initial_guess)
+            self.totals["iterations"] += result.iterations
+            self.totals["wall_s"] += result.wall_time_s
+            return result
+
+        Ipopt.solve = solve
+
+    def take(self) -> dict:
+        totals, self.totals = self.totals, {"iterations": 0, "wall_s": 0.0}
+        return totals
+
+
+def walk_cases(experiments, nodes, steps: int) -> list[Case]:
+    cases = []
+    for experiment in experiments:
+        for transcription in TRANSCRIPTIONS:
+            for n_nodes in nodes:
+                for strategy, options in (("one-phase", {}), ("decrease-and-conquer", {"workers": 1})):
+                    cases.append(Case(experiment=PluginChoice(experiment), transcription=PluginChoice(transcription),
+                                      solver=PluginChoice("ipopt"), strategy=PluginChoice(strategy, options),
+                                      n_nodes=n_nodes, steps=steps, time_limit_s=600))
+    return cases
+
+
+def walks_part(options: dict, experiments, nodes, steps: int) -> list[dict]:
+    rows, counter = [], SolveCounter()
+    builds = {"A": BuildCache(), "B": BuildCache()}
+    for case in walk_cases(experiments, nodes, steps):
+        row = {"part": "walks", "case": case.label}
+        for side, opts in (("A", {}), ("B", options)):
+            solved = dataclasses.replace(case, solver=PluginChoice("ipopt", opts))
+            outcome = run_case(solved, builds[side])
+            metrics = outcome.metrics
+            row[side] = {"status": outcome.status, "acot": metrics.get("acot"), "verified": metrics.get("verified"),
+                         "wall_s": outcome.wall_time_s, **counter.take()}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("part", choices=("steps", "sections", "walks", "fatrop"))
+    parser.add_argument("variant", choices=sorted(VARIANTS), nargs="?", default=None,
+                        help="the B side's options (not for fatrop, whose B side is FATROP)")
+    parser.add_argument("--nodes", type=int, nargs="+", default=[20, 60])
+    parser.add_argument("--repeats", type=int, default=2, help="paired solves per step (steps)")
+    parser.add_argument("--steps", type=int, default=2, help="steps per walk (walks)")
+    parser.add_argument("--experiments", nargs="+", default=list(EXPERIMENTS), choices=EXPERIMENTS)
+    arguments = parser.parse_args(argv)
+    if arguments.part != "fatrop" and arguments.variant is None:
+        parser.error(f"{arguments.part} needs a VARIANT")
+    options = VARIANTS.get(arguments.variant, {})
+    registry = load_registry()
+    started = time.perf_counter()
+    if arguments.part == "steps":
+        rows = steps_part(registry, options, arguments.experiments, arguments.nodes, arguments.repeats)
+    elif arguments.part == "sections":
+        rows = sections_part(registry, options, arguments.experiments, arguments.nodes)
+    elif arguments.part == "fatrop":
+        rows = fatrop_part(registry, arguments.nodes, arguments.repeats)
+    else:
+        rows = walks_part(options, arguments.experiments, arguments.nodes, arguments.steps)
+    commit = provenance().get("commit")
+    with RESULTS.open("a") as out:
+        for row in rows:
+            out.write(json.dumps({"variant": arguments.variant, "options": options, "commit": commit, **row}) + "\n")
+    print(f"{arguments.part} {arguments.variant}: {len(rows)} rows in {time.perf_counter() - started:.0f} s")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
