@@ -64,6 +64,17 @@ VARIANTS: dict[str, dict] = {
 """Solver options of the B side, by name."""
 
 
+_RECORD: dict = {}
+"""What every row of this run carries: the variant, its options and the commit (set by :func:`main`)."""
+
+
+def emit(row: dict) -> None:
+    """Print ``row`` and append it to :data:`RESULTS` at once, so that a run stopped early keeps what it measured."""
+    print(json.dumps(row), flush=True)
+    with RESULTS.open("a") as out:
+        out.write(json.dumps({**_RECORD, **row}) + "\n")
+
+
 def timed(spent: list[float], call, *arguments):
     """``call(*arguments)``, appending the CPU time this process spent in it to ``spent``: on a shared machine a
     steadier measure than wall time (every solve here runs in this process)."""
@@ -104,7 +115,7 @@ def steps_part(registry, options: dict, experiments, nodes, repeats: int) -> lis
                                  "objective": last.objective, "wall_s": min(r.wall_time_s for r in solved),
                                  "cpu_s": min(cpu[side])}
                 rows.append(row)
-                print(json.dumps(row), flush=True)
+                emit(row)
     return rows
 
 
@@ -141,7 +152,7 @@ def sections_part(registry, options: dict, experiments, nodes) -> list[dict]:
                 row["B_lower_objective"] = sum(b.objective < a.objective * (1 - 1e-9) for a, b in pairs)
                 row["B_higher_objective"] = sum(b.objective > a.objective * (1 + 1e-9) for a, b in pairs)
                 rows.append(row)
-                print(json.dumps(row), flush=True)
+                emit(row)
     return rows
 
 
@@ -170,7 +181,7 @@ def fatrop_part(registry, nodes, repeats: int) -> list[dict]:
                              "objective": last.objective, "violation": last.constraint_violation,
                              "wall_s": sorted(r.wall_time_s for r in solved), "cpu_s": sorted(cpu[side])}
             rows.append(row)
-            print(json.dumps(row), flush=True)
+            emit(row)
     return rows
 
 
@@ -231,9 +242,10 @@ def walks_part(options: dict, cases: list[Case]) -> list[dict]:
             outcome = timed(spent, run_case, solved, builds[side])
             metrics = outcome.metrics
             row[side] = {"status": outcome.status, "acot": metrics.get("acot"), "verified": metrics.get("verified"),
-                         "wall_s": outcome.wall_time_s, "cpu_s": spent[0], **counter.take()}
+                         "wall_s": outcome.wall_time_s, "cpu_s": spent[0], **counter.take(),
+                         "failed_sections": (metrics.get("strategy_details") or {}).get("failed_sections")}
         rows.append(row)
-        print(json.dumps(row), flush=True)
+        emit(row)
     return rows
 
 
@@ -253,6 +265,7 @@ def main(argv: list[str]) -> None:
     if arguments.part != "fatrop" and arguments.variant is None:
         parser.error(f"{arguments.part} needs a VARIANT")
     options = VARIANTS.get(arguments.variant, {})
+    _RECORD.update(variant=arguments.variant or "fatrop", options=options, commit=provenance().get("git_commit"))
     registry = load_registry()
     started = time.perf_counter()
     if arguments.part == "steps":
@@ -265,10 +278,6 @@ def main(argv: list[str]) -> None:
         cases = (suite_cases(arguments.suite) if arguments.suite is not None
                  else walk_cases(arguments.experiments, arguments.nodes, arguments.steps, arguments.strategies))
         rows = walks_part(options, cases)
-    commit = provenance().get("commit")
-    with RESULTS.open("a") as out:
-        for row in rows:
-            out.write(json.dumps({"variant": arguments.variant, "options": options, "commit": commit, **row}) + "\n")
     print(f"{arguments.part} {arguments.variant}: {len(rows)} rows in {time.perf_counter() - started:.0f} s")
 
 
