@@ -220,10 +220,12 @@ def walk_cases(experiments, nodes, steps: int, strategies) -> list[Case]:
     return cases
 
 
-def suite_cases(path: Path) -> list[Case]:
-    """A suite's cases (the regression set, say), decrease and conquer with one sectional worker."""
+def suite_cases(path: Path, strategies) -> list[Case]:
+    """A suite's cases (the regression set, say) of ``strategies``, decrease and conquer with one sectional worker."""
     cases = []
     for case in load_suite(path).cases:
+        if case.strategy.name not in strategies:
+            continue
         if case.strategy.name == "decrease-and-conquer":
             case = dataclasses.replace(case, strategy=PluginChoice(case.strategy.name,
                                                                    {**case.strategy.options, "workers": 1}))
@@ -258,7 +260,7 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--repeats", type=int, default=2, help="paired solves per step (steps)")
     parser.add_argument("--steps", type=int, default=2, help="steps per walk (walks)")
     parser.add_argument("--strategies", nargs="+", default=["one-phase", "decrease-and-conquer"],
-                        choices=["one-phase", "decrease-and-conquer"], help="walks: the grid's strategies")
+                        choices=["one-phase", "decrease-and-conquer"], help="walks: the strategies walked")
     parser.add_argument("--suite", type=Path, default=None, help="walks: this suite's cases instead of the grid")
     parser.add_argument("--experiments", nargs="+", default=list(EXPERIMENTS), choices=EXPERIMENTS)
     arguments = parser.parse_args(argv)
@@ -275,7 +277,7 @@ def main(argv: list[str]) -> None:
     elif arguments.part == "fatrop":
         rows = fatrop_part(registry, arguments.nodes, arguments.repeats)
     else:
-        cases = (suite_cases(arguments.suite) if arguments.suite is not None
+        cases = (suite_cases(arguments.suite, arguments.strategies) if arguments.suite is not None
                  else walk_cases(arguments.experiments, arguments.nodes, arguments.steps, arguments.strategies))
         rows = walks_part(options, cases)
     print(f"{arguments.part} {arguments.variant}: {len(rows)} rows in {time.perf_counter() - started:.0f} s")
