@@ -22,9 +22,6 @@ from gaitbench.solve.silence import quiet_stdout
 from gaitbench.solve.solver import options_key
 from gaitbench.solver_result import SolverResult, SolverStatus
 
-SECTION_OPTIONS: dict[str, Any] = {}
-"""IPOPT options that decrease and conquer's sectional NLPs get by default, over the solver's others."""
-
 _FUNCTIONS = ("f", "g", "grad_f", "jac_g", "hess_l")
 """The NLP callbacks IPOPT evaluates, named as in :class:`gaitbench.problem.nlp.NLPFunctions`."""
 
@@ -85,7 +82,7 @@ class Ipopt:
         if scaling not in SCALINGS:
             raise ValueError(f"scaling = {scaling!r}: expected one of {', '.join(SCALINGS)}")
         self.scaling = scaling
-        self.section_options = dict(SECTION_OPTIONS if section_options is None else section_options)
+        self.section_options = dict(section_options or {})
         self._arguments = dict(max_iterations=max_iterations, time_limit_s=time_limit_s, tolerance=tolerance,
                                print_level=print_level, scaling=scaling, section_options=self.section_options,
                                **ipopt_options)
