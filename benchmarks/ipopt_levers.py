@@ -1,5 +1,5 @@
-"""IPOPT option levers, paired: the same problems solved with IPOPT's defaults (A) and with a variant (B), A and B
-interleaved, so that a shared machine's load falls on both alike.
+"""IPOPT option levers, paired: the same problems solved with IPOPT's defaults (A, sections too) and with a variant
+(B), A and B interleaved, so that a shared machine's load falls on both alike.
 
 Run:    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/ipopt_levers.py steps VARIANT [--nodes 20 60 120]
         OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/ipopt_levers.py sections VARIANT [--nodes 20 60]
@@ -63,6 +63,10 @@ VARIANTS: dict[str, dict] = {
 }
 """Solver options of the B side, by name."""
 
+IPOPT_DEFAULTS = {"section_options": {}}
+"""The A side: IPOPT at its own defaults, sections too (the ``ipopt`` plugin's own default for sections is a lever
+measured here)."""
+
 
 _RECORD: dict = {}
 """What every row of this run carries: the variant, its options and the commit (set by :func:`main`)."""
@@ -98,7 +102,7 @@ def steps_part(registry, options: dict, experiments, nodes, repeats: int) -> lis
         for transcription in TRANSCRIPTIONS:
             for n_nodes in nodes:
                 sides = {side: step_problem(registry, experiment, transcription, n_nodes, opts)
-                         for side, opts in (("A", {}), ("B", options))}
+                         for side, opts in (("A", IPOPT_DEFAULTS), ("B", IPOPT_DEFAULTS | options))}
                 built = sides["A"][0].transcription.build(sides["A"][0].structure("second"))
                 data = sides["A"][1]
                 for problem, _ in sides.values():
@@ -124,13 +128,13 @@ def sections_part(registry, options: dict, experiments, nodes) -> list[dict]:
     for experiment in experiments:
         for transcription in TRANSCRIPTIONS:
             for n_nodes in nodes:
-                problem, data = step_problem(registry, experiment, transcription, n_nodes, {})
+                problem, data = step_problem(registry, experiment, transcription, n_nodes, IPOPT_DEFAULTS)
                 first = solve_with_retries(problem, 1, problem.transcription.build(problem.structure("first")),
                                            data, phase="first")
                 if not first.solved:
                     continue
                 solvers = {"A": section_solver(problem.solver),
-                           "B": section_solver(registry.create("solver", "ipopt", **options))}
+                           "B": section_solver(registry.create("solver", "ipopt", **IPOPT_DEFAULTS | options))}
                 results, cpu = {"A": [], "B": []}, {"A": [], "B": []}
                 for k0 in range(2, n_nodes - 1):
                     built = problem.transcription.build(sectional_structure(problem.structure("second"), k0))
@@ -161,7 +165,7 @@ def fatrop_part(registry, nodes, repeats: int) -> list[dict]:
     rows = []
     for transcription in TRANSCRIPTIONS:
         for n_nodes in nodes:
-            problem, data = step_problem(registry, "forward", transcription, n_nodes, {})
+            problem, data = step_problem(registry, "forward", transcription, n_nodes, IPOPT_DEFAULTS)
             built = problem.transcription.build(problem.structure("second"))
             solvers = {"A": problem.solver, "B": registry.create("solver", "fatrop", stagewise=True)}
             started = time.perf_counter()
@@ -238,7 +242,7 @@ def walks_part(options: dict, cases: list[Case]) -> list[dict]:
     builds = {"A": BuildCache(), "B": BuildCache()}
     for case in cases:
         row = {"part": "walks", "case": case.label}
-        for side, opts in (("A", {}), ("B", options)):
+        for side, opts in (("A", IPOPT_DEFAULTS), ("B", IPOPT_DEFAULTS | options)):
             solved = dataclasses.replace(case, solver=PluginChoice("ipopt", {**case.solver.options, **opts}))
             spent: list[float] = []
             outcome = timed(spent, run_case, solved, builds[side])
