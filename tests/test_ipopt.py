@@ -159,6 +159,14 @@ def test_section_options_apply_to_the_sectional_solver_only():
     assert section_solver(plain) is plain
 
 
+def test_sections_get_adaptive_mu_by_default_and_steps_do_not():
+    solver = Ipopt()
+    assert solver.for_sections().options["ipopt"]["mu_strategy"] == "adaptive"
+    assert solver.for_sections().options["ipopt"]["mu_oracle"] == "quality-function"
+    assert "mu_strategy" not in solver.options["ipopt"]
+    assert [name for name, _ in solver.remedies()] == ["adaptive-mu"]  # the steps' remedy stays
+
+
 def test_a_section_option_ipopt_refuses_is_named_under_section_options():
     with pytest.raises(OptionError, match=r"^section_options\.mu_strategy: IPOPT rejects mu_strategy = 'adaptiv'"):
         Ipopt.check_options({"section_options": {"mu_strategy": "adaptiv"}})
