@@ -24,7 +24,7 @@ from gaitbench.solver_result import SolverResult, SolverStatus
 
 SECTION_OPTIONS = {"mu_strategy": "adaptive", "mu_oracle": "quality-function"}
 """The IPOPT options of decrease and conquer's sectional NLPs unless ``section_options`` says otherwise: adaptive μ,
-on 16 D&C walks at N = 12–40 38 % fewer iterations and verified ACOTs no worse
+on 20 D&C walks at N = 12–40 37 % fewer iterations and verified ACOTs no worse on average
 (docs/decisions/0015-ipopt-levers.md). ``section_options = {}`` solves the sections as the steps."""
 
 _FUNCTIONS = ("f", "g", "grad_f", "jac_g", "hess_l")
