@@ -90,12 +90,13 @@ class Solver(Protocol):
     """Solves NLPs (a ``solver`` plugin, built as ``factory(**options)``).
 
     Optional members are used when present: ``prepare(nlp) -> None`` builds what the solver reuses across solves of
-    ``nlp`` ahead of the first one (a strategy calls it before forking workers). The retry ladder (docs/solvers.md,
-    "Retries") asks for named variants, each a ``list[tuple[str, Solver]]``: ``continuations()``, started from the
-    last iterate of a solve that ran out of iterations, before any other rung; ``remedies()``, worth a retry after
-    a failed solve; ``seed_remedies()``, worth one only when the retry starts from a trajectory (the First-Phase
-    seed, say), not from the blended guess; and ``last_resorts()``, tried only after every other rung has failed,
-    because they tend to reach worse optima.
+    ``nlp`` ahead of the first one (a strategy calls it before forking workers); ``for_sections() -> Solver`` is the
+    variant that solves decrease and conquer's sectional NLPs (:func:`gaitbench.solve.solver.section_solver`). The
+    retry ladder (docs/solvers.md, "Retries") asks for named variants, each a ``list[tuple[str, Solver]]``:
+    ``continuations()``, started from the last iterate of a solve that ran out of iterations, before any other rung;
+    ``remedies()``, worth a retry after a failed solve; ``seed_remedies()``, worth one only when the retry starts
+    from a trajectory (the First-Phase seed, say), not from the blended guess; and ``last_resorts()``, tried only
+    after every other rung has failed, because they tend to reach worse optima.
     """
 
     name: str

@@ -479,7 +479,8 @@ def test_help_documents_the_exit_codes(invoke):
     [
         (["-o", "bogus_option=1"], "Error: Invalid value for '-o' / '--solver-option': solver 'ipopt', option "
                                    "bogus_option: unknown option 'bogus_option'; allowed: max_iterations, "
-                                   "time_limit_s, tolerance, print_level, scaling, or any IPOPT option"),
+                                   "time_limit_s, tolerance, print_level, scaling, section_options, or any IPOPT "
+                                   "option"),
         (["-o", "max_iterations=many"], "solver 'ipopt', option max_iterations: expected an integer ≥ 1, found a "
                                         "string 'many'"),
         (["-o", "mu_strategy=adaptiv"], "IPOPT rejects mu_strategy = 'adaptiv': it accepts 'monotone' or 'adaptive'"),

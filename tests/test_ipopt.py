@@ -20,7 +20,9 @@ from nlp_problems import (
     undefined_at_start,
 )
 
+from gaitbench.options import OptionError
 from gaitbench.plugins import load_registry
+from gaitbench.solve.solver import section_solver
 from gaitbench.solver_result import SolverStatus
 from plugins.solvers.ipopt import Ipopt
 
@@ -138,3 +140,36 @@ def test_registered_as_a_solver_plugin():
     registry = load_registry()
     assert "ipopt" in registry.names("solver")
     assert isinstance(registry.create("solver", "ipopt", max_iterations=5), Ipopt)
+
+
+def test_section_options_apply_to_the_sectional_solver_only():
+    """``section_options`` are IPOPT options over the solver's own for decrease and conquer's sectional NLPs; the
+    step solver keeps its own, and the core's :func:`section_solver` finds the variant."""
+    solver = Ipopt(tolerance=1e-7, section_options={"mu_strategy": "adaptive", "tol": 1e-6})
+    sections = section_solver(solver)
+    assert sections is solver.for_sections() and sections is not solver
+    assert (sections.options["ipopt"]["mu_strategy"], sections.options["ipopt"]["tol"]) == ("adaptive", 1e-6)
+    assert "mu_strategy" not in solver.options["ipopt"] and solver.options["ipopt"]["tol"] == 1e-7
+    assert sections.for_sections() is sections  # its own sections: the same options
+    problem = hs071()
+    assert sections.solve(problem.nlp, problem.parameters, problem.x0).converged
+    unchanged = Ipopt(section_options={})
+    assert section_solver(unchanged) is unchanged
+    plain = object()  # a solver without for_sections solves sections itself
+    assert section_solver(plain) is plain
+
+
+def test_sections_get_adaptive_mu_by_default_and_steps_do_not():
+    solver = Ipopt()
+    assert solver.for_sections().options["ipopt"]["mu_strategy"] == "adaptive"
+    assert solver.for_sections().options["ipopt"]["mu_oracle"] == "quality-function"
+    assert "mu_strategy" not in solver.options["ipopt"]
+    assert [name for name, _ in solver.remedies()] == ["adaptive-mu"]  # the steps' remedy stays
+
+
+def test_a_section_option_ipopt_refuses_is_named_under_section_options():
+    with pytest.raises(OptionError, match=r"^section_options\.mu_strategy: IPOPT rejects mu_strategy = 'adaptiv'"):
+        Ipopt.check_options({"section_options": {"mu_strategy": "adaptiv"}})
+    with pytest.raises(OptionError, match="section_options: expected a table of IPOPT options"):
+        Ipopt.check_options({"section_options": 1})
+    Ipopt.check_options({"section_options": {"nlp_scaling_obj_target_gradient": 1.0}})

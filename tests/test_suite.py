@@ -221,7 +221,7 @@ def _solver(entry: str) -> str:
     [
         (_solver('{ name = "ipopt", options = { bogus_option = 1 } }'),
          ["[sweep].solvers[0].options.bogus_option: solver 'ipopt': unknown option 'bogus_option'; allowed: "
-          "max_iterations, time_limit_s, tolerance, print_level, scaling, or any IPOPT option"]),
+          "max_iterations, time_limit_s, tolerance, print_level, scaling, section_options, or any IPOPT option"]),
         (_solver('{ name = "ipopt", options = { mu_stratgy = "adaptive" } }'),
          ["[sweep].solvers[0].options.mu_stratgy: solver 'ipopt': unknown option 'mu_stratgy' (did you mean "
           "'mu_strategy'"]),
@@ -290,7 +290,8 @@ def test_options_are_checked_when_the_suite_loads(tmp_path, text, expected):
 
 def test_options_the_plugins_accept_load(tmp_path):
     text = _solver('{ name = "ipopt", options = { linear_solver = "mumps", mu_strategy = "adaptive", '
-                   'acceptable_tol = 1e-6, max_iterations = 500, time_limit_s = 60, print_level = 0 } }, '
+                   'acceptable_tol = 1e-6, max_iterations = 500, time_limit_s = 60, print_level = 0, '
+                   'section_options = { nlp_scaling_obj_target_gradient = 1 } } }, '
                    '{ name = "cyipopt", options = { tol = 1 } }, '
                    '{ name = "fatrop", options = { convexify_margin = 1e-3 } }')
     text += ("[tracking]\noptions = { controller = { kp = [900, 400] }, sample_rate = 1000, "

@@ -26,6 +26,17 @@ def prepare(solver: Solver, nlp: NLP) -> None:
         method(nlp)
 
 
+def section_solver(solver: Solver) -> Solver:
+    """The solver for a strategy's sectional NLPs (decrease and conquer's k0 = 2 … N−2 problems).
+
+    Optional for solver plugins: one that defines ``for_sections()`` returns the variant it solves sections with
+    (other options suit those short problems, started far from feasible, than suit whole steps); without it, the
+    solver itself.
+    """
+    method = getattr(solver, "for_sections", None)
+    return solver if method is None else method()
+
+
 def options_key(name: str, options: dict) -> tuple:
     """A hashable, order-independent key for ``nlp.solver_cache``: a solver built with these options is reusable."""
     return (name, _freeze(options))

@@ -46,7 +46,7 @@ from gaitbench.problem.trajectory import StepTrajectory, nodal_trajectory
 from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.parallel import WorkerPool
 from gaitbench.solve.rescue import coarse_grid_rescue
-from gaitbench.solve.solver import prepare
+from gaitbench.solve.solver import prepare, section_solver
 from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import push_off_charge, verify_step
 from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
@@ -231,7 +231,7 @@ class SectionalSolves:
         builder = problem.builds.builder(problem.transcription, structure)
         self.built: dict[int, TranscribedStep] = {
             k0: builder.build(sectional_structure(structure, k0)) for k0 in self.starts}
-        self.solver = problem.solver
+        self.solver = section_solver(problem.solver)
         self._fan_out = problem.fan_out if workers == "auto" and len(self.starts) > 1 else None
         forking = "fork" in multiprocessing.get_all_start_methods()
         self._cores = problem.cores if workers == "auto" and forking else None
@@ -280,7 +280,7 @@ class SectionSolver:
     def __init__(self, problem: WalkProblem) -> None:
         self.structure = problem.structure("second")
         self.builder = problem.builds.builder(problem.transcription, self.structure)
-        self.solver = problem.solver
+        self.solver = section_solver(problem.solver)
         self.built: dict[int, TranscribedStep] = {}
 
     def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
