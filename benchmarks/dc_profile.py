@@ -26,7 +26,7 @@ OUT = Path(__file__).parent / "results" / "dc_profile"
 
 
 def profile(experiment_name: str, transcription: str, n_nodes: int, steps: int) -> dict:
-    import plugins.strategies.decrease_and_conquer as dc
+    import gaitbench_plugins.strategies.decrease_and_conquer as dc
 
     registry = load_registry()
     experiment = registry.create("experiment", experiment_name)

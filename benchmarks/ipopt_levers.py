@@ -193,7 +193,7 @@ class SolveCounter:
     """Every IPOPT solve's iterations and time in this process, sectional and other (the walks' effort)."""
 
     def __init__(self) -> None:
-        from plugins.solvers.ipopt import Ipopt
+        from gaitbench_plugins.solvers.ipopt import Ipopt
 
         self.totals = {"iterations": 0, "wall_s": 0.0}
         original = Ipopt.solve

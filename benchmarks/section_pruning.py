@@ -53,7 +53,7 @@ OUT = Path(__file__).parent / "results" / "section_pruning"
 def choose(nodes, starts: list[int], n: int, mass: float, chord: float, g: float, max_checks: int):
     """The strategy's synthesis, completion and final choice by candidate COT: (label, chosen patch, candidate COTs,
     synthesis)."""
-    import plugins.strategies.decrease_and_conquer as dc
+    import gaitbench_plugins.strategies.decrease_and_conquer as dc
 
     synthesis = synthesize(nodes.pcot, nodes.values, max_checks=max_checks)
     completed = nodes.completed(starts)
@@ -77,7 +77,7 @@ def same_patch(a, b) -> bool:
 
 
 def analyse(experiment_name: str, transcription: str, n_nodes: int, steps: int) -> dict:
-    import plugins.strategies.decrease_and_conquer as dc
+    import gaitbench_plugins.strategies.decrease_and_conquer as dc
 
     registry = load_registry()
     experiment = registry.create("experiment", experiment_name)

@@ -14,7 +14,7 @@ from nlp_problems import ReferenceProblem
 
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 TIE_BREAK = 1e-3
 """Weight of ∫τ² next to the cost of transport: enough to make the optimum unique, small against the COT."""

@@ -34,6 +34,9 @@ is what solving and everything above it programs against."""
 FACADE = "gaitbench"
 """The package face (``gaitbench/__init__.py``) re-exports for users, so it may reach any layer (lazily)."""
 
+PLUGINS = "gaitbench_plugins"
+"""The import name of the built-in plugins, whose folder is ``plugins/`` (pyproject.toml's package-dir)."""
+
 MIN_CORE_MODULES = 80
 """A floor under the number of core modules a check reads (the core has more); the exact count is compared with the
 imported package's own files."""
@@ -68,11 +71,12 @@ class Arrow:
         return f"{self.source.path.name}:{self.line} ({self.source.name}) imports {self.target}"
 
 
-def modules(root: Path, top: str) -> list[Module]:
-    """Every module of the package ``top`` under ``root``."""
+def modules(root: Path, top: str, name: str | None = None) -> list[Module]:
+    """Every module of the package in the folder ``top`` under ``root``, named as imported (``name``, by default
+    the folder's)."""
     found = []
     for path in sorted((root / top).rglob("*.py")):
-        parts = path.relative_to(root).with_suffix("").parts
+        parts = (name or top, *path.relative_to(root / top).with_suffix("").parts)
         is_package = parts[-1] == "__init__"
         found.append(Module(".".join(parts[:-1] if is_package else parts), path, is_package))
     return found
@@ -132,13 +136,13 @@ def _room(module: str) -> str | None:
     parts = module.split(".")
     if parts[0] == "gaitbench":
         return None if module == FACADE else f"gaitbench:{_layer(module)}"
-    if parts[0] == "plugins" and len(parts) > 1:
+    if parts[0] == PLUGINS and len(parts) > 1:
         return ".".join(parts[:3])
     return None
 
 
 def core_imports_plugin(core: list[Module]) -> list[str]:
-    return [str(arrow) for module in core for arrow in imports(module) if arrow.target.split(".")[0] == "plugins"]
+    return [str(arrow) for module in core for arrow in imports(module) if arrow.target.split(".")[0] == PLUGINS]
 
 
 def upward_imports(core: list[Module]) -> list[str]:
@@ -157,9 +161,9 @@ def upward_imports(core: list[Module]) -> list[str]:
 def plugins_reaching_other_plugins(plugins: list[Module]) -> list[str]:
     offenders = []
     for module in plugins:
-        own = ".".join(module.name.split(".")[:3])  # plugins.<kind>.<plugin>
+        own = ".".join(module.name.split(".")[:3])  # gaitbench_plugins.<kind>.<plugin>
         offenders += [str(arrow) for arrow in imports(module)
-                      if arrow.target.split(".")[0] == "plugins" and not (arrow.target + ".").startswith(own + ".")]
+                      if arrow.target.split(".")[0] == PLUGINS and not (arrow.target + ".").startswith(own + ".")]
     return offenders
 
 
@@ -242,7 +246,7 @@ def too_long(root: Path) -> list[str]:
 
 @pytest.fixture(scope="module")
 def tree() -> tuple[list[Module], list[Module]]:
-    return modules(ROOT, "gaitbench"), modules(ROOT, "plugins")
+    return modules(ROOT, "gaitbench"), modules(ROOT, "plugins", PLUGINS)
 
 
 def test_the_checks_read_every_core_module(tree):
@@ -294,7 +298,7 @@ def _replace(path: Path, old: str, new: str) -> None:
 def _import_plugin_from_core(root: Path) -> None:
     _replace(root / "gaitbench" / "model" / "terrain.py", "from __future__ import annotations\n",
              "from __future__ import annotations\n\nimport importlib\n\n"
-             "_SOLVER = importlib.import_module(\"plugins.solvers.sqp\")\n")
+             "_SOLVER = importlib.import_module(\"gaitbench_plugins.solvers.sqp\")\n")
 
 
 def _move_the_test_deeper(root: Path) -> None:

@@ -21,8 +21,8 @@ from nlp_problems import (
 
 from gaitbench.problem.nlp import NLP, NLPBuilder
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.casadi_solvers import CasadiMethod, Fatrop, register_solvers
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.casadi_solvers import CasadiMethod, Fatrop, register_solvers
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 METHODS = [Fatrop]
 
@@ -196,7 +196,7 @@ def test_fatrop_by_default_solves_a_gait_step_stage_wise_and_a_textbook_nlp_dens
 def test_print_level_zero_is_silent_on_standard_output():
     """CasADi's FATROP interface prints a warning per row its structure detection refuses, whatever the print
     options say (on a gait step, which is not stage-wise as built); they are cut."""
-    script = ("from gait_steps import gait_step; from plugins.solvers.casadi_solvers import Fatrop; "
+    script = ("from gait_steps import gait_step; from gaitbench_plugins.solvers.casadi_solvers import Fatrop; "
               "p = gait_step('dmoc', 10); "
               "assert Fatrop(structure_detection='auto').solve(p.nlp, p.parameters, p.x0).status.name == 'ERROR'; "
               "print('done')")

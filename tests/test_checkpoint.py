@@ -225,7 +225,7 @@ def test_the_code_fingerprint_follows_the_source_that_solves_walks_not_the_commi
     """A documentation commit, or one to the command line or the reports, keeps a walk in flight resumable; an edit
     to the code that solves walks (the core, a built-in solver or other plugin) does not."""
     import gaitbench
-    import plugins as builtin
+    import gaitbench_plugins as builtin
     from gaitbench.run import provenance
 
     assert provenance._source_roots() == [Path(gaitbench.__file__).resolve().parent,

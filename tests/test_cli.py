@@ -230,8 +230,8 @@ def test_hermite_simpson_finds_the_passive_gait_with_booles_rule_and_not_with_si
     from gaitbench.plugins import load_registry
     from gaitbench.problem.gait_problem import ProblemOptions
     from gaitbench.solve.one_phase import OnePhase
-    from plugins.solvers.ipopt import Ipopt
-    from plugins.transcriptions.hermite_simpson import HermiteSimpson
+    from gaitbench_plugins.solvers.ipopt import Ipopt
+    from gaitbench_plugins.transcriptions.hermite_simpson import HermiteSimpson
 
     experiment = load_registry().create("experiment", "compass-gait")
     options = ProblemOptions(limits=experiment.limits, clearance="off")

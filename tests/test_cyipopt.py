@@ -23,8 +23,8 @@ from nlp_problems import (
 
 from gaitbench.solve.evaluation import NLPEvaluator
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.cyipopt_solver import CyIpopt, register_solvers
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.cyipopt_solver import CyIpopt, register_solvers
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -157,8 +157,8 @@ def test_evaluations_and_timings_are_reported():
 
 
 def _run(print_level: int) -> subprocess.CompletedProcess:
-    script = ("from nlp_problems import hs071; from plugins.solvers.cyipopt_solver import CyIpopt; p = hs071(); "
-              f"assert CyIpopt(print_level={print_level}).solve(p.nlp, p.parameters, p.x0).converged")
+    script = ("from nlp_problems import hs071; from gaitbench_plugins.solvers.cyipopt_solver import CyIpopt; "
+              f"p = hs071(); assert CyIpopt(print_level={print_level}).solve(p.nlp, p.parameters, p.x0).converged")
     return subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
 
 

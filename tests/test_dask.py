@@ -28,7 +28,7 @@ class Slow:
     name = "slow-ipopt"
 
     def __init__(self, pause_s=3.0, log=None, pids=None, **options):
-        from plugins.solvers.ipopt import Ipopt
+        from gaitbench_plugins.solvers.ipopt import Ipopt
         self.pause_s, self.log, self.pids, self.ipopt = pause_s, log, pids, Ipopt(**options)
 
     def solve(self, nlp, parameters, initial_guess):

@@ -14,7 +14,7 @@ from gaitbench.model.experiment import (
 )
 from gaitbench.model.robot import InvalidParameterError, RobotParameters
 from gaitbench.model.terrain import Terrain
-from plugins.experiments import thesis_experiments
+from gaitbench_plugins.experiments import thesis_experiments
 
 THESIS_NAMES = ("forward", "downward-slope", "upward-slope", "stairs")
 

@@ -13,18 +13,18 @@ from gait_steps import gait_step
 from nlp_problems import ReferenceProblem, hs071, hs076, infeasible, nonnegative_projection, undefined_at_start
 from saved_qps import clarabel_objective, saved_qp
 
-import plugins.solvers.fsqp as fsqp
-import plugins.solvers.fsqp.qp as fsqp_qp
-import plugins.solvers.fsqp.solver as fsqp_solver
+import gaitbench_plugins.solvers.fsqp as fsqp
+import gaitbench_plugins.solvers.fsqp.qp as fsqp_qp
+import gaitbench_plugins.solvers.fsqp.solver as fsqp_solver
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solve.qp import RetryOrder
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.fsqp import FSQP
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.hessian import qp_hessian
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.fsqp import FSQP
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.hessian import qp_hessian
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 
 def _solve(problem: ReferenceProblem, x0=None, **options):

@@ -24,7 +24,7 @@ from gaitbench.options import OptionError
 from gaitbench.plugins import load_registry
 from gaitbench.solve.solver import section_solver
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -130,7 +130,7 @@ def test_evaluations_and_timings_are_reported():
 
 def test_print_level_zero_is_silent():
     """In a fresh process, since IPOPT prints its banner only on the first solve of a process."""
-    script = "from nlp_problems import hs071; from plugins.solvers.ipopt import Ipopt; p = hs071(); " \
+    script = "from nlp_problems import hs071; from gaitbench_plugins.solvers.ipopt import Ipopt; p = hs071(); " \
              "assert Ipopt().solve(p.nlp, p.parameters, p.x0).converged"
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
     assert (run.returncode, run.stdout, run.stderr) == (0, "", "")

@@ -19,7 +19,7 @@ from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructu
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import Interpolant, StepTrajectory
 from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_running_cost, objective_gap, verify_step
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 N_NODES = 25
 

@@ -17,7 +17,7 @@ from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import nodal_trajectory
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
-from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
+from gaitbench_plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 
 REGISTRY = load_registry()
 OBJECTIVES = {"net-power": NET_POWER, "actuator-work": ActuatorWork(), "actuator-work-margaria": ActuatorWork(True),

@@ -19,12 +19,12 @@ from nlp_problems import (
     undefined_at_start,
 )
 
-import plugins.solvers.pyomo_solver.solver as pyomo_solver
+import gaitbench_plugins.solvers.pyomo_solver.solver as pyomo_solver
 from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.ipopt import Ipopt
-from plugins.solvers.pyomo_solver import PyomoSolver, UnsupportedOperationError, translate
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.pyomo_solver import PyomoSolver, UnsupportedOperationError, translate
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -245,7 +245,7 @@ def test_print_level_zero_is_silent_and_positive_echoes_the_log(capfd: pytest.Ca
 
 def test_registered_as_a_solver_plugin(tmp_path: Path):
     # a plugin directory loads files, not packages: this one registers the package's plugin
-    plugin = "from plugins.solvers.pyomo_solver import register_solvers  # noqa: F401\n"
+    plugin = "from gaitbench_plugins.solvers.pyomo_solver import register_solvers  # noqa: F401\n"
     (tmp_path / "pyomo_plugin.py").write_text(plugin)
     registry = load_registry([tmp_path], use_entry_points=False)
     assert registry.names("solver") == ["pyomo"]

@@ -75,7 +75,7 @@ class SpendsItsLimit:
                             float("nan"), 1, self.time_limit_s, 0.0)
 
     def remedies(self):
-        from plugins.solvers.ipopt import Ipopt
+        from gaitbench_plugins.solvers.ipopt import Ipopt
         return [("ipopt", Ipopt(time_limit_s=self.time_limit_s))]
 
 

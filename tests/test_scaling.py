@@ -11,7 +11,7 @@ from nlp_problems import STANDARD_PROBLEMS, ReferenceProblem, hs071
 from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepStructure
 from gaitbench.problem.scaling import ScaledProblem, ScaleFactors, nominal_factors
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 
 def _dense(matrix) -> np.ndarray:

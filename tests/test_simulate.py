@@ -6,7 +6,12 @@ import pytest
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.robot import RobotParameters
 from gaitbench.model.simulate import OpenLoop, simulate
-from plugins.experiments.compass_gait import SLOPE, compass_gait_experiment, compass_gait_robot, passive_limit_cycle
+from gaitbench_plugins.experiments.compass_gait import (
+    SLOPE,
+    compass_gait_experiment,
+    compass_gait_robot,
+    passive_limit_cycle,
+)
 
 # Goswami, Thuilot and Espiau (1996): post-impact [q_sw, q_st, dq_sw, dq_st] and period on a 3° slope.
 PUBLISHED_FIXED_POINT = np.array([-0.3234, 0.2187, -0.3774, -1.0924])

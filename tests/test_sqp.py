@@ -34,12 +34,12 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.nlp import NLP, NLPBuilder
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.ipopt import Ipopt
-from plugins.solvers.sqp import SQP
-from plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends
-from plugins.solvers.sqp.iterate import least_squares_multipliers
-from plugins.solvers.sqp.solver import LONG_BUDGET
-from plugins.solvers.sqp.subproblems import Subproblems
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.sqp import SQP
+from gaitbench_plugins.solvers.sqp.backends import _BACKEND_OPTIONS, QPBackends
+from gaitbench_plugins.solvers.sqp.iterate import least_squares_multipliers
+from gaitbench_plugins.solvers.sqp.solver import LONG_BUDGET
+from gaitbench_plugins.solvers.sqp.subproblems import Subproblems
 
 
 def _solve(problem: ReferenceProblem, **options):
@@ -259,7 +259,7 @@ def test_iteration_log(capsys):
 def test_print_level_zero_is_silent_even_for_backends_that_print():
     """In a fresh process: HiGHS prints its banner from C on its first use in a process and OSQP notes about
     polishing, whatever their verbosity settings."""
-    script = ("from nlp_problems import hs071; from plugins.solvers.sqp import SQP; p = hs071(); "
+    script = ("from nlp_problems import hs071; from gaitbench_plugins.solvers.sqp import SQP; p = hs071(); "
               "assert all(SQP(qp_solver=b).solve(p.nlp, p.parameters, p.x0).converged "
               "for b in ('highs', 'osqp', 'clarabel'))")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
@@ -469,7 +469,7 @@ def test_a_three_step_forward_walk_at_ipopts_acot_or_lower(transcription: str, n
 
 
 def test_the_last_resorts_are_the_crawl_floor_then_a_longer_budget_with_the_same_options():
-    from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR
+    from gaitbench_plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR
 
     solver = SQP(qp_solver="clarabel", merit="filter", tolerance=1e-7)
     [(floor_name, floor), (budget_name, budget)] = solver.last_resorts()
@@ -575,7 +575,7 @@ def test_the_backend_settings_go_first_again_when_a_qp_fails_under_the_retry_set
     the retry settings fail and the backend's own settings solve; a QP both fail leaves the order as it was. Before
     the crawl (``swap`` off) the backend's own settings always go first."""
     from gaitbench.solve.qp import RETRY_SETTINGS
-    from plugins.solvers.sqp.backends import QPOutcome
+    from gaitbench_plugins.solvers.sqp.backends import QPOutcome
 
     def solves():  # per QP, the settings that solve it
         return iter([{"retry"}, {"retry"}, set(), {"own"}, {"own", "retry"}])
@@ -605,7 +605,8 @@ def test_the_backend_settings_go_first_again_when_a_qp_fails_under_the_retry_set
 def test_registered_as_a_solver_plugin(tmp_path: Path):
     """Through a plugin directory holding only a file that registers this plugin (a package, which a plugin directory
     does not load itself), so the test does not depend on the installed entry points."""
-    (tmp_path / "sqp_plugin.py").write_text("from plugins.solvers.sqp import register_solvers  # noqa: F401\n")
+    registration = "from gaitbench_plugins.solvers.sqp import register_solvers  # noqa: F401\n"
+    (tmp_path / "sqp_plugin.py").write_text(registration)
     registry = load_registry([tmp_path], use_entry_points=False)
     assert registry.names("solver") == ["sqp"]
     solver = registry.create("solver", "sqp", qp_solver="daqp", hessian="bfgs", merit="filter")
@@ -631,7 +632,7 @@ def test_print_level_two_names_the_blocks_that_hold_the_violation_and_the_step(c
 def test_released_linear_variables_lose_the_shift_and_get_a_step_bound():
     """The release behind the end of the late-step crawl: a variable with an empty Hessian column loses the shift,
     the others keep it, and the QP bounds its step by LINEAR_STEP·(1 + |x_i|) inside its own bounds."""
-    from plugins.solvers.sqp.hessian import LINEAR_STEP, Model, convexify, release_linear_variables
+    from gaitbench_plugins.solvers.sqp.hessian import LINEAR_STEP, Model, convexify, release_linear_variables
 
     H = sp.csc_matrix(np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
     jacobian = sp.csr_matrix(np.array([[1.0, 1.0, -1.0]]))
@@ -655,9 +656,9 @@ def test_the_crawl_floor_lowers_the_shift_floor_once_the_shift_sits_at_its_floor
     """``crawl_shift_floor``: before the crawl shows the shift's floor is SHIFT_FLOOR·max|H|, after it the crawl
     floor (by default SHIFT_FLOOR still); a shift between the two still counts as at the floor (the crawl goes on),
     one above SHIFT_FLOOR's ends it."""
-    from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR, hessian_scale
-    from plugins.solvers.sqp.run import Run
-    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+    from gaitbench_plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR, SHIFT_FLOOR, hessian_scale
+    from gaitbench_plugins.solvers.sqp.run import Run
+    from gaitbench_plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
 
     nlp = _split_power()
     x = np.zeros(nlp.n_variables)
@@ -684,8 +685,8 @@ def test_a_row_whose_gradient_vanishes_brings_a_capped_multiplier_into_the_hessi
     c = u₀u₁ ≥ 0 at u₀ = 0 is active with a gradient of norm |u₁|, here 1e-4. Its multiplier enters the Hessian
     capped at DEGENERATE_MULTIPLIER_CAP, with its sign; a row with an O(1) gradient keeps its multiplier, and so
     do the iterate's multipliers (the QP, the merit's weights and the KKT test use them)."""
-    from plugins.solvers.sqp.hessian import DEGENERATE_MULTIPLIER_CAP
-    from plugins.solvers.sqp.run import Run
+    from gaitbench_plugins.solvers.sqp.hessian import DEGENERATE_MULTIPLIER_CAP
+    from gaitbench_plugins.solvers.sqp.run import Run
 
     b = NLPBuilder()
     u = b.variable("u", (2, 1))
@@ -712,8 +713,8 @@ def test_a_row_whose_gradient_vanishes_is_posed_at_unit_norm_with_its_multiplier
     1e6 (the scale's limit; its dual there is 20), the multiplier comes back as −2e7, and the trust test reads the
     QP's own dual: the QP is not taken for a nearly inconsistent one (its multiplier is above 1e6). Only once the
     crawl shows: before it the QPs are posed as they are."""
-    from plugins.solvers.sqp.run import Run
-    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+    from gaitbench_plugins.solvers.sqp.run import Run
+    from gaitbench_plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
 
     b = NLPBuilder()
     u = b.variable("u", (2, 1))
@@ -737,8 +738,8 @@ def test_a_warm_start_carries_its_duals_into_the_row_scale_of_the_qp_it_starts()
     """ProxQP starts from the previous QP's duals. Where that QP posed the crossing's row unscaled and this one at
     unit norm (the crawl has begun between them), the dual the backend gets is the multiplier over this QP's scale,
     not the other QP's dual: a factor of 1e6 apart on that row."""
-    from plugins.solvers.sqp.run import Run
-    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+    from gaitbench_plugins.solvers.sqp.run import Run
+    from gaitbench_plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
 
     b = NLPBuilder()
     u = b.variable("u", (2, 1))
@@ -778,8 +779,8 @@ def _split_power() -> NLP:
 def test_slack_pairs_are_reset_to_the_cheapest_values_that_satisfy_their_row():
     """A magical step (plugins/solvers/sqp/slacks.py): the pair's row holds exactly afterwards, with one slack at
     its bound, and the objective falls by the cost the reset saves."""
-    from plugins.solvers.sqp.linearization import Linearization
-    from plugins.solvers.sqp.slacks import SlackPairs
+    from gaitbench_plugins.solvers.sqp.linearization import Linearization
+    from gaitbench_plugins.solvers.sqp.slacks import SlackPairs
 
     nlp = _split_power()
     evaluator = NLPEvaluator(nlp, np.zeros(0))
@@ -810,8 +811,8 @@ def test_slack_pairs_are_reset_only_once_the_shift_sits_at_its_floor(monkeypatch
     """The reset is for the late-step crawl: before the shift has sat at its floor for 20 iterations it never runs,
     so the first steps' paths are those without it (on this small problem the solve ends before that). Where it
     runs (the floor count set to 0 here), a reset point holds its split row exactly and never has a higher merit."""
-    import plugins.solvers.sqp.subproblems as subproblems
-    from plugins.solvers.sqp.linesearch import LineSearch
+    import gaitbench_plugins.solvers.sqp.subproblems as subproblems
+    from gaitbench_plugins.solvers.sqp.linesearch import LineSearch
 
     monkeypatch.setattr(subproblems, "_FLOOR_ITERATIONS", floor_iterations)
     nlp = _split_power()
@@ -843,8 +844,8 @@ def test_a_slack_reset_that_would_raise_the_merit_or_comes_before_the_crawl_is_n
     """``LineSearch._reset_slacks`` on one point: taken once the shift has sat at its floor, with the ℓ1 merit, where
     it lowers φ; the point itself before the crawl, where covering the power costs more than the merit's weights
     save, and with the filter."""
-    from plugins.solvers.sqp.run import Run
-    from plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
+    from gaitbench_plugins.solvers.sqp.run import Run
+    from gaitbench_plugins.solvers.sqp.subproblems import _FLOOR_ITERATIONS
 
     nlp = _split_power()
     split = np.arange(nlp.n_constraints)[nlp.constraint_blocks["split"]]
@@ -870,7 +871,7 @@ def test_a_row_the_qp_keeps_off_its_bound_leaves_the_working_set():
     there at 1e-5. In the working set by nearness alone, its term max|H|·d₁² = 1e4·d₁² held each step to 1e-9, and the
     solve ended after 14 iterations by the stall rule, the KKT residual at 1e-5; once five QP steps have left it inside,
     it leaves the working set, the next step reaches its bound and gives it the cost's push as its multiplier."""
-    from plugins.solvers.sqp.subproblems import _INSIDE_STEPS
+    from gaitbench_plugins.solvers.sqp.subproblems import _INSIDE_STEPS
 
     b = NLPBuilder()
     x = b.variable("x", (3, 1))

@@ -15,9 +15,9 @@ from gaitbench.problem.transcription import TranscribedStep
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk import solve_with_retries
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.ipopt import Ipopt
-from plugins.transcriptions.dmoc import DiscreteMechanics
-from plugins.transcriptions.hermite_simpson import HermiteSimpson
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.transcriptions.dmoc import DiscreteMechanics
+from gaitbench_plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()
 

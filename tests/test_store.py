@@ -540,7 +540,7 @@ multiprocessing.util.Finalize(None, slow_exit, exitpriority=10)  # runs before t
 
 
 def slow_forward():
-    from plugins.experiments.thesis_experiments import forward
+    from gaitbench_plugins.experiments.thesis_experiments import forward
 
     time.sleep(1.0)  # each of the two workers takes one case
     return forward()

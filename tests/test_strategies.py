@@ -25,7 +25,7 @@ from gaitbench.solve.synthesis import complete_sections, relation_holds, synthes
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.strategies.decrease_and_conquer import (
+from gaitbench_plugins.strategies.decrease_and_conquer import (
     DYNAMICS_TOLERANCE,
     DecreaseAndConquer,
     NodeValues,

@@ -13,7 +13,7 @@ import pytest
 from gaitbench.plugins import load_registry
 from gaitbench.run.case import TrackingStage
 from gaitbench.run.suite import SuiteError, load_suite
-from plugins.experiments.energetics import energetics
+from gaitbench_plugins.experiments.energetics import energetics
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITES = ROOT / "suites"

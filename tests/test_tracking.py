@@ -20,8 +20,8 @@ from gaitbench.control.tracking import track_walk
 from gaitbench.plugins import UnknownPluginError, load_registry
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk_file import WalkFileError, load_walk, write_walk
-from plugins.solvers.ipopt import Ipopt
-from plugins.transcriptions.hermite_simpson import HermiteSimpson
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()
 
@@ -226,7 +226,7 @@ def test_track_command(saved, tmp_path):
 def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tmp_path):
     """Tracking follows the polished trajectory and compares with the verified ACOT, in memory and from the saved
     walk; without polish, the complete Second Phase solution each step reports."""
-    from plugins.strategies.decrease_and_conquer import DecreaseAndConquer
+    from gaitbench_plugins.strategies.decrease_and_conquer import DecreaseAndConquer
 
     experiment = REGISTRY.create("experiment", "forward")
     problem = WalkProblem(experiment, HermiteSimpson(), Ipopt(), 8, steps=1)

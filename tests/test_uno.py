@@ -26,8 +26,8 @@ from gaitbench.plugins import load_registry
 from gaitbench.solve.evaluation import NLPEvaluator
 from gaitbench.solve.walk import solve_and_verify
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.ipopt import Ipopt
-from plugins.solvers.uno_solver import Uno, gaitbench_status, register_solvers
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.uno_solver import Uno, gaitbench_status, register_solvers
 
 OPTIMIZATION, SOLUTION = unopy.OptimizationStatus, unopy.SolutionStatus
 
@@ -200,7 +200,7 @@ def test_evaluations_and_timings_are_reported():
 
 
 def _run(print_level: int) -> subprocess.CompletedProcess:
-    script = ("from nlp_problems import hs071; from plugins.solvers.uno_solver import Uno; p = hs071(); "
+    script = ("from nlp_problems import hs071; from gaitbench_plugins.solvers.uno_solver import Uno; p = hs071(); "
               f"assert Uno(print_level={print_level}).solve(p.nlp, p.parameters, p.x0).converged")
     return subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)
 
@@ -216,7 +216,7 @@ def test_standard_error_written_by_compiled_code_during_a_quiet_solve_is_discard
     """BQPD's Fortran writes workspace warnings to standard error (on HS, N = 50 with ``preset=filtersqp``); at
     print_level 0 the solve discards file descriptor 2 and flushes libgfortran's buffers before restoring it."""
     script = ("import os\nfrom gaitbench.solve.silence import quiet_stderr\n"
-              "from plugins.solvers.uno_solver import _flush_fortran_units\n"
+              "from gaitbench_plugins.solvers.uno_solver import _flush_fortran_units\n"
               "with quiet_stderr(True):\n    os.write(2, b'from C')\n    _flush_fortran_units()\n"
               "os.write(2, b'after')")
     run = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, capture_output=True, text=True)

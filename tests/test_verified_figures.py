@@ -26,9 +26,9 @@ from gaitbench.problem.trajectory import Interpolant, StepTrajectory
 from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost, verify_step
 from gaitbench.solve.walk import next_step_state
 from gaitbench.walk_types import StepOutcome, WalkResult
-from plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
-from plugins.solvers.ipopt import Ipopt
-from plugins.transcriptions.dmoc import interval_motion
+from gaitbench_plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.transcriptions.dmoc import interval_motion
 
 REGISTRY = load_registry()
 N_NODES = 12

@@ -15,8 +15,8 @@ from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructu
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state
-from plugins.solvers.ipopt import Ipopt
-from plugins.transcriptions.hermite_simpson import HermiteSimpson
+from gaitbench_plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.transcriptions.hermite_simpson import HermiteSimpson
 
 REGISTRY = load_registry()
 

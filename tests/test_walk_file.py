@@ -18,7 +18,7 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk_file import WALK_FORMAT_VERSION, WalkFileError, load_walk, read_walk, write_walk
-from plugins.solvers.ipopt import Ipopt
+from gaitbench_plugins.solvers.ipopt import Ipopt
 
 REGISTRY = load_registry()
 STORED = Path(__file__).parent / "data" / "unversioned-walk"

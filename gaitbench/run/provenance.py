@@ -116,10 +116,10 @@ change to a progress line or a report's table should not send hours of solved st
 
 
 def _source_roots() -> list[Path]:
-    """The directories of the ``gaitbench`` package and of the built-in ``plugins`` package, found without importing
-    the plugins (the core imports none)."""
+    """The directories of the ``gaitbench`` package and of the built-in plugins (``gaitbench_plugins``, the folder
+    ``plugins/``), found without importing the plugins (the core imports none)."""
     roots = [Path(__file__).resolve().parents[1]]  # gaitbench/: this file is gaitbench/run/provenance.py
-    spec = importlib.util.find_spec("plugins")
+    spec = importlib.util.find_spec("gaitbench_plugins")
     if spec is not None and spec.submodule_search_locations:
         roots += [Path(location).resolve() for location in spec.submodule_search_locations]
     return roots

@@ -33,8 +33,8 @@ Modules: :mod:`.solver` (the two phases of a solve), :mod:`.options`, :mod:`.pro
 from __future__ import annotations
 
 from gaitbench import Registration, hookimpl
-from plugins.solvers.fsqp.outcome import IterationRecord
-from plugins.solvers.fsqp.solver import FSQP
+from gaitbench_plugins.solvers.fsqp.outcome import IterationRecord
+from gaitbench_plugins.solvers.fsqp.solver import FSQP
 
 __all__ = ["FSQP", "IterationRecord", "register_solvers"]
 

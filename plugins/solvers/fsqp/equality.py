@@ -9,14 +9,20 @@ import numpy as np
 import scipy.sparse as sp
 
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.hessian import BFGS, convexified_hessian
-from plugins.solvers.fsqp.linalg import Factorization, full_row_rank, kkt, least_squares_multipliers, row_norms
-from plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.hessian import BFGS, convexified_hessian
+from gaitbench_plugins.solvers.fsqp.linalg import (
+    Factorization,
+    full_row_rank,
+    kkt,
+    least_squares_multipliers,
+    row_norms,
+)
+from gaitbench_plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
 
 if TYPE_CHECKING:
-    from plugins.solvers.fsqp.options import FSQPOptions
-    from plugins.solvers.fsqp.progress import Progress
+    from gaitbench_plugins.solvers.fsqp.options import FSQPOptions
+    from gaitbench_plugins.solvers.fsqp.progress import Progress
 
 
 def minimize(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.ndarray,

@@ -14,12 +14,12 @@ import scipy.sparse.linalg as spla
 
 from gaitbench.solve.qp import RetryOrder
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.outcome import Breakdown, Outcome
-from plugins.solvers.fsqp.qp import solve_qp
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.outcome import Breakdown, Outcome
+from gaitbench_plugins.solvers.fsqp.qp import solve_qp
 
 if TYPE_CHECKING:
-    from plugins.solvers.fsqp.progress import Progress
+    from gaitbench_plugins.solvers.fsqp.progress import Progress
 
 _PUSH = 1e-8
 """The start is pushed this far (relative) inside its bounds: a start exactly on several bounds at once (HS071's

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.linalg import positive_definite, row_norms
-from plugins.solvers.fsqp.outcome import Breakdown
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.linalg import positive_definite, row_norms
+from gaitbench_plugins.solvers.fsqp.outcome import Breakdown
 
 _AUGMENTATION = 1e2
 """ρ̄ of the exact-Hessian convexification H + ρ̄ ÂᵀÂ + δI, relative to the Hessian's largest diagonal entry."""

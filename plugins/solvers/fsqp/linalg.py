@@ -8,7 +8,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from plugins.solvers.fsqp.outcome import Breakdown
+from gaitbench_plugins.solvers.fsqp.outcome import Breakdown
 
 _DENSE_FRACTION = 0.2
 """A KKT matrix with more than this fraction of nonzeros (a dense BFGS block) is factorized by dense LU."""

@@ -10,7 +10,7 @@ import numpy as np
 from gaitbench.solve.evaluation import Deadline
 from gaitbench.solve.qp import RetryOrder
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.fsqp.outcome import IterationRecord
+from gaitbench_plugins.solvers.fsqp.outcome import IterationRecord
 
 
 @dataclass

@@ -10,8 +10,8 @@ import qpsolvers
 
 from gaitbench.solve.qp import BACKEND_SETTINGS, INACCURATE_STATUSES, RetryOrder, backend_status
 from gaitbench.solve.silence import quiet_stdout
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.outcome import Breakdown
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.outcome import Breakdown
 
 _QP_SOLVERS = ("piqp", "clarabel")
 """Backends of the ``qp`` subproblem, in turn: PIQP, the fastest on the gait QPs (docs/decisions/0002-qp-backends.md),

@@ -11,15 +11,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from gaitbench.solver_result import SolverStatus
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.hessian import SHIFT_RANGE, qp_hessian
-from plugins.solvers.fsqp.linalg import row_norms
-from plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
-from plugins.solvers.fsqp.qp import bend, solve_qp
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.hessian import SHIFT_RANGE, qp_hessian
+from gaitbench_plugins.solvers.fsqp.linalg import row_norms
+from gaitbench_plugins.solvers.fsqp.outcome import ROUNDING, Breakdown, Outcome
+from gaitbench_plugins.solvers.fsqp.qp import bend, solve_qp
 
 if TYPE_CHECKING:
-    from plugins.solvers.fsqp.options import FSQPOptions
-    from plugins.solvers.fsqp.progress import Progress
+    from gaitbench_plugins.solvers.fsqp.options import FSQPOptions
+    from gaitbench_plugins.solvers.fsqp.progress import Progress
 
 _ACTIVE = 1e-6
 """A row is held by a QP step when c_j + ∇c_jᵀd ≥ −this (scaled units), and a bound row is near when c_j ≥ −this:

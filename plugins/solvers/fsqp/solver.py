@@ -11,13 +11,13 @@ import numpy as np
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.fsqp.equality import minimize
-from plugins.solvers.fsqp.feasibility import feasibility, push_inside
-from plugins.solvers.fsqp.form import NLPForm
-from plugins.solvers.fsqp.options import FSQPOptions
-from plugins.solvers.fsqp.outcome import IterationRecord
-from plugins.solvers.fsqp.progress import Progress
-from plugins.solvers.fsqp.qp_subproblem import minimize_qp
+from gaitbench_plugins.solvers.fsqp.equality import minimize
+from gaitbench_plugins.solvers.fsqp.feasibility import feasibility, push_inside
+from gaitbench_plugins.solvers.fsqp.form import NLPForm
+from gaitbench_plugins.solvers.fsqp.options import FSQPOptions
+from gaitbench_plugins.solvers.fsqp.outcome import IterationRecord
+from gaitbench_plugins.solvers.fsqp.progress import Progress
+from gaitbench_plugins.solvers.fsqp.qp_subproblem import minimize_qp
 
 
 @dataclass(frozen=True, eq=False)

@@ -21,8 +21,8 @@ The translated model is kept in ``nlp.solver_cache``, so re-solving with new par
 from __future__ import annotations
 
 from gaitbench import Registration, hookimpl
-from plugins.solvers.pyomo_solver.solver import PyomoSolver, locate_executable
-from plugins.solvers.pyomo_solver.translation import PyomoNLP, UnsupportedOperationError, translate
+from gaitbench_plugins.solvers.pyomo_solver.solver import PyomoSolver, locate_executable
+from gaitbench_plugins.solvers.pyomo_solver.translation import PyomoNLP, UnsupportedOperationError, translate
 
 __all__ = ["PyomoNLP", "PyomoSolver", "UnsupportedOperationError", "locate_executable", "register_solvers",
            "translate"]

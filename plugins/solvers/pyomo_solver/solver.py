@@ -20,7 +20,7 @@ from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solve.solver import options_key
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.pyomo_solver.translation import PyomoNLP, translate
+from gaitbench_plugins.solvers.pyomo_solver.translation import PyomoNLP, translate
 
 _OPTION_NAMES: dict[str, dict[str, str]] = {
     "ripopt": {"max_iterations": "max_iter", "time_limit_s": "max_wall_time", "tolerance": "tol",

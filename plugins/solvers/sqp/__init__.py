@@ -134,7 +134,7 @@ convexification and BFGS) and :mod:`.slacks` (the slack pairs' reset).
 from __future__ import annotations
 
 from gaitbench import Registration, hookimpl
-from plugins.solvers.sqp.solver import SQP
+from gaitbench_plugins.solvers.sqp.solver import SQP
 
 __all__ = ["SQP", "register_solvers"]
 

@@ -11,7 +11,7 @@ import scipy.linalg.lapack
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
-from plugins.solvers.sqp.linearization import DEGENERATE_GRADIENT, Linearization, row_norms
+from gaitbench_plugins.solvers.sqp.linearization import DEGENERATE_GRADIENT, Linearization, row_norms
 
 
 @dataclass

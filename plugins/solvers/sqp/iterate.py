@@ -13,13 +13,13 @@ import scipy.sparse.linalg
 
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, solver_result
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.sqp.backends import QPBackends, QPOutcome
-from plugins.solvers.sqp.hessian import damped_bfgs_update
-from plugins.solvers.sqp.linearization import Linearization
-from plugins.solvers.sqp.slacks import SlackPairs
+from gaitbench_plugins.solvers.sqp.backends import QPBackends, QPOutcome
+from gaitbench_plugins.solvers.sqp.hessian import damped_bfgs_update
+from gaitbench_plugins.solvers.sqp.linearization import Linearization
+from gaitbench_plugins.solvers.sqp.slacks import SlackPairs
 
 if TYPE_CHECKING:
-    from plugins.solvers.sqp.options import SQPOptions
+    from gaitbench_plugins.solvers.sqp.options import SQPOptions
 
 
 @dataclass

@@ -10,7 +10,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from gaitbench.problem.nlp import NLP
-from plugins.solvers.sqp.backends import QPOutcome
+from gaitbench_plugins.solvers.sqp.backends import QPOutcome
 
 DEGENERATE_GRADIENT = 1e-2
 """A row whose gradient norm is below this is degenerate: the gait rows are O(1), and the one that gets there is the

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from plugins.solvers.sqp.backends import QPOutcome
-from plugins.solvers.sqp.hessian import Model
-from plugins.solvers.sqp.iterate import Trial
-from plugins.solvers.sqp.subproblems import Subproblems
+from gaitbench_plugins.solvers.sqp.backends import QPOutcome
+from gaitbench_plugins.solvers.sqp.hessian import Model
+from gaitbench_plugins.solvers.sqp.iterate import Trial
+from gaitbench_plugins.solvers.sqp.subproblems import Subproblems
 
 ARMIJO = 1e-4
 MIN_STEP = 1e-10

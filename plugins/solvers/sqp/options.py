@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import qpsolvers
 
 from gaitbench.options import SolverOptions
-from plugins.solvers.sqp.hessian import SHIFT_FLOOR
+from gaitbench_plugins.solvers.sqp.hessian import SHIFT_FLOOR
 
 _HESSIANS = ("exact", "bfgs")
 _MERITS = ("l1", "filter")

@@ -7,7 +7,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from gaitbench.solver_result import SolverResult
-from plugins.solvers.sqp.linesearch import ARMIJO, MIN_STEP, LineSearch
+from gaitbench_plugins.solvers.sqp.linesearch import ARMIJO, MIN_STEP, LineSearch
 
 _RESTORATION_REDUCTION = 0.9
 _RESTORATION_WEIGHT = 1e4

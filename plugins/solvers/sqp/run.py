@@ -8,8 +8,8 @@ import itertools
 import numpy as np
 
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.sqp.hessian import Model
-from plugins.solvers.sqp.restoration import Restoration
+from gaitbench_plugins.solvers.sqp.hessian import Model
+from gaitbench_plugins.solvers.sqp.restoration import Restoration
 
 _ACCEPTABLE_ITERATIONS = 15
 """Consecutive iterates at the acceptable level that end a solve as converged (IPOPT's acceptable_iter)."""

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from gaitbench.solve.evaluation import NLPEvaluator
-from plugins.solvers.sqp.linearization import Linearization
+from gaitbench_plugins.solvers.sqp.linearization import Linearization
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,9 @@ import numpy as np
 from gaitbench.problem.nlp import NLP
 from gaitbench.solve.evaluation import Deadline, NLPEvaluator, error_result, solver_result
 from gaitbench.solver_result import SolverResult, SolverStatus
-from plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR
-from plugins.solvers.sqp.options import SQPOptions
-from plugins.solvers.sqp.run import Run
+from gaitbench_plugins.solvers.sqp.hessian import CRAWL_SHIFT_FLOOR
+from gaitbench_plugins.solvers.sqp.options import SQPOptions
+from gaitbench_plugins.solvers.sqp.run import Run
 
 LONG_BUDGET = 10_000
 """The iteration budget of the ``more-iterations`` last resort (:meth:`SQP.last_resorts`)."""

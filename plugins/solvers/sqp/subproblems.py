@@ -7,8 +7,8 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
-from plugins.solvers.sqp.backends import QPOutcome
-from plugins.solvers.sqp.hessian import (
+from gaitbench_plugins.solvers.sqp.backends import QPOutcome
+from gaitbench_plugins.solvers.sqp.hessian import (
     LINEAR_STEP,
     SHIFT_FLOOR,
     Model,
@@ -18,7 +18,7 @@ from plugins.solvers.sqp.hessian import (
     release_linear_variables,
     working_set,
 )
-from plugins.solvers.sqp.iterate import Iterate
+from gaitbench_plugins.solvers.sqp.iterate import Iterate
 
 _FLOOR_ITERATIONS = 20
 """Consecutive iterations with the shift at its floor after which the linear variables are released: how the
