@@ -5,6 +5,8 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
+
 from gaitbench.run.case import Case, PluginChoice
 from gaitbench.run.runner import largest_first
 from gaitbench.run.suite import load_suite
@@ -356,3 +358,45 @@ def test_every_mutant_of_the_mutation_check_names_text_that_occurs_once_in_its_f
         assert text.count(mutant.original) == 1, mutant.name
         assert mutant.replacement != mutant.original
     assert all((root / test).is_file() for test in mutation.FAST_TESTS)
+
+
+def _sweep_store(path, commits):
+    """A store of two runs of suite ``s``: r1 finished after an hour, r2 stopped (no end) after its last case; one
+    complete verified case per commit in ``commits``, the first by r1, the rest by r2."""
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.create(path) as store:
+        store.add_run({"run_id": "r1", "suite": "s", "cases_total": len(commits), "jobs": 2,
+                       "started_at": "2026-01-01T00:00:00+00:00", "finished_at": "2026-01-01T01:00:00+00:00"})
+        store.add_run({"run_id": "r2", "suite": "s", "cases_total": len(commits), "jobs": 2,
+                       "started_at": "2026-01-02T00:00:00+00:00", "heartbeat_at": "2026-01-02T00:10:00+00:00"})
+        for i, commit in enumerate(commits):
+            store.record_case({"case_key": f"{i:016x}", "suite": "s", "run_id": "r1" if i == 0 else "r2",
+                               "experiment": "forward", "method": "m", "N": 10 * (i + 1), "experiment_options": {},
+                               "steps": 11, "transcription": "dmoc", "solver": "ipopt", "strategy": "one-phase",
+                               "repetition": 0, "message": "",
+                               "status": "solved", "stop_cause": "complete", "verified": i % 2 == 0,
+                               "wall_time_s": 100.0, "provenance": {"git_commit": commit, "cpu": "x", "cpus": 2},
+                               "finished_at": f"2026-01-0{1 + min(i, 1)}T00:{20 * i:02d}:00+00:00"})
+
+
+def test_a_sweep_over_sessions_adds_its_runs_spans_and_is_recorded_only_whole_on_one_commit(tmp_path):
+    module = _benchmark("sweep_record")
+    _sweep_store(tmp_path / "one", ["a" * 40] * 3)
+    row = module.sweep_record(tmp_path / "one")
+    # r1 ended at its finished_at (3,600 s); r2 has no end: its last case (00:40) is later than its heartbeat
+    assert row["wall_s"] == 3600 + 2400
+    assert (row["cases"], row["complete"], row["verified"], row["case_time_s"]) == (3, 3, 2, 300.0)
+    assert row["one_clean_commit"] and [run["cases_done"] for run in row["runs"]] == [1, 2]
+    performance = tmp_path / "performance.json"
+    performance.write_text(json.dumps({"steps": [], "sweeps": [{"suite": "s", "wall_s": 1}]}))
+    module.record(row, performance)
+    assert json.loads(performance.read_text())["sweeps"] == [json.loads(json.dumps(row))]
+
+    _sweep_store(tmp_path / "two", ["a" * 40, "b" * 40, "a" * 40])
+    mixed = module.sweep_record(tmp_path / "two")
+    assert not mixed["one_clean_commit"]
+    with pytest.raises(SystemExit, match="ran on a{40}, b{40}"):
+        module.record(mixed, performance)
+    with pytest.raises(SystemExit, match="3 of 4 cases stored"):
+        module.record(row | {"cases_total": 4}, performance)
