@@ -753,3 +753,27 @@ def test_each_thesis_cell_gets_a_verdict():
     assert missed == ("not reproduced: our verified minimum 0.3000 (+50 %), claimed 0.2500, read the thesis's way "
                       "0.2200")
     assert tables.verdict(base | {"acot": math.nan}) == "not reproduced: no verified walk of this method"
+
+
+def test_the_report_says_how_many_versions_of_the_code_solved_its_cases(tmp_path):
+    frame = pd.DataFrame({"method": ["OP-DC", "OP-DM", "D&C-DC", "OP-DC"],
+                          "finished_at": ["2026-01-03", "2026-01-01", "2026-01-02", "2026-01-04"],
+                          "provenance": [{"git_commit": "b" * 40}, {"git_commit": "a" * 40}, {"git_commit": "a" * 40},
+                                         None]})
+    table = tables.case_commits(frame)
+    assert table.to_dict("records") == [
+        {"git_commit": "a" * 40, "cases": 2, "methods": "D&C-DC, OP-DM", "first_finished": "2026-01-01",
+         "last_finished": "2026-01-02"},
+        {"git_commit": "b" * 40, "cases": 1, "methods": "OP-DC", "first_finished": "2026-01-03",
+         "last_finished": "2026-01-03"},
+        {"git_commit": "unknown", "cases": 1, "methods": "OP-DC", "first_finished": "2026-01-04",
+         "last_finished": "2026-01-04"}]
+    assert tables.case_commits(frame.iloc[:0]).empty
+
+
+def test_the_opening_names_the_one_commit_that_solved_every_case(report_dir):
+    commits = pd.read_csv(report_dir / "case_commits.csv")
+    assert len(commits) == 1
+    html = (report_dir / "index.html").read_text()
+    assert f"Every case was solved by one commit, <code>{commits['git_commit'][0][:12]}</code>." in html
+    assert 'id="tbl-case-commits"' in html

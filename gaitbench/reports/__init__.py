@@ -111,7 +111,8 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
         "stop_causes": tb.stop_causes(df), "unverified_cases": tb.unverified_cases(df),
         "failed_cases": tb.failed_cases(df),
-        "provenance": tb.provenance_table(runs), "cases": tb.cases_table(df),
+        "case_commits": tb.case_commits(df), "provenance": tb.provenance_table(runs),
+        "cases": tb.cases_table(df),
     }
     suites = sorted({run.get("suite") or "?" for run in runs})
     report = ReportData(store_dir=shown, title=f"gaitbench report: {', '.join(suites) or store_dir.name}",

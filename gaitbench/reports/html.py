@@ -86,6 +86,7 @@ EMPTY_TABLES = {
                          "ours beside.",
     "unverified_cases": "None: every complete walk passed the whole-walk verification.",
     "failed_cases": "None: every case's walk was solved to its last step.",
+    "case_commits": "No case in the store.",
     "provenance": "The store records no run.",
 }
 """Why each table of the page is empty, where one reason covers it (the savings' depends on the store:
@@ -182,6 +183,7 @@ class HtmlReporter:
         csv_files = sorted(path.name for path in out_dir.glob("*.csv"))
         html = environment.get_template("report.html.j2").render(
             report=report, table=table, rows=rows, counts=counts, total=len(df), retries=retries, csv_files=csv_files,
+            commits=tables["case_commits"],
             generated=datetime.now(timezone.utc).isoformat(timespec="seconds"), thesis=thesis_values,
             figures_dir=FIGURES_DIR, has_dc=bool(len(tables["dc_claims"])),
             consistency_band=statistics.CONSISTENCY_BAND, consistency_tolerance=statistics.CONSISTENCY_TOLERANCE,

@@ -60,6 +60,7 @@ UNVERIFIED_COLUMNS = ["case_key", "experiment", "method", "N", "unranked_acot", 
 FAILED_COLUMNS = ["case_key", "experiment", "method", "N", "status", "stop_cause", "stop_step", "stop_status",
                   "message", "steps_solved", "partial_acot", "retries", "wall_time_s"]
 PROVENANCE_COLUMNS = ["run_id", "item", "value"]
+COMMIT_COLUMNS = ["git_commit", "cases", "methods", "first_finished", "last_finished"]
 CASES_COLUMNS = ["case_key", "run_id", "experiment", "method", "N", "steps", "transcription", "solver", "strategy",
                  "objective",
                  "repetition", "status", "message", "acot", "claimed_acot", "cot_min", "cot_max", "steps_solved",
@@ -390,6 +391,23 @@ def failed_cases(df: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(columns=FAILED_COLUMNS)
     failed = df[df["status"] != "solved"]
     return _integers(failed[FAILED_COLUMNS].reset_index(drop=True), "steps_solved", "retries")
+
+
+def case_commits(df: pd.DataFrame) -> pd.DataFrame:
+    """The code each case was solved by: one row per commit (``unknown`` where a case's provenance names none), most
+    cases first. Figures are comparable as one benchmark only where they share a row: cases solved by other code
+    may have solved another problem."""
+    if df.empty:
+        return pd.DataFrame(columns=COMMIT_COLUMNS)
+    provenances = df["provenance"] if "provenance" in df else [None] * len(df)
+    commits = [(provenance.get("git_commit") if isinstance(provenance, dict) else None) or "unknown"
+               for provenance in provenances]
+    frame = df.assign(git_commit=commits)
+    rows = [{"git_commit": commit, "cases": len(group), "methods": ", ".join(sorted(set(group["method"]))),
+             "first_finished": group["finished_at"].min(), "last_finished": group["finished_at"].max()}
+            for commit, group in frame.groupby("git_commit", sort=False)]
+    rows.sort(key=lambda row: (-row["cases"], row["git_commit"]))
+    return pd.DataFrame(rows, columns=COMMIT_COLUMNS)
 
 
 def provenance_table(runs: Iterable[dict]) -> pd.DataFrame:
