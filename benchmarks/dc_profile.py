@@ -25,15 +25,21 @@ from gaitbench.problem.gait_problem import ProblemOptions
 OUT = Path(__file__).parent / "results" / "dc_profile"
 
 
+def ipopt_walk(experiment_name: str, transcription: str, n_nodes: int, steps: int) -> WalkProblem:
+    """The walk a thesis suite's IPOPT method solves: the experiment's limits, the default problem options and the
+    net-power objective (shared by the D&C benchmarks beside this one)."""
+    registry = load_registry()
+    experiment = registry.create("experiment", experiment_name)
+    return WalkProblem(experiment, registry.create("transcription", transcription), registry.create("solver", "ipopt"),
+                       n_nodes, steps=steps, options=ProblemOptions(limits=experiment.limits),
+                       objective=registry.create("objective", "net-power"))
+
+
 def profile(experiment_name: str, transcription: str, n_nodes: int, steps: int) -> dict:
     import gaitbench_plugins.strategies.decrease_and_conquer as dc
 
     registry = load_registry()
-    experiment = registry.create("experiment", experiment_name)
-    problem = WalkProblem(experiment, registry.create("transcription", transcription),
-                          registry.create("solver", "ipopt"), n_nodes, steps=steps,
-                          options=ProblemOptions(limits=experiment.limits),
-                          objective=registry.create("objective", "net-power"))
+    problem = ipopt_walk(experiment_name, transcription, n_nodes, steps)
     record: dict = {"experiment": experiment_name, "transcription": transcription, "N": n_nodes, "steps": steps,
                     "sections": [], "parts": [], "steps_done_s": []}
     solve_one, solve_with_retries = dc.SectionalSolves.solve_one, dc.solve_with_retries

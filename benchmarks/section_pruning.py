@@ -39,12 +39,13 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+from dc_profile import ipopt_walk  # its sibling in benchmarks/
 
 from gaitbench.contracts import WalkProblem
 from gaitbench.model.energetics import candidate_cot
 from gaitbench.model.mechanics import BipedModel, biped_functions
 from gaitbench.plugins import load_registry
-from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector, roles_to_legs
+from gaitbench.problem.gait_problem import role_robot_vector, roles_to_legs
 from gaitbench.solve.synthesis import synthesize
 
 OUT = Path(__file__).parent / "results" / "section_pruning"
@@ -79,13 +80,8 @@ def same_patch(a, b) -> bool:
 def analyse(experiment_name: str, transcription: str, n_nodes: int, steps: int) -> dict:
     import gaitbench_plugins.strategies.decrease_and_conquer as dc
 
-    registry = load_registry()
-    experiment = registry.create("experiment", experiment_name)
-    problem = WalkProblem(experiment, registry.create("transcription", transcription),
-                          registry.create("solver", "ipopt"), n_nodes, steps=steps,
-                          options=ProblemOptions(limits=experiment.limits),
-                          objective=registry.create("objective", "net-power"))
-    strategy = registry.create("strategy", "decrease-and-conquer")
+    problem = ipopt_walk(experiment_name, transcription, n_nodes, steps)
+    strategy = load_registry().create("strategy", "decrease-and-conquer")
     record: dict = {"experiment": experiment_name, "transcription": transcription, "N": n_nodes, "steps": []}
     pending: dict = {"sections": []}
     solve_one, node_values_of = dc.SectionalSolves.solve_one, dc.NodeValues.__dict__["of"]

@@ -24,10 +24,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from dc_profile import ipopt_walk  # its sibling in benchmarks/
 
 from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
-from gaitbench.problem.gait_problem import ProblemOptions, StepData, sectional_structure
+from gaitbench.problem.gait_problem import StepData, sectional_structure
 from gaitbench.run.provenance import provenance
 from gaitbench.solve.solver import prepare, section_solver
 from gaitbench.solve.walk import solve_with_retries
@@ -37,19 +38,11 @@ OUT = Path(__file__).parent / "results" / "section_warm_start.jsonl"
 
 def chained_step(experiment_name: str, transcription: str, n_nodes: int, step: int):
     """The walk problem and step ``step``'s data, from the post-impact state of decrease and conquer's step − 1."""
-    registry = load_registry()
-    experiment = registry.create("experiment", experiment_name)
-
-    def problem_of(steps: int) -> WalkProblem:
-        return WalkProblem(experiment, registry.create("transcription", transcription),
-                           registry.create("solver", "ipopt"), n_nodes, steps=steps,
-                           options=ProblemOptions(limits=experiment.limits),
-                           objective=registry.create("objective", "net-power"))
-
-    problem = problem_of(step)
+    problem = ipopt_walk(experiment_name, transcription, n_nodes, step)
     state = problem.start_state()
     if step > 1:
-        walk = registry.create("strategy", "decrease-and-conquer").solve(problem_of(step - 1))
+        before = ipopt_walk(experiment_name, transcription, n_nodes, step - 1)
+        walk = load_registry().create("strategy", "decrease-and-conquer").solve(before)
         if not walk.complete:
             raise SystemExit(f"decrease and conquer did not walk steps 1–{step - 1}: {walk.failure}")
         state = walk.steps[-1].next_state
