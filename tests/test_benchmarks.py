@@ -2,6 +2,7 @@
 
 import importlib.util
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -400,3 +401,23 @@ def test_a_sweep_over_sessions_adds_its_runs_spans_and_is_recorded_only_whole_on
         module.record(mixed, performance)
     with pytest.raises(SystemExit, match="3 of 4 cases stored"):
         module.record(row | {"cases_total": 4}, performance)
+
+
+def test_the_start_sample_pairs_each_method_with_its_blended_twin_on_verified_figures(tmp_path):
+    from gaitbench.run.store import ResultStore
+
+    module = _benchmark("start_sample")
+    rows = [("OP-DC", 0.28, True), ("OP-DC blended", 0.30, True), ("OP-DM", 0.35, False), ("OP-DM blended", 0.40, True)]
+    with ResultStore.create(tmp_path / "store") as store:
+        store.add_run({"run_id": "r1", "suite": "start-sample", "started_at": "2026-01-01T00:00:00+00:00"})
+        for i, (method, acot, verified) in enumerate(rows):
+            store.record_case({"case_key": f"{i:016x}", "suite": "start-sample", "run_id": "r1", "experiment": "stairs",
+                               "method": method, "N": 60, "experiment_options": {}, "steps": 11,
+                               "transcription": "dmoc", "solver": "ipopt", "strategy": "one-phase", "repetition": 0,
+                               "message": "", "status": "solved", "stop_cause": "complete", "acot": acot,
+                               "verified": verified, "wall_time_s": 10.0 * (i + 1)})
+    pairs = module.paired(tmp_path / "store").set_index("method")
+    assert list(pairs.index) == ["OP-DC", "OP-DM"]
+    assert pairs.loc["OP-DC", "change"] == pytest.approx(0.28 / 0.30 - 1)
+    assert not pairs.loc["OP-DM", "verified_walk_best"]
+    assert math.isnan(pairs.loc["OP-DM", "acot_best"]) and math.isnan(pairs.loc["OP-DM", "change"])
