@@ -240,3 +240,19 @@ def test_run_retry_inconsistent_solves_only_those_walks_again(ladder, monkeypatc
     assert result.exit_code == 0, result.output
     assert executor.ran == [110]
     assert build_report(store).tables["consistency"].empty  # its new row (0.31) replaced the old
+
+
+def test_the_dearest_step_of_a_dc_exception_comes_from_its_verified_steps_not_a_patchworks_claims():
+    """D&C-DC: median 1.0 over N = 40–90, then 1.4 at N = 110 with step 2 the dear one. A row stored before D&C
+    walks chained verified motions (its per-step COTs, the patchwork's claims, do not average to its ACOT) has no
+    dearest step."""
+    def dc(n: int, acot: float, cot_steps: list[float]) -> dict:
+        return _dc(n, acot) | {"acot": acot, "claimed_acot": 0.5 * acot, "cot_steps": cot_steps}
+
+    rows = [dc(n, 1.0, [1.0, 1.0]) for n in range(40, 100, 10)]
+    rows += [dc(110, 1.4, [1.0, 1.8]), dc(130, 1.4, [0.2, 0.3])]  # the second: a patchwork's claims
+    df = _cases(rows)
+    exceptions = statistics.consistency_exceptions(tables.acot_table(df), df).set_index("N")
+    assert set(exceptions.index) == {110, 130}
+    assert (exceptions.loc[110, "dearest_step"], exceptions.loc[110, "dearest_step_excess"]) == (2, pytest.approx(0.8))
+    assert pd.isna(exceptions.loc[130, "dearest_step"])

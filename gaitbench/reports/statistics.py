@@ -25,6 +25,8 @@ CONSISTENCY_BAND = (40, 90)
 """The coarser N whose median ACOT is a method's reference in the consistency check."""
 CONSISTENCY_TOLERANCE = 0.15
 """A finer N's ACOT more than this fraction away from the reference median is an exception."""
+OWN_STEPS_RTOL = 1e-6
+"""How closely a walk's stored per-step COTs must average to its ACOT to be taken as its own."""
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
 CONFIDENCE = 0.95
@@ -180,14 +182,16 @@ def consistency_exceptions(acot: pd.DataFrame, df: pd.DataFrame | None = None,
 
 
 def _cell_steps(df: pd.DataFrame) -> dict[tuple[str, str, int], np.ndarray]:
-    """Each experiment × method × N's per-step COT, the mean over its complete walks, for the strategies whose
-    stored per-step COTs are the walk's own (not Decrease & Conquer's, whose are the patchwork's claims)."""
+    """Each experiment × method × N's per-step COT, the mean over its complete walks whose stored per-step COTs are
+    the walk's own: those that average to its ACOT. Decrease & Conquer rows stored before its walks chained verified
+    motions hold the patchwork's claims there, which do not, and are left out."""
     sweep = sweep_cases(df)
-    walks = sweep[sweep["complete"].astype(bool) & sweep["acot"].notna() & ~sweep["is_dc"].astype(bool)]
+    walks = sweep[sweep["complete"].astype(bool) & sweep["acot"].notna()]
     cells = {}
     for (experiment, method, n), group in walks.groupby(["experiment", "method", "N"], sort=False):
-        per_walk = [_floats(cots) for cots in group["cot_steps"]]
-        if per_walk and all(len(cots) == len(per_walk[0]) > 0 for cots in per_walk):
+        per_walk = [cots for cots, acot in zip(map(_floats, group["cot_steps"]), group["acot"], strict=True)
+                    if len(cots) and math.isclose(float(np.mean(cots)), acot, rel_tol=OWN_STEPS_RTOL)]
+        if per_walk and all(len(cots) == len(per_walk[0]) for cots in per_walk):
             cells[(experiment, method, int(n))] = np.mean(per_walk, axis=0)
     return cells
 
