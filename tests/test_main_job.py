@@ -110,3 +110,6 @@ def test_running_a_suite_twice_leaves_tracked_files_alone(tmp_path, monkeypatch)
                                 text=True, check=True).stdout
         assert status == "", f"{attempt} run changed the checkout:\n{status}"
     assert "1 case already in the store is skipped" in result.stderr
+    # the run's summary ends with its time, the store on a line of its own (no "; " left at a wrapped line's end)
+    assert re.search(r"^run \S+: 0 solved, 0 failed, 1 already in the store, [\d.]+ s$", result.stderr, re.M)
+    assert re.search(r"^store: \S+$", result.stderr, re.M)

@@ -128,7 +128,8 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         raise SystemExit(stop.code) from None
     shared = f"{summary.elsewhere} solved by another run, " if summary.elsewhere else ""
     console.print(f"run {summary.run_id}: {summary.solved} solved, {summary.failed} failed, {shared}"
-                  f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s; store: {summary.store}")
+                  f"{summary.skipped} already in the store, {summary.wall_time_s:.1f} s")
+    console.print(f"store: {summary.store}")
     try:
         Console().print(_suite_results(suite, store_dir))
     except StoreError as error:
