@@ -238,11 +238,22 @@ def _problem_set(rows: list[dict]) -> str:
             f"N = {', '.join(map(str, sorted({row['N'] for row in rows})))}")
 
 
+def profiled_solvers(rows: list[dict]) -> tuple[list[str], list[str]]:
+    """The solvers the profiles compare, and those left out: a solver (a variant, say) run on fewer than half the
+    problems that the most-run solver ran would shrink the common problem set to its few."""
+    counts: dict[str, int] = {}
+    for row in rows:
+        counts[row["solver"]] = counts.get(row["solver"], 0) + 1
+    most = max(counts.values(), default=0)
+    return (sorted(solver for solver, count in counts.items() if 2 * count >= most),
+            sorted(solver for solver, count in counts.items() if 2 * count < most))
+
+
 def profile_ratios(rows: list[dict]) -> tuple[int, int, dict[str, dict]]:
-    """The Dolan–Moré ratios of time and of verified COT over the problems every solver ran (a solve counts when it
-    converged and was verified; COT on every step but :data:`UNCOMPARED_STEPS`): the two problem counts and, per
-    panel label, each solver's ratios."""
-    solvers = sorted({row["solver"] for row in rows})
+    """The Dolan–Moré ratios of time and of verified COT over the problems every profiled solver ran
+    (:func:`profiled_solvers`; a solve counts when it converged and was verified; COT on every step but
+    :data:`UNCOMPARED_STEPS`): the two problem counts and, per panel label, each solver's ratios."""
+    solvers = profiled_solvers(rows)[0]
     by_key = {_key(row): row for row in rows}
     problems = sorted({_step(row) for row in rows if all((solver, *_step(row)) in by_key for solver in solvers)},
                       key=str)
@@ -261,10 +272,13 @@ def profile_section(rows: list[dict], figure: str = PROFILE_FIGURE.format(stem="
     """The profiles' figure and their values at a few τ, as Markdown lines."""
     n_time, n_cot, panels = profile_ratios(rows)
     time_ratios, cot_ratios = panels.values()
+    left_out = profiled_solvers(rows)[1]
+    omitted = (f" Left out, run on too few of the problems: {', '.join(f'`{solver}`' for solver in left_out)}."
+               if left_out else "")
     lines = [f"Performance profiles (Dolan–Moré): the share of problems a solver solved (converged and verified) "
              f"within τ × the best solver's time ({n_time} problems that every solver ran), and within τ × the best "
              f"verified COT ({n_cot} of them, forward step 1 left out). A solver's curve starts at the share where "
-             "it was best and ends at the share it solved.", "", f"![performance profiles]({figure})", "",
+             f"it was best and ends at the share it solved.{omitted}", "", f"![performance profiles]({figure})", "",
              "| solver | verified | " + " | ".join(f"time ≤ {tau:g}×" for tau in TIME_TAUS) + " | "
              + " | ".join(f"COT ≤ {tau:g}×" for tau in COT_TAUS) + " |",
              "|---|---|" + "---|" * (len(TIME_TAUS) + len(COT_TAUS))]

@@ -421,3 +421,13 @@ def test_the_start_sample_pairs_each_method_with_its_blended_twin_on_verified_fi
     assert pairs.loc["OP-DC", "change"] == pytest.approx(0.28 / 0.30 - 1)
     assert not pairs.loc["OP-DM", "verified_walk_best"]
     assert math.isnan(pairs.loc["OP-DM", "acot_best"]) and math.isnan(pairs.loc["OP-DM", "change"])
+
+
+def test_a_solver_run_on_few_of_the_problems_is_left_out_of_the_profiles_not_the_problems():
+    solvers = _solvers_module()
+    rows = [_solve(solver, "forward", step, "converged", 1.0, 1.0) for solver in ("ipopt", "sqp") for step in (1, 2, 6)]
+    rows.append(_solve("sqp dense", "forward", 1, "killed", 20.0))  # a variant run on one problem of three
+    assert solvers.profiled_solvers(rows) == (["ipopt", "sqp"], ["sqp dense"])
+    n_time, _, panels = solvers.profile_ratios(rows)
+    assert n_time == 3 and set(next(iter(panels.values()))) == {"ipopt", "sqp"}
+    assert "Left out, run on too few of the problems: `sqp dense`." in solvers.profile_section(rows)[0]
