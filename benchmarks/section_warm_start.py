@@ -13,7 +13,7 @@ before a section converged, from the tail).
 
 Appends a record to benchmarks/results/section_warm_start.jsonl: per mode the sections converged, iterations and CPU
 seconds, and per section both objectives, so that which optima the warm start reaches can be read beside its speed.
-``--summarize`` prints the records as the table of docs/decisions/0015-ipopt-levers.md.
+``--summarize`` prints the records as the table of docs/decisions/0020-section-warm-start.md.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ def solve_sections(problem: WalkProblem, step: int, data: StepData) -> dict:
             if mode == "neighbour" and last is not None:
                 seed = last[1].seed((k0 - last[0]) * h)
             else:
-                seed = first.trajectory.seed((k0 - 1) * h)
+                seed = tail.seed((k0 - 1) * h)
             guess = built[k0].initial_guess(section_data[k0], seed)
             cpu = time.process_time()
             result = solver.solve(built[k0].nlp, section_data[k0].parameter_vector(), guess)

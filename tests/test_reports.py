@@ -755,7 +755,7 @@ def test_each_thesis_cell_gets_a_verdict():
     assert tables.verdict(base | {"acot": math.nan}) == "not reproduced: no verified walk of this method"
 
 
-def test_the_report_says_how_many_versions_of_the_code_solved_its_cases(tmp_path):
+def test_the_report_says_how_many_versions_of_the_code_solved_its_cases():
     frame = pd.DataFrame({"method": ["OP-DC", "OP-DM", "D&C-DC", "OP-DC"],
                           "finished_at": ["2026-01-03", "2026-01-01", "2026-01-02", "2026-01-04"],
                           "provenance": [{"git_commit": "b" * 40}, {"git_commit": "a" * 40}, {"git_commit": "a" * 40},
