@@ -15,7 +15,7 @@ run: $(INSTALLED)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/gaitbench run suites/demo.toml --jobs 2 --resume
 
 test: $(INSTALLED)
-	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/pytest -q  # threaded BLAS thrashes small dense solves on 2 cores
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/pytest -q -n auto  # a test process per core (pytest-xdist); one BLAS thread each
 
 # Which hand-made mistakes in the figures' code the fast tests catch (benchmarks/mutation.py; --full: every test).
 mutation: $(INSTALLED)

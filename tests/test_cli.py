@@ -379,7 +379,7 @@ def test_runs_list_fits_80_columns_without_cutting_a_name(invoke, store_with_run
         assert any(line.startswith(run_id + " ") for line in lines), run_id  # whole, on one line
     assert any(line.startswith("suite thesis-all ") for line in lines)  # under the id that does not name it
     assert sum("thesis-all" in line for line in lines) == 2  # the other id names its suite
-    assert str(store_with_runs) in " ".join(result.stdout.split())
+    assert str(store_with_runs) in "".join(result.stdout.split())  # whole, though folded when over 80 columns
     finished = next(line for line in lines if line.startswith("20261203-112256-energetics-sample"))
     assert finished.split()[1:] == ["160", "0", "0", "52", "2026-12-03", "11:48"]
     assert "not finished" in result.stdout and "fail, skip:" in result.stdout  # the legend of the short headers
