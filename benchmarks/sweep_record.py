@@ -1,12 +1,17 @@
 """What a whole sweep took, read off its store: the record of a suite run once, on one commit, for the targets.
 
-Run:    .venv/bin/python benchmarks/sweep_record.py STORE [--record]
+Run:    .venv/bin/python benchmarks/sweep_record.py STORE [--against EARLIER] [--record]
 
 A sweep as long as ``thesis-all`` runs over several sessions (``gaitbench run --smallest-first``, then ``--resume``),
 so its wall time is the sum of its runs' spans: each run from its start to its end, or, for a run that was stopped
 (a session's end, a kill), to its last heartbeat or its last finished case, whichever is later. Beside it: the
 cases the suite asks for and those stored, how many are complete and how many verified, the total case time, and
 the commits and machines the cases ran on.
+
+With ``--against EARLIER`` (a store or pack of the same suite, such as the committed snapshot) it also says how far
+a sweep still running has come by the earlier sweep's measure: the share of the earlier sweep's case time that the
+cases done took there, and, scaling by how much longer or shorter they took here, the whole sweep's case time and
+wall time at this run's parallelism, an estimate. Cases are matched by experiment, method and N.
 
 Printed as JSON. With ``--record`` the row goes into ``benchmarks/results/performance.json`` under ``sweeps``
 (replacing the row of the same suite), which the targets in docs/performance.md cite; it is refused unless every
@@ -73,6 +78,27 @@ def sweep_record(store_path: str | Path) -> dict[str, Any]:
     }
 
 
+def progress_against(row: dict[str, Any], store_path: str | Path, earlier_path: str | Path) -> dict[str, Any]:
+    """How much of the sweep is done by ``earlier_path``'s case times, and the whole sweep's case and wall time
+    projected from the cases done (their time here over their time there)."""
+    def case_times(path: str | Path) -> dict[tuple, float]:
+        with ResultStore.open(path) as store:
+            return {(case["experiment"], case["method"], case["N"]): case["wall_time_s"] or 0.0
+                    for case in store.cases()}
+
+    here, there = case_times(store_path), case_times(earlier_path)
+    done = [key for key in here if key in there]
+    if not done or not sum(there.values()):
+        raise SystemExit(f"{earlier_path}: none of its cases is a case of {store_path} (by experiment, method, N)")
+    share = sum(there[key] for key in done) / sum(there.values())
+    ratio = sum(here[key] for key in done) / sum(there[key] for key in done)
+    case_time_s = ratio * sum(there.values())
+    parallelism = row["case_time_s"] / row["wall_s"] if row["wall_s"] else 1.0
+    return {"against": str(earlier_path), "cases_matched": len(done), "work_done_share": round(share, 4),
+            "case_time_ratio": round(ratio, 3), "projected_case_time_s": round(case_time_s),
+            "projected_wall_s": round(case_time_s / parallelism)}
+
+
 def record(row: dict[str, Any], performance: Path = PERFORMANCE) -> None:
     """Put ``row`` into ``performance.json``'s ``sweeps``, replacing the row of its suite; refused for a sweep that
     is not whole or not on one clean commit."""
@@ -91,9 +117,12 @@ def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("store", help="the sweep's results store (a directory or a pack)")
     parser.add_argument("--record", action="store_true", help="write the row into benchmarks/results/performance.json")
+    parser.add_argument("--against", metavar="EARLIER",
+                        help="an earlier store or pack of the suite: the share of its work done, and a projection")
     arguments = parser.parse_args(argv)
     row = sweep_record(arguments.store)
-    print(json.dumps(row, indent=1))
+    progress = progress_against(row, arguments.store, arguments.against) if arguments.against else {}
+    print(json.dumps(row | {"progress": progress} if progress else row, indent=1))
     if arguments.record:
         record(row)
 

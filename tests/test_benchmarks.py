@@ -403,6 +403,26 @@ def test_a_sweep_over_sessions_adds_its_runs_spans_and_is_recorded_only_whole_on
         module.record(row | {"cases_total": 4}, performance)
 
 
+def test_a_sweep_s_progress_is_measured_by_an_earlier_sweep_s_case_times(tmp_path):
+    module = _benchmark("sweep_record")
+    _sweep_store(tmp_path / "earlier", ["a" * 40] * 4)  # N = 10 … 40, 100 s each
+    _sweep_store(tmp_path / "now", ["b" * 40] * 2)  # N = 10, 20 done
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.create(tmp_path / "earlier") as store:  # the earlier N = 40 took 500 s: 800 s in all
+        store.update_cases({"0000000000000003": {"wall_time_s": 500.0}})
+    row = module.sweep_record(tmp_path / "now")
+    progress = module.progress_against(row, tmp_path / "now", tmp_path / "earlier")
+    assert (progress["cases_matched"], progress["work_done_share"], progress["case_time_ratio"]) == (2, 0.25, 1.0)
+    assert progress["projected_case_time_s"] == 800
+    assert progress["projected_wall_s"] == 800 * 4800 / 200  # 200 s of case time in 3,600 + 1,200 s of wall time
+    _sweep_store(tmp_path / "other", ["a" * 40])
+    with ResultStore.create(tmp_path / "other") as store:
+        store.update_cases({"0000000000000000": {"method": "another"}})
+    with pytest.raises(SystemExit, match="none of its cases"):
+        module.progress_against(row, tmp_path / "now", tmp_path / "other")
+
+
 def test_the_start_sample_pairs_each_method_with_its_blended_twin_on_verified_figures(tmp_path):
     from gaitbench.run.store import ResultStore
 
