@@ -241,9 +241,7 @@ def _problem_set(rows: list[dict]) -> str:
 def profiled_solvers(rows: list[dict]) -> tuple[list[str], list[str]]:
     """The solvers the profiles compare, and those left out: a solver (a variant, say) run on fewer than half the
     problems that the most-run solver ran would shrink the common problem set to its few."""
-    counts: dict[str, int] = {}
-    for row in rows:
-        counts[row["solver"]] = counts.get(row["solver"], 0) + 1
+    counts = Counter(row["solver"] for row in rows)
     most = max(counts.values(), default=0)
     return (sorted(solver for solver, count in counts.items() if 2 * count >= most),
             sorted(solver for solver, count in counts.items() if 2 * count < most))

@@ -88,8 +88,10 @@ def progress_against(row: dict[str, Any], store_path: str | Path, earlier_path: 
 
     here, there = case_times(store_path), case_times(earlier_path)
     done = [key for key in here if key in there]
-    if not done or not sum(there.values()):
+    if not done:
         raise SystemExit(f"{earlier_path}: none of its cases is a case of {store_path} (by experiment, method, N)")
+    if not sum(there[key] for key in done):
+        raise SystemExit(f"{earlier_path}: its cases record no case time (wall_time_s) to measure progress by")
     share = sum(there[key] for key in done) / sum(there.values())
     ratio = sum(here[key] for key in done) / sum(there[key] for key in done)
     case_time_s = ratio * sum(there.values())
