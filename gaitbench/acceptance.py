@@ -8,8 +8,10 @@ reasons :func:`step_failures` and :func:`join_failure` give.
 The re-simulation error and the objective gap are discretization errors, so their limits shrink with the grid:
 every built-in transcription is at least first-order accurate, so a step whose re-simulation error exceeds a limit
 proportional to h = 1/N is off for another reason than the grid's coarseness; the gap's limit has a floor, the
-largest consistent difference between a transcription's cost and its interpolant's. The defect and the join are the
-solver's and the chain's own accuracy, independent of N.
+largest consistent difference between a transcription's cost and its interpolant's. In a walk, a step's gap is
+measured against the larger of its own COT and the walk's mean step COT: a nearly free step (a downhill step at COT
+0.01) is held to what it can move the walk's figure by, not to a share of its own near-zero cost. The defect and the
+join are the solver's and the chain's own accuracy, independent of N.
 """
 
 from __future__ import annotations
@@ -32,10 +34,23 @@ ACOT_RTOL = 0.01
 
 OBJECTIVE_GAP = 0.10
 OBJECTIVE_GAP_AT_N = 2.0
-"""|objective gap| (:func:`gaitbench.solve.verify.objective_gap`) may be at most ``max(OBJECTIVE_GAP,
-OBJECTIVE_GAP_AT_N / N)``: 10 % from N = 20, 20 % at N = 10. The floor lies above the consistent difference
-between DMOC's discrete cost and its interpolant's (docs/decisions/verification-thresholds.md), so that a gap beyond
-it is the optimizer exploiting its quadrature, not a transcription's own offset."""
+"""|objective gap| (:func:`objective_gap`) may be at most ``max(OBJECTIVE_GAP, OBJECTIVE_GAP_AT_N / N)``: 10 % from
+N = 20, 20 % at N = 10. The floor lies above the consistent difference between DMOC's discrete cost and its
+interpolant's (docs/decisions/verification-thresholds.md), so that a gap beyond it is the optimizer exploiting its
+quadrature, not a transcription's own offset."""
+
+OBJECTIVE_RTOL = 0.05
+OBJECTIVE_ATOL = 1e-3
+"""A step's objective agrees with its verified COT (``objective_agrees``, a diagnostic, not a threshold) when they
+differ by at most 5 % of the COT, or by 1e-3 in COT for steps that cost almost nothing (where relative differences
+mean nothing)."""
+
+
+def objective_gap(cot: float, objective_cot: float, walk_cot: float = 0.0) -> float:
+    """How much more (> 0) or less the verified COT is than the objective, relative to the larger of the COT and
+    ``walk_cot`` (the walk's mean step COT, when the step is judged within its walk), floored at OBJECTIVE_ATOL /
+    OBJECTIVE_RTOL so that |gap| ≤ OBJECTIVE_RTOL means agreement within 5 % or 1e-3."""
+    return (cot - objective_cot) / max(abs(cot), walk_cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
 
 
 @dataclass(frozen=True)
@@ -70,24 +85,36 @@ class StepVerification:
     push_off_energy: float  # J, what the push-off is charged (ProblemOptions.push_off_cost); the COT has its event cost
     cot: float
     objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
-    objective_gap: float | None = None  # (cot − objective_cot) / max(cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)
+    objective_gap: float | None = None  # objective_gap(cot, objective_cot): against the step's own COT
     objective_agrees: bool | None = None  # |objective_gap| ≤ OBJECTIVE_RTOL
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
 
 
-def step_failures(check: StepVerification, limits: Thresholds) -> list[str]:
+def judged_gap(check: StepVerification, walk_cot: float | None = None) -> float | None:
+    """The objective gap a step is held to: against its own COT alone, or, within a walk whose mean step COT is
+    ``walk_cot``, against the larger of the two (:func:`objective_gap`)."""
+    if walk_cot is None or check.objective_cot is None:
+        return check.objective_gap
+    return objective_gap(check.cot, check.objective_cot, walk_cot)
+
+
+def step_failures(check: StepVerification, limits: Thresholds, walk_cot: float | None = None) -> list[str]:
     """Why a step's verification does not pass ``limits``, one short reason each; empty when it passes. A figure
-    that is missing or not finite fails (a step with no verification is no motion)."""
+    that is missing or not finite fails (a step with no verification is no motion). ``walk_cot``, the mean step COT
+    of the walk the step belongs to, sets the basis of its objective gap (:func:`judged_gap`); without it (choosing
+    between candidate motions of one step, before any walk figure exists) the gap is against the step's own COT,
+    the stricter test."""
     reasons = []
     if not check.max_defect <= limits.max_defect:
         reasons.append(f"dynamics defect {check.max_defect:.1e} > {limits.max_defect:.0e}")
     if not check.resim_error <= limits.max_resim_error:
         reasons.append(f"re-simulation error {check.resim_error:.2g} > {limits.max_resim_error:.2g}")
-    gap = check.objective_gap
+    gap = judged_gap(check, walk_cot)
     if gap is not None and not abs(gap) <= limits.max_objective_gap:
-        reasons.append(f"objective gap {gap:+.1%} beyond ±{limits.max_objective_gap:.1%}")
+        basis = " of the walk's mean step COT" if walk_cot is not None and walk_cot > abs(check.cot) else ""
+        reasons.append(f"objective gap {gap:+.1%}{basis} beyond ±{limits.max_objective_gap:.1%}")
     return reasons
 
 

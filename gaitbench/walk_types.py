@@ -26,6 +26,7 @@ class StepCheck:
     max_defect: float
     resim_error: float
     objective_gap: float | None
+    """The gap the step was held to: against the larger of its COT and the walk's mean step COT."""
     join_mismatch: float
     """Largest |start state − post-impact state of the step before| (rad, rad/s)."""
     join_energy: float

@@ -11,6 +11,7 @@ from functools import cache
 import numpy as np
 import pytest
 
+from gaitbench.acceptance import OBJECTIVE_ATOL, OBJECTIVE_RTOL, objective_gap
 from gaitbench.contracts import WalkProblem
 from gaitbench.model.energetics import cost_of_transport
 from gaitbench.model.mechanics import BipedModel
@@ -18,7 +19,7 @@ from gaitbench.plugins import load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import Interpolant, StepTrajectory
-from gaitbench.solve.verify import OBJECTIVE_ATOL, OBJECTIVE_RTOL, fine_grid_running_cost, objective_gap, verify_step
+from gaitbench.solve.verify import fine_grid_running_cost, verify_step
 from gaitbench_plugins.solvers.ipopt import Ipopt
 
 N_NODES = 25

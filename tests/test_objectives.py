@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from gaitbench.acceptance import OBJECTIVE_RTOL
 from gaitbench.cli.main import main
 from gaitbench.contracts import WalkProblem
 from gaitbench.plugins import load_registry
@@ -16,7 +17,7 @@ from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import nodal_trajectory
 from gaitbench.solve.one_phase import OnePhase
-from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost
+from gaitbench.solve.verify import fine_grid_running_cost
 from gaitbench_plugins.objectives.energy_costs import ActuatorWork, TorqueSquared
 
 REGISTRY = load_registry()

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from gaitbench.acceptance import StepVerification
+from gaitbench.acceptance import OBJECTIVE_RTOL, StepVerification
 from gaitbench.model.mechanics import BipedModel, biped_functions
 from gaitbench.model.robot import RobotParameters
 from gaitbench.plugins import load_registry
@@ -23,7 +23,7 @@ from gaitbench.problem.nlp import NLPBuilder
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.step_cost import QUADRATURE_RULES, charged
 from gaitbench.problem.trajectory import Interpolant, StepTrajectory
-from gaitbench.solve.verify import OBJECTIVE_RTOL, fine_grid_running_cost, verify_step
+from gaitbench.solve.verify import fine_grid_running_cost, verify_step
 from gaitbench.solve.walk import next_step_state
 from gaitbench.walk_types import StepOutcome, WalkResult
 from gaitbench_plugins.objectives.energy_costs import ActuatorWork, TorqueSquared

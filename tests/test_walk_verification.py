@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from gaitbench.acceptance import StepVerification, Thresholds, step_failures
+from gaitbench.acceptance import StepVerification, Thresholds, objective_gap, step_failures
 from gaitbench.cli.main import main
 from gaitbench.contracts import WalkProblem
 from gaitbench.model.mechanics import BipedModel
@@ -29,10 +29,13 @@ def forward():
     return REGISTRY.create("experiment", "forward")
 
 
-def _check(cot=0.3, defect=1e-9, resim=1e-3, gap=0.0) -> StepVerification:
+def _check(cot=0.3, defect=1e-9, resim=1e-3, gap=0.0, objective=None) -> StepVerification:
+    """A step's verification; with ``objective`` (the NLP's COT) its gap is computed from it."""
+    if objective is not None:
+        gap = objective_gap(cot, objective)
     return StepVerification(max_defect=defect, resim_error=resim, resim_max_error=resim, hip_energy=1.0,
-                            push_off_energy=0.0, cot=cot, objective_cot=cot, objective_gap=gap,
-                            objective_agrees=True)
+                            push_off_energy=0.0, cot=cot, objective_cot=cot if objective is None else objective,
+                            objective_gap=gap, objective_agrees=abs(gap) <= 0.05)
 
 
 def _step(index: int, stance: int, start: np.ndarray, check: StepVerification) -> StepOutcome:
@@ -97,6 +100,28 @@ def test_the_thresholds_scale_with_the_grid():
     assert coarse.max_objective_gap == pytest.approx(0.2) and fine.max_objective_gap == pytest.approx(0.1)
     assert coarse.max_defect == fine.max_defect and coarse.max_join_mismatch == fine.max_join_mismatch
     assert step_failures(_check(resim=0.3), coarse) == [] and step_failures(_check(resim=0.03), fine)
+
+
+def test_a_nearly_free_steps_gap_is_held_to_what_it_can_move_the_walks_figure_by(forward):
+    """A downhill step at COT 0.01 whose objective misses it by 0.0025 (12.5 % against its own COT, floored at 0.02)
+    passes in a walk of mean step COT 0.255 (1 % of that); a costly step 20 % off fails in the same walk."""
+    start = forward.start_state("on-ground")
+    free = _check(cot=0.01, objective=0.0075)
+    assert step_failures(free, Thresholds.for_nodes(20))  # alone, against its own COT
+    costly = _step(1, 1, start, _check(cot=0.5, objective=0.49))
+    cheap = _step(2, 2, costly.next_state, free)
+    verification = verify_walk(_walk([costly, cheap]), start, forward.robot)
+    assert verification.verified, verification.reasons
+    assert verification.steps[1].objective_gap == pytest.approx(0.0025 / 0.255)
+    exploited = _step(1, 1, start, _check(cot=0.5, objective=0.4))
+    cheap = _step(2, 2, exploited.next_state, free)
+    verification = verify_walk(_walk([exploited, cheap]), start, forward.robot)
+    assert verification.reasons == ("step 1: objective gap +20.0% beyond ±10.0%",)
+
+
+def test_a_gap_judged_against_the_walk_says_so():
+    failures = step_failures(_check(cot=0.01, objective=-0.02), Thresholds.for_nodes(20), walk_cot=0.2)
+    assert failures == ["objective gap +15.0% of the walk's mean step COT beyond ±10.0%"]
 
 
 def test_an_incomplete_walk_is_not_verified(forward):

@@ -8,14 +8,15 @@ by its controls from its initial state.
 The objective is still compared with the verified COT: a transcription whose cost quadrature sees less than its
 trajectory does lets the optimizer exploit the difference (the net-power cost makes opposing torques free wherever
 the quadrature does not look), and the two then disagree. ``objective_gap`` measures it, and ``objective_agrees``
-says whether it is within :data:`OBJECTIVE_RTOL` (with the absolute floor :data:`OBJECTIVE_ATOL`).
+says whether it is within :data:`~gaitbench.acceptance.OBJECTIVE_RTOL` (with the absolute floor
+:data:`~gaitbench.acceptance.OBJECTIVE_ATOL`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from gaitbench.acceptance import StepVerification
+from gaitbench.acceptance import OBJECTIVE_RTOL, StepVerification, objective_gap
 from gaitbench.model.energetics import cost_of_transport, hip_energy, push_off_work
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.model.simulate import OpenLoop, simulate
@@ -28,10 +29,6 @@ SAMPLES_PER_INTERVAL = 16
 INSIDE = 1e-9
 """How far inside an interval (relative to its length) the fine grid reads the controls at its two ends: on the
 interval's own side of a jump at a node (DMOC's piecewise-constant torques), within ~1e-9 of the end otherwise."""
-OBJECTIVE_RTOL = 0.05
-OBJECTIVE_ATOL = 1e-3
-"""The objective agrees with the verified COT when they differ by at most 5 % of the COT, or by 1e-3 in COT for
-steps that cost almost nothing (where relative differences mean nothing)."""
 
 
 def verify_step(
@@ -73,12 +70,6 @@ def push_off_charge(model: BipedModel, trajectory: StepTrajectory, accounting: s
                                    trajectory.push_off, trajectory.stance)
     stance_mass = role_robot_vector(model.robot, trajectory.stance)[0]
     return float(push_off_work(accounting, gain, np.ravel(dq_plus)[2:4], stance_mass))
-
-
-def objective_gap(cot: float, objective_cot: float) -> float:
-    """How much more (> 0) or less the verified COT is than the objective, relative to the COT, floored at
-    OBJECTIVE_ATOL / OBJECTIVE_RTOL so that |gap| ≤ OBJECTIVE_RTOL means agreement within 5 % or 1e-3."""
-    return (cot - objective_cot) / max(abs(cot), OBJECTIVE_ATOL / OBJECTIVE_RTOL)
 
 
 def fine_grid_running_cost(trajectory: StepTrajectory, objective: Objective, robot: np.ndarray,

@@ -13,10 +13,11 @@ thresholds are in :mod:`gaitbench.acceptance`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import takewhile
 
 import numpy as np
 
-from gaitbench.acceptance import Thresholds, join_failure, step_failures
+from gaitbench.acceptance import Thresholds, join_failure, judged_gap, step_failures
 from gaitbench.contracts import Strategy, WalkProblem
 from gaitbench.model.energetics import average_cot
 from gaitbench.model.experiment import Experiment
@@ -33,26 +34,26 @@ from gaitbench.walk_types import StepCheck, StepOutcome, WalkResult, WalkVerific
 
 def verify_walk(walk: WalkResult, start_state: np.ndarray, robot: RobotParameters) -> WalkVerification:
     """Check the steps ``walk`` reports (:attr:`StepOutcome.verified`: decrease and conquer's polished or complete
-    motion, not its patchwork) against :class:`Thresholds` for its N, and each step's start against the post-impact
-    state of the one before (``start_state``, leg order (q1, q2, q̇1, q̇2), for step 1)."""
+    motion, not its patchwork) against :class:`Thresholds` for its N, each step's objective gap against the larger
+    of its COT and the walk's mean step COT, and each step's start against the post-impact state of the one before
+    (``start_state``, leg order (q1, q2, q̇1, q̇2), for step 1)."""
     limits = Thresholds.for_nodes(walk.N)
     energy = BipedModel(robot, 2)  # both feet on the ground at a join: the 2-DOF model's energies
     expected = np.asarray(start_state, dtype=float)
+    motions = list(takewhile(lambda motion: motion.solved, (step.verified for step in walk.steps)))
+    walk_cot = average_cot([motion.verification.cot for motion in motions]) if motions else None
     checks, reasons = [], []
-    for step in walk.steps:
-        motion = step.verified
-        if not motion.solved:
-            break
+    for step, motion in zip(walk.steps, motions, strict=False):  # the steps after the first unsolved are not checked
         trajectory, check = motion.trajectory, motion.verification
         start = np.r_[trajectory.q[0], trajectory.dq[0]]
         mismatch = float(np.max(np.abs(start - expected)))
         appeared = (energy.total_energy(start[:2], start[2:], step.stance)
                     - energy.total_energy(expected[:2], expected[2:], step.stance))
-        failures = step_failures(check, limits)
+        failures = step_failures(check, limits, walk_cot)
         joined = join_failure(mismatch, limits)
         failures += [joined] if joined else []
-        checks.append(StepCheck(step.index, check.cot, check.max_defect, check.resim_error, check.objective_gap,
-                                mismatch, float(appeared), tuple(failures)))
+        checks.append(StepCheck(step.index, check.cot, check.max_defect, check.resim_error,
+                                judged_gap(check, walk_cot), mismatch, float(appeared), tuple(failures)))
         reasons += [f"step {step.index}: {failure}" for failure in failures]
         expected = motion.next_state
     if not walk.complete:
