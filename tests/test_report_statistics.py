@@ -86,6 +86,28 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     assert quoted["min_vs_min_percent"] == pytest.approx(row["min_vs_min_percent"])
 
 
+def test_methods_under_another_objective_meet_neither_the_thesis_nor_the_other_objectives_baselines():
+    """A store like thesis-forward-work (every method under actuator-work) beside net-power methods: the work
+    methods are never matched with the thesis's net-power figures, each D&C method is paired with the One Phase and
+    reference methods of its own objective, and no pair crosses objectives."""
+    work = {"objective": "actuator-work"}
+    rows = []
+    for extra in ({}, work):
+        rows += [{"method": "OP-DC", "N": 20, "acot": 0.40} | extra,
+                 {"method": "reference", "N": 20, "acot": 0.42} | extra,
+                 _dc(20, 0.36) | extra]
+    info = case_frame.method_info(_cases(rows)).set_index("method")
+    assert info.loc["OP-DC", "thesis_method"] == "OP-DC" and info.loc["D&C-DC", "thesis_method"] == "D&C-DC"
+    assert info.loc["reference", "thesis_method"] == "SNOPT"
+    for method in ("OP-DC [actuator-work]", "D&C-DC [actuator-work]", "reference [actuator-work]"):
+        assert info.loc[method, "thesis_method"] is None, method
+    assert info.loc["reference [actuator-work]", "label"] == "reference"
+    assert sorted(tables.baselines(info.reset_index())) == sorted([
+        ("forward", "D&C-DC", "OP-DC", "one-phase"), ("forward", "D&C-DC", "reference", "reference"),
+        ("forward", "D&C-DC [actuator-work]", "OP-DC [actuator-work]", "one-phase"),
+        ("forward", "D&C-DC [actuator-work]", "reference [actuator-work]", "reference")])
+
+
 def test_the_spread_is_over_every_complete_walk_at_neighbouring_n():
     rows = [{"method": "OP-DC", "N": 10, "acot": 1.0}, {"method": "OP-DC", "N": 10, "acot": 1.2, "repetition": 1},
             {"method": "OP-DC", "N": 20, "acot": 1.1}, {"method": "OP-DC", "N": 30, "acot": 2.0},

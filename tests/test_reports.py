@@ -750,7 +750,7 @@ def test_each_thesis_cell_gets_a_verdict():
     assert below.startswith("published figure below the physical bound 0.5000")
     missed = tables.verdict(base | {"acot": 0.30, "difference_percent": 50.0, "claimed_acot": 0.25,
                                     "thesis_reading_acot": 0.22})
-    assert missed == ("not reproduced: our verified minimum 0.3000 (+50 %), claimed 0.2500, read the thesis's way "
+    assert missed == ("not reproduced: our verified minimum 0.3000 (+50.0 %), claimed 0.2500, read the thesis's way "
                       "0.2200")
     assert tables.verdict(base | {"acot": math.nan}) == "not reproduced: no verified walk of this method"
 

@@ -148,19 +148,25 @@ def experiments(df: pd.DataFrame) -> list[str]:
 
 
 def method_info(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per (experiment, method): its transcription, solver, strategy and the thesis method it stands for."""
-    columns = ["experiment", "method", "transcription", "solver", "strategy", "thesis_method"]
+    """One row per (experiment, method): its transcription, solver, strategy, objective, its label without the
+    objective's brackets (``label``), and the thesis method it stands for: only under the thesis's own objective
+    (``net-power``), since the published figures measure that cost and no other."""
+    columns = ["experiment", "method", "transcription", "solver", "strategy", "objective", "label", "thesis_method"]
     sweep = sweep_cases(df)
     if sweep.empty:
         return pd.DataFrame(columns=columns)
-    info = sweep.groupby(["experiment", "method"], sort=False)[["transcription", "solver", "strategy"]].first()
+    info = sweep.groupby(["experiment", "method"], sort=False)[["transcription", "solver", "strategy",
+                                                                "objective"]].first()
     info = info.reset_index()
+    info["label"] = [method.removesuffix(f" [{objective}]")
+                     for method, objective in zip(info["method"], info["objective"], strict=True)]
     info["thesis_method"] = None
     for _, group in info.groupby("experiment", sort=False):
         taken: set[str] = set()
         guesses = {}
         for index, row in group.iterrows():
-            guesses[index] = _thesis_method(row["method"], row["strategy"], row["transcription"])
+            guesses[index] = _thesis_method(row["label"], row["strategy"], row["transcription"]) \
+                if row["objective"] == NET_POWER.name else None
         counts = pd.Series([g for g in guesses.values() if g]).value_counts()
         for index, guess in guesses.items():
             if guess and counts[guess] == 1 and guess not in taken:

@@ -197,7 +197,11 @@ def _cell_steps(df: pd.DataFrame) -> dict[tuple[str, str, int], np.ndarray]:
 
 
 def _floats(cot_steps) -> np.ndarray:
-    values = json.loads(cot_steps) if isinstance(cot_steps, str) else cot_steps
+    """A row's per-step COTs; empty where the stored value is not a list (a malformed row is left out, not fatal)."""
+    try:
+        values = json.loads(cot_steps) if isinstance(cot_steps, str) else cot_steps
+    except json.JSONDecodeError:
+        return np.empty(0)
     return np.array([math.nan if v is None else float(v) for v in values], float) if isinstance(values, list) \
         else np.empty(0)
 

@@ -145,16 +145,17 @@ def savings_percent(reference: Any, candidate: Any) -> Any:
 
 def baselines(info: pd.DataFrame) -> list[tuple[str, str, str, str]]:
     """(experiment, D&C method, baseline method, kind) pairs: each D&C method against One Phase with the same
-    transcription and solver (kind ``one-phase``) and against the suite's ``reference`` method (kind ``reference``)."""
+    transcription, solver and objective (kind ``one-phase``) and against the suite's ``reference`` method under the
+    same objective (kind ``reference``): a saving between two cost measures means nothing."""
     pairs = []
-    for experiment, group in info.groupby("experiment", sort=False):
-        references = [m for m in group["method"] if m.lower() == REFERENCE_LABEL]
+    for (experiment, _), group in info.groupby(["experiment", "objective"], sort=False):
+        is_reference = group["label"].str.lower() == REFERENCE_LABEL
         for row in group[group["strategy"] == DC_STRATEGY].itertuples():
             same = group[(group["strategy"] == ONE_PHASE) & (group["transcription"] == row.transcription)
-                         & (group["solver"] == row.solver) & (group["method"].str.lower() != REFERENCE_LABEL)]
+                         & (group["solver"] == row.solver) & ~is_reference]
             if not same.empty:
                 pairs.append((experiment, row.method, same["method"].iloc[0], ONE_PHASE))
-            for reference in references:
+            for reference in group.loc[is_reference, "method"]:
                 pairs.append((experiment, row.method, reference, REFERENCE_LABEL))
     return pairs
 
@@ -228,7 +229,7 @@ def verdict(row: Mapping[str, Any]) -> str:
     if abs(ours - row["published_acot"]) <= REPRODUCED_WITHIN * row["published_acot"]:
         return "reproduced"
     reading, claimed = row.get("thesis_reading_acot"), row.get("claimed_acot")
-    measured = [f"our verified minimum {ours:.4f} ({row['difference_percent']:+.0f} %)"]
+    measured = [f"our verified minimum {ours:.4f} ({row['difference_percent']:+.1f} %)"]
     if claimed is not None and math.isfinite(claimed):
         measured.append(f"claimed {claimed:.4f}")
     if reading is not None and math.isfinite(reading):
