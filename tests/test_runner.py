@@ -275,6 +275,39 @@ def test_cases_reach_the_executor_largest_n_first_or_smallest_when_asked(tmp_pat
     assert handed == [cases[0].key, cases[2].key, cases[3].key, cases[1].key]
 
 
+def test_a_complete_walk_run_again_keeps_its_row_and_files_when_the_new_run_fails(tmp_path: Path) -> None:
+    """--retry-unverified and --retry-inconsistent run complete walks again: one that then crashes must not replace
+    the walk, and the next run's clean-up must not take its files for leftovers. A new complete walk replaces it."""
+    case = walk_case(8)
+
+    class Finishing:
+        name, jobs = "finishing", 1
+
+        def __init__(self, outcome):
+            self.outcome = outcome
+
+        def run(self, cases):
+            for case in cases:
+                yield self.outcome(case)
+
+    solved = lambda case: CaseOutcome(case, "solved", "", 1.0, {"acot": 0.3, "verified": True},  # noqa: E731
+                                      {"walk.json": b'{"first": 1}'})
+    run_suite(suite_of([case]), tmp_path, Finishing(solved))
+    shown = []
+    crashed = Finishing(lambda case: failed_outcome(case, "crashed", "worker died (SIGKILL)"))
+    run_suite(suite_of([case]), tmp_path, crashed, resume=True, rerun={case.key}, on_outcome=shown.append)
+    assert shown[0].message.endswith("the complete walk stored before is kept")
+    run_suite(suite_of([case]), tmp_path, crashed, resume=True)  # its start cleans leftovers
+    row = rows_by_key(tmp_path)[case.key]
+    assert (row["status"], row["acot"]) == ("solved", 0.3)
+    assert (tmp_path / row["walk_path"]).read_bytes() == b'{"first": 1}'
+    again = lambda case: CaseOutcome(case, "solved", "", 1.0, {"acot": 0.25, "verified": True},  # noqa: E731
+                                     {"walk.json": b'{"second": 2}'})
+    run_suite(suite_of([case]), tmp_path, Finishing(again), resume=True, rerun={case.key})
+    row = rows_by_key(tmp_path)[case.key]
+    assert row["acot"] == 0.25 and (tmp_path / row["walk_path"]).read_bytes() == b'{"second": 2}'
+
+
 def test_runs_started_within_one_second_get_distinct_ids(tmp_path: Path, monkeypatch) -> None:
     import gaitbench.run.runner as runner
 

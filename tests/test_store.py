@@ -22,7 +22,7 @@ from click.testing import CliRunner
 import gaitbench
 from gaitbench.cli.main import main
 from gaitbench.run.case import Case, PluginChoice
-from gaitbench.run.runner import CaseOutcome, case_row, run_suite
+from gaitbench.run.runner import CaseOutcome, case_row, failed_outcome, run_suite
 from gaitbench.run.store import DATABASE, ResultStore
 from gaitbench.run.store_files import CASE_MARKER
 from gaitbench.run.store_schema import StoreError
@@ -616,6 +616,20 @@ def test_merging_stores_gathers_cases_with_their_files_and_runs(tmp_path: Path) 
     assert replaced.code == 0 and "1 replaced" in replaced.output
     assert stored(tmp_path / "a")[cases[1].key] == source[cases[1].key]
     assert b'"store": "b"' in (tmp_path / "a" / source[cases[1].key]["walk_path"]).read_bytes()
+
+
+def test_replace_never_puts_a_failed_walk_over_a_complete_one(tmp_path: Path) -> None:
+    from gaitbench.run.merge import merge_store
+
+    case = fake_case(6)
+    run_suite(suite_of([case]), tmp_path / "a", Tagged("a"))
+    crashing = SimpleNamespace(name="crashing", jobs=1,
+                               run=lambda cases: (failed_outcome(case, "crashed", "worker died") for case in cases))
+    run_suite(suite_of([case], name="b"), tmp_path / "b", crashing)
+    with ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
+        summary = merge_store(into, source, replace=True)
+    assert summary.kept == [case.key] and not summary.replaced
+    assert stored(tmp_path / "a")[case.key]["status"] == "solved"
 
 
 def test_a_run_id_taken_by_another_run_is_renamed_when_merged(tmp_path: Path) -> None:

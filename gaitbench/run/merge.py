@@ -5,7 +5,8 @@ A case is known by its key (:attr:`gaitbench.run.case.Case.key`), whatever store
 same case in two stores is the same walk. Each copied case keeps its row whole (its provenance: the commit, the
 machine, the solver versions) and its files, and brings the run that computed it; a run id the destination already
 uses for another run is given a suffix, as :meth:`ResultStore.start_run` does. A case the destination already
-holds is left alone unless ``replace``; one that a live run there has claimed is always left to that run.
+holds is left alone unless ``replace``, and a complete walk there is never replaced by one that is not; one
+that a live run there has claimed is always left to that run.
 Checkpoints of walks in flight are not merged: a walk is resumed on the store that holds it
 (:mod:`gaitbench.checkpoint`).
 """
@@ -34,7 +35,7 @@ class MergeSummary:
     same: list[str] = field(default_factory=list)
     """Cases it already held exactly so."""
     kept: list[str] = field(default_factory=list)
-    """Cases it held otherwise and kept (no ``replace``)."""
+    """Cases it held otherwise and kept: without ``replace``, or where only the destination's walk is complete."""
     in_flight: list[str] = field(default_factory=list)
     """Cases a live run on the destination is solving now: left to it."""
     runs: list[str] = field(default_factory=list)
@@ -61,7 +62,7 @@ def merge_store(destination: ResultStore, source: ResultStore, replace: bool = F
             chosen.append(row)
         elif _without_run(held[key]) == _without_run(row):
             summary.same.append(key)
-        elif replace:
+        elif replace and (row["status"] == "solved" or held[key]["status"] != "solved"):
             summary.replaced.append(key)
             chosen.append(row)
         else:

@@ -357,7 +357,9 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                     if outcome.store_error:
                         raise StoreError(f"{store.directory}: the run stopped: {outcome.store_error}")
                     row = case_row(outcome, suite.name, run_id)
-                    store.record_case(row, outcome.files)
+                    if not store.record_case(row, outcome.files):
+                        outcome = replace(outcome, message=f"{outcome.message}; the complete walk stored before is "
+                                                           "kept")
                     if outcome.case.checkpoint and not resumable(outcome, row):
                         _remove_checkpoint(store, outcome.case)  # its walk is recorded whole
                     solved += not outcome.failed

@@ -374,26 +374,35 @@ class ResultStore:
         with self._failing("read the cases"):
             return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
 
-    def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> None:
+    def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> bool:
         """Write one finished case: its files first (renamed into place as one directory), then its row, which
-        releases the case's claim.
+        releases the case's claim. True when written.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
         :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``, and the
         store's marker (:mod:`gaitbench.run.store_files`); an earlier directory of the case is replaced only if it
         has the marker or the case's row names it.
+
+        A row whose walk is not ``solved`` never replaces a stored ``solved`` one: a complete walk run again (``--retry-
+        unverified``, ``--retry-inconsistent``, a merge) that crashed, timed out or stopped early keeps the walk it
+        was run again for. Then only the claim is released, and False is returned.
         """
         key = row["case_key"]
         with self._failing(f"record case {key}"):
+            stored = self._db.execute("SELECT status, walk_path, tracking_path FROM cases WHERE case_key = ?",
+                                      (key,)).fetchone()
+            if stored is not None and stored[0] == "solved" and row.get("status") != "solved":
+                with self._write(f"release case {key}"):
+                    self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
+                return False
             if files:
-                stored = self._db.execute("SELECT walk_path, tracking_path FROM cases WHERE case_key = ?",
-                                          (key,)).fetchone()
                 named = stored is not None and any(
-                    isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored)
+                    isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored[1:])
                 place_case(self.directory, key, files, 0o777 & ~umask(), replaceable=named)
         with self._write(f"record case {key}"):
             self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
             self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
+        return True
 
     def update_cases(self, updates: Mapping[str, Mapping[str, Any]]) -> None:
         """Set some columns of stored cases, ``{case_key: {column: value}}``, in one transaction: what a later
