@@ -38,8 +38,10 @@ FAST_TESTS = (
     "tests/test_objective_agreement.py",
     "tests/test_walk.py",
     "tests/test_mechanics.py",
+    "tests/test_walk_verification.py",
 )
-"""The tests of verification, objectives, quadrature, walks and the role-order mechanics."""
+"""The tests of verification (of steps and of whole walks), objectives, quadrature, walks and the role-order
+mechanics."""
 LIST_CHECK = "tests/test_benchmarks.py::test_every_mutant_of_the_mutation_check_names_text_that_occurs_once_in_its_file"
 """The test that :data:`MUTANTS` follows the code: it fails on any mutated tree, so it is no test of a mutant."""
 
@@ -64,8 +66,10 @@ MUTANTS = (
            "resim_max_error=float(errors.max())", "resim_max_error=float(errors[-1])"),
     Mutant("verify: one-sided objective check", "gaitbench/solve/verify.py",
            "bool(abs(gap) <= OBJECTIVE_RTOL)", "bool(gap <= OBJECTIVE_RTOL)"),
-    Mutant("verify: objective gap floor without 1/RTOL", "gaitbench/solve/verify.py",
-           "max(abs(cot), OBJECTIVE_ATOL / OBJECTIVE_RTOL)", "max(abs(cot), OBJECTIVE_ATOL)"),
+    Mutant("verify: objective gap floor without 1/RTOL", "gaitbench/acceptance.py",
+           "max(abs(cot), walk_cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)", "max(abs(cot), walk_cot, OBJECTIVE_ATOL)"),
+    Mutant("walk verification: gap against the step's COT alone", "gaitbench/solve/walk_verification.py",
+           "step_failures(check, limits, walk_cot)", "step_failures(check, limits)"),
     Mutant("verify: fine grid reads controls at the nodes", "gaitbench/solve/verify.py",
            "np.clip(np.linspace(0.0, 1.0, samples_per_interval + 1), INSIDE, 1.0 - INSIDE)",
            "np.linspace(0.0, 1.0, samples_per_interval + 1)"),
@@ -178,7 +182,8 @@ def copy_tree(destination: Path) -> None:
 
 def run_tests(tree: Path, tests: list[str]) -> tuple[str, str]:
     """(status, first failed test) of ``pytest -x`` on ``tests`` in ``tree``: passed, failed or timed out."""
-    command = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "--deselect", LIST_CHECK, *tests]
+    command = [sys.executable, "-m", "pytest", "-x", "-q", "-rfE", "-p", "no:cacheprovider", "--deselect", LIST_CHECK,
+               *tests]  # -rfE: the summary names the failed test, whatever the configuration's -r says
     environment = {**_environment(), "PYTHONPATH": str(tree)}
     try:
         run = subprocess.run(command, cwd=tree, env=environment, capture_output=True, text=True, timeout=TIMEOUT_S)

@@ -691,3 +691,17 @@ def test_runs_show_narrows_the_table_by_experiment_method_and_status(tmp_path: P
     assert [line.split()[1:3] for line in shown("--method", "D&C-DC")] == [["7", "D&C-DC"]]
     assert len(shown("--method", "D&C-DC", "--method", "OP-DC", "--experiment", "forward")) == 2
     assert shown("--experiment", "stairs") == [] and shown("--status", "incomplete") == []
+
+
+def test_a_verdict_is_not_written_onto_a_walk_recorded_again_since_it_was_read(tmp_path: Path) -> None:
+    """``gaitbench verify --store`` reads the rows, verifies for a long while, then writes: a case a run recorded
+    again meanwhile keeps its new row."""
+    cases = [fake_case(6), fake_case(7)]
+    run_suite(suite_of(cases), tmp_path, Tagged("first"))
+    read = {key: row["finished_at"] for key, row in stored(tmp_path).items()}
+    with ResultStore.create(tmp_path) as store:
+        store.update_cases({cases[1].key: {"finished_at": "2099-01-01T00:00:00+00:00"}})  # recorded again
+        changed = store.update_cases({case.key: {"verified": True} for case in cases}, read)
+    assert changed == [cases[1].key]
+    rows = stored(tmp_path)
+    assert rows[cases[0].key]["verified"] == 1 and rows[cases[1].key]["verified"] is None

@@ -47,7 +47,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     console, failed, updates = Console(), 0, {}
     packed = store is not None and is_pack(store)
     if store is not None:
-        stored, absent = _stored_walks(store)
+        stored, absent, finished_at = _stored_walks(store)
         targets += stored
         if absent:  # a pack of the report's trajectories: one line for all it cannot verify
             note = (f"{count(len(absent), 'stored walk')} not verified: {absent[0]}"
@@ -79,18 +79,23 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
 
         try:
             with ResultStore.create(store) as writable:
-                writable.update_cases(updates)
+                changed = writable.update_cases(updates, finished_at)
         except StoreError as exc:
             raise click.ClickException(str(exc)) from None
+        if changed:
+            note = (f"{count(len(changed), 'walk')} recorded again while being verified, verdicts not recorded "
+                    f"({', '.join(changed)}): run `gaitbench verify --store {store}` again")
+            click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
         if not as_json:
-            console.print(f"recorded the verdicts of {count(len(updates), 'walk')} in {store}")
+            console.print(f"recorded the verdicts of {count(len(updates) - len(changed), 'walk')} in {store}")
     if failed:
         ctx.exit(1)
 
 
-def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str]]:
-    """The store's walks as (walk file, case key, stored ACOT), and why each walk whose trajectories its pack left
-    out cannot be verified (:func:`gaitbench.run.pack_format.left_out`)."""
+def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str], dict[str, str | None]]:
+    """The store's walks as (walk file, case key, stored ACOT), why each walk whose trajectories its pack left
+    out cannot be verified (:func:`gaitbench.run.pack_format.left_out`), and when each case was recorded (so that a
+    verdict is not written onto a walk recorded again meanwhile)."""
     from gaitbench.run.pack_format import left_out
     from gaitbench.run.store import ResultStore, StoreError
 
@@ -107,7 +112,7 @@ def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str]]:
             absent.append(missing)
         else:
             walks.append((directory / row["walk_path"], row["case_key"], row.get("acot")))
-    return walks, absent
+    return walks, absent, {row["case_key"]: row.get("finished_at") for row in rows}
 
 
 def _report(path: Path, walk, stored_acot: Any, acot_is_claimed: bool = False) -> dict[str, Any]:

@@ -404,18 +404,29 @@ class ResultStore:
             self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
         return True
 
-    def update_cases(self, updates: Mapping[str, Mapping[str, Any]]) -> None:
+    def update_cases(self, updates: Mapping[str, Mapping[str, Any]],
+                     finished_at: Mapping[str, str | None] | None = None) -> list[str]:
         """Set some columns of stored cases, ``{case_key: {column: value}}``, in one transaction: what a later
-        check of stored walks adds to their rows (``gaitbench verify --store``)."""
+        check of stored walks adds to their rows (``gaitbench verify --store``). With ``finished_at`` (each case's
+        ``finished_at`` when it was read), a case recorded again since then is left alone: its verdict was of the
+        walk before. Returns the keys left alone."""
         for values in updates.values():
             unknown = set(values) - set(CASE_COLUMNS)
             if unknown:
                 raise ValueError(f"unknown case columns {sorted(unknown)}")
+        changed = []
         with self._write("update cases"):
             for case_key, values in updates.items():
                 assignments = ", ".join(f"{column} = ?" for column in values)
-                self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?",
-                                 (*(_encode(column, value) for column, value in values.items()), case_key))
+                values = tuple(_encode(column, value) for column, value in values.items())
+                if finished_at is None:
+                    self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?", (*values, case_key))
+                    continue
+                done = self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ? AND finished_at IS ?",
+                                        (*values, case_key, finished_at.get(case_key)))
+                if not done.rowcount:
+                    changed.append(case_key)
+        return changed
 
     def cases(self, run_id: str | None = None) -> list[dict[str, Any]]:
         """Stored case rows (JSON columns decoded, every column of :data:`CASE_COLUMNS` present, null where a
