@@ -204,6 +204,9 @@ class WalkProblem:
     local processes."""
     experiment_options: dict = field(default_factory=dict, compare=False, repr=False)
     """The options the experiment was built with, recorded in the walk (:attr:`WalkResult.experiment_options`)."""
+    transcription_options: dict = field(default_factory=dict, compare=False, repr=False)
+    """The options the transcription was built with, recorded in the walk
+    (:attr:`WalkResult.transcription_options`)."""
     strategy_options: dict = field(default_factory=dict, compare=False, repr=False)
     """The options the strategy was built with, recorded in the walk (:attr:`WalkResult.strategy_options`)."""
 

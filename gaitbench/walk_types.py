@@ -161,6 +161,9 @@ class WalkResult:
     the problem's by :func:`gaitbench.solve.walk_verification.solve_verified`."""
     strategy_options: dict = field(default_factory=dict)
     """The options the strategy was built with (set like :attr:`experiment_options`)."""
+    transcription_options: dict = field(default_factory=dict)
+    """The options the transcription was built with (its quadrature, say: set like :attr:`experiment_options`), so
+    that a saved walk is verified by the NLP it was solved with."""
     objective_options: dict = field(default_factory=dict)
     """The objective's options (its dataclass fields), so that a saved walk is verified under the same objective."""
     verification: WalkVerification | None = field(default=None, repr=False)
@@ -206,6 +209,7 @@ class WalkResult:
             "experiment": self.experiment,
             "experiment_options": self.experiment_options,
             "transcription": self.transcription,
+            "transcription_options": self.transcription_options,
             "solver": self.solver,
             "strategy": self.strategy,
             "strategy_options": self.strategy_options,

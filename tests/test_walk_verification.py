@@ -215,6 +215,45 @@ def test_a_claimed_acot_that_a_walk_file_before_format_2_stores_as_its_acot_is_a
     assert _report(tmp_path, walk, 0.3, acot_is_claimed=True)["notes"] == []
 
 
+def test_a_walk_file_is_verified_by_the_nlp_it_was_solved_with_its_transcriptions_options_included(tmp_path,
+                                                                                                       forward):
+    """A walk solved under Hermite–Simpson's Simpson rule: re-verified from its file, its objective gap is the
+    solve's, not that of the default Boole rule; a file written before the options were recorded takes them from
+    the store's row."""
+    from gaitbench.run.case import PluginChoice
+    from gaitbench.solve.walk_assembly import assemble_walk
+    from gaitbench.solve.walk_file import read_walk, write_walk
+    from gaitbench.solve.walk_verification import reverify
+
+    strategy, problem = assemble_walk(
+        REGISTRY.create, 10, experiment=PluginChoice("forward"),
+        transcription=PluginChoice("hermite-simpson", {"quadrature": "simpson"}), solver=PluginChoice("ipopt"),
+        strategy=PluginChoice("one-phase"), objective=PluginChoice("net-power"), steps=1)
+    walk = solve_verified(strategy, problem)
+    path = write_walk(walk, tmp_path / "walk.json")
+    assert json.loads(path.read_text())["transcription_options"] == {"quadrature": "simpson"}
+    solved_gap = walk.steps[0].verification.objective_gap
+    again = reverify(read_walk(path), REGISTRY)
+    assert again.steps[0].verification.objective_gap == pytest.approx(solved_gap, abs=1e-9)
+    old = read_walk(path)
+    del old.header["transcription_options"]
+    assert reverify(old, REGISTRY).steps[0].verification.objective_gap != pytest.approx(solved_gap, abs=1e-4)
+
+    from gaitbench.run.store import ResultStore, case_file
+
+    header = json.loads(path.read_text())
+    del header["transcription_options"]
+    files = {"walk.json": json.dumps(header).encode(), "walk.npz": (path.parent / "walk.npz").read_bytes()}
+    with ResultStore.create(tmp_path / "store") as results:
+        results.start_run({"run_id": "r1", "suite": "s", "started_at": "2026-01-01T00:00:00+00:00"})
+        results.record_case({"case_key": "a" * 16, "run_id": "r1", "experiment": "forward", "N": 10,
+                             "status": "solved", "acot": walk.acot, "walk_path": case_file("a" * 16, "walk.json"),
+                             "transcription_options": {"quadrature": "simpson"}}, files)
+    result = CliRunner().invoke(main, ["verify", "--store", str(tmp_path / "store"), "--json"])
+    report = json.loads(result.output.splitlines()[0])
+    assert report["steps"][0]["objective_gap"] == pytest.approx(solved_gap, abs=1e-9)
+
+
 def test_gaitbench_verify_refuses_what_is_not_a_walk_file(tmp_path):
     (tmp_path / "x.json").write_text("{}")
     result = CliRunner().invoke(main, ["verify", str(tmp_path / "x.json")])

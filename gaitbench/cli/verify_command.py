@@ -43,7 +43,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
 
     if not walks and store is None:
         raise click.UsageError("name walk files, or a store with --store")
-    targets: list[tuple[Path, str | None, float | None]] = [(path, None, None) for path in walks]
+    targets: list[tuple[Path, str | None, float | None, dict]] = [(path, None, None, {}) for path in walks]
     console, failed, updates = Console(), 0, {}
     packed = store is not None and is_pack(store)
     if store is not None:
@@ -53,9 +53,11 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             note = (f"{count(len(absent), 'stored walk')} not verified: {absent[0]}"
                     + (f" (and {len(absent) - 1} more like it)" if len(absent) > 1 else ""))
             click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
-    for path, case_key, stored_acot in targets:
+    for path, case_key, stored_acot, transcription_options in targets:
         try:
             walk_file = read_walk(path)
+            # a walk file that predates its transcription's options: the store's row has them
+            walk_file.header.setdefault("transcription_options", transcription_options)
             walk = reverify(walk_file, ctx.obj.registry)
         except WalkFileError as exc:
             if case_key is None:
@@ -92,10 +94,10 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
         ctx.exit(1)
 
 
-def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str], dict[str, str | None]]:
-    """The store's walks as (walk file, case key, stored ACOT), why each walk whose trajectories its pack left
-    out cannot be verified (:func:`gaitbench.run.pack_format.left_out`), and when each case was recorded (so that a
-    verdict is not written onto a walk recorded again meanwhile)."""
+def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any, dict]], list[str], dict[str, str | None]]:
+    """The store's walks as (walk file, case key, stored ACOT, transcription options), why each walk whose
+    trajectories its pack left out cannot be verified (:func:`gaitbench.run.pack_format.left_out`), and when each
+    case was recorded (so that a verdict is not written onto a walk recorded again meanwhile)."""
     from gaitbench.run.pack_format import left_out
     from gaitbench.run.store import ResultStore, StoreError
 
@@ -111,7 +113,8 @@ def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any]], list[str], 
         if missing:
             absent.append(missing)
         else:
-            walks.append((directory / row["walk_path"], row["case_key"], row.get("acot")))
+            walks.append((directory / row["walk_path"], row["case_key"], row.get("acot"),
+                          dict(row.get("transcription_options") or {})))
     return walks, absent, {row["case_key"]: row.get("finished_at") for row in rows}
 
 

@@ -29,7 +29,8 @@ def assemble_walk(build: Build, n_nodes: int, *, experiment: Choice, transcripti
                   problem_options: Mapping[str, Any] | None = None, **walk: Any) -> tuple[Strategy, WalkProblem]:
     """The strategy and the problem it is to solve: the plugins built in the order above, ``problem_options``
     over the experiment's defaults (its limits), and ``walk`` the problem's other fields (``builds``, ``deadline``,
-    ``checkpoint``, ``cores``). The problem keeps the experiment's and the strategy's options for the walk's record.
+    ``checkpoint``, ``cores``). The problem keeps the experiment's, the transcription's and the strategy's options
+    for the walk's record.
     Raises :class:`gaitbench.contracts.StepsOutOfRange` when ``steps`` does not fit the experiment."""
     built_experiment = build("experiment", experiment.name, **experiment.options)
     built_transcription = build("transcription", transcription.name, **transcription.options)
@@ -39,5 +40,6 @@ def assemble_walk(build: Build, n_nodes: int, *, experiment: Choice, transcripti
     options = replace(ProblemOptions(limits=built_experiment.limits), **(problem_options or {}))
     problem = WalkProblem(built_experiment, built_transcription, built_solver, n_nodes, steps=steps, options=options,
                           objective=built_objective, experiment_options=dict(experiment.options),
-                          strategy_options=dict(strategy.options), **walk)
+                          transcription_options=dict(transcription.options), strategy_options=dict(strategy.options),
+                          **walk)
     return built_strategy, problem

@@ -128,6 +128,11 @@ class WalkFile:
     def strategy_options(self) -> dict[str, Any]:
         return dict(self.header.get("strategy_options") or {})
 
+    @property
+    def transcription_options(self) -> dict[str, Any]:
+        """The transcription's options (empty in files that predate their record: the suite's row has them)."""
+        return dict(self.header.get("transcription_options") or {})
+
     def step_arrays(self, index: int, name: str = "") -> dict[str, np.ndarray]:
         """Step ``index``'s arrays (``name``: ``polished`` for its polished trajectory's), keyed ``t``, ``q``, ...;
         empty when the file holds none."""
@@ -186,7 +191,7 @@ class WalkFile:
         data = self.header
         experiment = self.experiment(registry)
         options = self.problem_options(experiment)
-        transcription = registry.create("transcription", data["transcription"])
+        transcription = registry.create("transcription", data["transcription"], **self.transcription_options)
         n_nodes, phase = int(data["N"]), data["phase"]
         built = transcription.build(StepStructure(phase, n_nodes, options))
         model = BipedModel(experiment.robot, 4 if phase == "second" else 2)
@@ -198,7 +203,8 @@ class WalkFile:
                           problem_options=asdict(options),
                           objective=data.get("objective", WalkResult.objective),
                           objective_options=dict(data.get("objective_options") or {}),
-                          experiment_options=self.experiment_options, strategy_options=self.strategy_options)
+                          experiment_options=self.experiment_options, strategy_options=self.strategy_options,
+                          transcription_options=self.transcription_options)
         npz = self.path.parent / data["trajectories"]
         for step in data["steps"]:
             arrays = self.step_arrays(int(step["index"]))

@@ -68,6 +68,7 @@ def solve_verified(strategy: Strategy, problem: WalkProblem,
     and the suite runner both run."""
     walk = strategy.solve(problem, on_step=on_step)
     walk.experiment_options, walk.strategy_options = dict(problem.experiment_options), dict(problem.strategy_options)
+    walk.transcription_options = dict(problem.transcription_options)
     walk.verification = verify_walk(walk, problem.start_state(), problem.experiment.robot)
     walk.thesis_reading_acot = thesis_reading_of(walk, problem.experiment)
     return walk
@@ -99,7 +100,7 @@ def reverify(walk_file: WalkFile, registry: PluginRegistry | None = None) -> Wal
     registry = registry or load_registry()
     walk, experiment = walk_file.result(registry)
     options = walk_file.problem_options(experiment)
-    transcription = registry.create("transcription", walk.transcription)
+    transcription = registry.create("transcription", walk.transcription, **walk.transcription_options)
     built = transcription.build(StepStructure(walk.phase, walk.N, options, walk_file.objective(registry)))
     model = BipedModel(experiment.robot, 4 if walk.phase == "second" else 2)
     for step in walk.steps:
