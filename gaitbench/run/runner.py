@@ -237,8 +237,9 @@ def walk_metrics(walk) -> dict[str, Any]:
     """ACOT, per-step COT and its bounds, effort, verification and why the walk stopped, as store columns.
 
     The figures are those of the motions the walk reports (:attr:`StepOutcome.verified`; for decrease and conquer
-    its polished or complete steps), never a patchwork's claim, which goes to ``claimed_acot``; effort counts every
-    solve."""
+    its polished or complete steps), never a patchwork's claim, which goes to ``claimed_acot``. Effort
+    (``iterations``, ``solve_time_s``) is that of the solve that produced each step's reported trajectory
+    (:attr:`StepOutcome.solver_result`); the case's ``wall_time_s`` counts every solve."""
     motions = [step.verified for step in walk.steps]
     cots = [motion.verification.cot if motion.verification else None for motion in motions]
     solved = [cot for cot in cots if cot is not None]

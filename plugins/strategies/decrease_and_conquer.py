@@ -19,9 +19,10 @@ The synthesized (and completed) trajectories are node-wise patchworks of differe
 they are not motions of the robot: a patchwork's end state is not where the robot would be. The thesis chains its
 steps through the patchworks; this strategy keeps each patchwork as the step's claim (its COT is the claimed COT,
 reported beside the verified one, labelled "patchwork, not a motion") and walks on from the motion it reports, so
-that the walk's steps join into one motion of the robot (:mod:`gaitbench.solve.walk_verification`). Where the
-polish fails after its remedies, the complete Second Phase solution, the same problem from the same state solved
-from the First-Phase seed, stands in for it (``details["polished"]["stand_in"]``). With ``rescue`` (the default), a
+that the walk's steps join into one motion of the robot (:mod:`gaitbench.solve.walk_verification`). The complete
+Second Phase solution (the same problem from the same state, solved from the First-Phase seed) stands in for the
+polish where the polish fails after its remedies, fails verification while the complete solution passes, or costs
+more (:func:`reported_motion`; ``details["polished"]["stand_in"]``). With ``rescue`` (the default), a
 First Phase that still fails is solved on coarser grids from the same state, and the N-node First Phase started from
 that solution (:func:`~gaitbench.solve.rescue.coarse_grid_rescue`); a walk that completes without it is the same
 walk with it.
