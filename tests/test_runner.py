@@ -654,3 +654,24 @@ def test_run_reports_plugins_that_failed_to_load_and_records_them(tmp_path: Path
         (run,) = opened.runs()
     assert run["provenance"]["plugin_problems"] == [
         {"source": str(broken.resolve()), "message": "import failed: ImportError: half-finished plugin"}]
+
+
+def test_a_plugin_value_the_store_cannot_hold_costs_its_case_not_the_store(tmp_path: Path) -> None:
+    """A strategy's figure of the wrong type (a word for the ACOT, a list for its details) would make every later
+    opening of the store refuse it; it is refused before it is written and the case is an error row that says why."""
+    bad, good = walk_case(8), walk_case(10)
+
+    class Odd:
+        name, jobs = "odd", 1
+
+        def run(self, cases):
+            for case in cases:
+                metrics = {"acot": "n/a"} if case.key == bad.key else {"acot": 0.3}
+                yield CaseOutcome(case, "solved", "", 1.0, metrics, {"walk.json": b"{}"})
+
+    run_suite(suite_of([bad, good]), tmp_path, Odd())
+    rows = rows_by_key(tmp_path)  # the store opens
+    assert rows[good.key]["status"] == "solved"
+    assert rows[bad.key]["status"] == "error"
+    assert "its result cannot be stored" in rows[bad.key]["message"] and "column acot" in rows[bad.key]["message"]
+    assert not isinstance(rows[bad.key]["walk_path"], str)  # no file of a walk whose row was refused

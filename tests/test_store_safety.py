@@ -112,10 +112,12 @@ def test_a_case_directory_is_replaced_only_with_the_marker_or_a_row_naming_it(tm
     blocking.mkdir()
     (blocking / "mine.txt").write_text("not gaitbench's")
     with ResultStore.create(tmp_path) as store:
-        store.record_case({"case_key": legacy.key, "run_id": None, "status": "solved"}, {"walk.json": b"[]"})
+        store.record_case({"case_key": legacy.key, "run_id": None, "status": "solved", "experiment": "forward"},
+                          {"walk.json": b"[]"})
         assert (tmp_path / "cases" / legacy.key / "walk.json").read_bytes() == b"[]"
         with pytest.raises(StoreError, match=f"cannot record case {foreign.key} .*was not written by this store"):
-            store.record_case({"case_key": foreign.key, "run_id": None, "status": "solved"}, {"walk.json": b"{}"})
+            store.record_case({"case_key": foreign.key, "run_id": None, "status": "solved", "experiment": "forward"},
+                              {"walk.json": b"{}"})
     assert (blocking / "mine.txt").read_text() == "not gaitbench's"
 
 

@@ -116,7 +116,8 @@ def test_a_version_1_store_opens_gains_every_column_and_keeps_its_rows(version_1
 
     with ResultStore.create(version_1_store) as store:  # and a resumed run writes today's rows into it
         assert store.runs()[0]["run_id"] == OLD_RUN["run_id"]
-        store.record_case({"case_key": "new", "run_id": "r2", "status": "solved", "objective": "actuator-work",
+        store.record_case({"case_key": "new", "run_id": "r2", "status": "solved", "experiment": "forward",
+                           "objective": "actuator-work",
                            "retries": 1, "back_ups": 1, "stop_cause": "complete"})
         rows = {row["case_key"]: row for row in store.cases()}
     assert len(rows) == len(OLD_CASES) + 1

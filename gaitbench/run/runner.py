@@ -25,7 +25,7 @@ from gaitbench.cores import IdleCores
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
 from gaitbench.run.provenance import code_fingerprint, provenance
-from gaitbench.run.store import LOCK_TIMEOUT_S, ResultStore, case_file, checkpoint_file
+from gaitbench.run.store import LOCK_TIMEOUT_S, BadRow, ResultStore, case_file, checkpoint_file
 from gaitbench.run.store_schema import StoreError
 
 if TYPE_CHECKING:
@@ -358,7 +358,14 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                     if outcome.store_error:
                         raise StoreError(f"{store.directory}: the run stopped: {outcome.store_error}")
                     row = case_row(outcome, suite.name, run_id)
-                    if not store.record_case(row, outcome.files):
+                    try:
+                        recorded = store.record_case(row, outcome.files)
+                    except BadRow as exc:  # the case's failure, not the store's
+                        outcome = failed_outcome(outcome.case, "error", f"its result cannot be stored: {exc}",
+                                                 outcome.wall_time_s)
+                        row = case_row(outcome, suite.name, run_id)
+                        recorded = store.record_case(row, outcome.files)
+                    if not recorded:
                         outcome = replace(outcome, message=f"{outcome.message}; the complete walk stored before is "
                                                            "kept")
                     if outcome.case.checkpoint and not resumable(outcome, row):

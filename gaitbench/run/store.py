@@ -38,7 +38,7 @@ from typing import Any
 
 from gaitbench.run.pack_cache import unpacked
 from gaitbench.run.pack_format import is_pack, refusal
-from gaitbench.run.store_check import check_store, decode_json
+from gaitbench.run.store_check import check_store, decode_json, row_problem
 from gaitbench.run.store_files import (
     CASES_DIR,
     CHECKPOINTS_DIR,
@@ -68,8 +68,8 @@ from gaitbench.run.store_schema import (
 
 DATABASE = "results.sqlite"
 
-__all__ = ["CASES_DIR", "CHECKPOINTS_DIR", "DATABASE", "ResultStore", "case_file", "checkpoint_file", "load_results",
-           "run_alive"]
+__all__ = ["CASES_DIR", "CHECKPOINTS_DIR", "DATABASE", "BadRow", "ResultStore", "case_file", "checkpoint_file",
+           "load_results", "run_alive"]
 
 LOCK_TIMEOUT_S = 60.0
 """How long a store operation waits for SQLite's write lock, which another run holds for milliseconds at a time,
@@ -95,6 +95,10 @@ def _closed_on_failure(connection: sqlite3.Connection) -> Iterator[None]:
     except BaseException:
         connection.close()
         raise
+
+
+class BadRow(ValueError):
+    """A case row with a value its column cannot hold (a plugin's result of the wrong type): refused unwritten."""
 
 
 class ResultStore:
@@ -386,8 +390,15 @@ class ResultStore:
         A row whose walk is not ``solved`` never replaces a stored ``solved`` one: a complete walk run again (``--retry-
         unverified``, ``--retry-inconsistent``, a merge) that crashed, timed out or stopped early keeps the walk it
         was run again for. Then only the claim is released, and False is returned.
+
+        A row the store's checks would refuse when it is next opened (a word where a number belongs, JSON of the
+        wrong shape: :func:`~gaitbench.run.store_check.row_problem`) raises :class:`BadRow` before anything is
+        written.
         """
         key = row["case_key"]
+        problem = row_problem("cases", dict(zip(CASE_COLUMNS, _row(row, CASE_COLUMNS), strict=True)), self.database)
+        if problem:
+            raise BadRow(f"case {key}: {problem}")
         with self._failing(f"record case {key}"):
             stored = self._db.execute("SELECT status, walk_path, tracking_path FROM cases WHERE case_key = ?",
                                       (key,)).fetchone()

@@ -88,6 +88,28 @@ def check_types(connection: sqlite3.Connection, database: Path, tables: set[str]
                                  "store was changed outside gaitbench)")
 
 
+def row_problem(table: str, values: dict[str, Any], database: Path) -> str | None:
+    """Why a row about to be written (``values``, encoded for SQLite) would make :func:`check_types` or
+    :func:`check_json` refuse the store the next time it is opened, or None: a plugin's bad value is refused before
+    it is written, so that it costs its own case, not the whole store."""
+    for column, declared in TABLES[table].items():
+        value, kind = values.get(column), declared.split()[0]
+        if value is None:
+            if column in NOT_NULL[table]:
+                return f"column {column}: expected {_WHAT[kind]}, found null"
+            continue
+        fits = {"INTEGER": isinstance(value, int) or (isinstance(value, float) and value.is_integer()),
+                "REAL": isinstance(value, (int, float)), "TEXT": isinstance(value, str)}[kind]
+        if not fits:
+            return f"column {column}: expected {_WHAT[kind]}, found {_shown(value)}"
+        if column in JSON_COLUMNS:
+            try:
+                _json_value(value, database, table, values.get(KEYS[table]), column)
+            except StoreError as error:
+                return f"column {column}: {str(error).rpartition(f'column {column}: ')[2]}"
+    return None
+
+
 def check_json(connection: sqlite3.Connection, database: Path, tables: set[str]) -> None:
     """:class:`StoreError` naming the first JSON cell that does not parse or is not its column's value, in every
     table gaitbench reads (so a damaged store is refused before a run starts on it, not when it is read)."""
