@@ -188,3 +188,36 @@ def test_a_corrupt_or_foreign_pack_is_one_line_naming_it(store, tmp_path):
             assert result.exit_code == 1, result.output
             assert result.output.startswith(f"Error: {pack}: {expected}"), result.output
             assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output
+
+
+def test_a_case_recorded_while_the_store_is_packed_is_in_the_pack_whole_or_not_at_all(store, tmp_path, monkeypatch):
+    """The pack's cases are those of the database's copy: one a run records after the store was opened for packing
+    but before the copy is in it with its files (not a row without them); one recorded after the copy is not in
+    it at all."""
+    import shutil
+
+    import gaitbench.run.store_pack as store_pack
+
+    writing = tmp_path / "writing"
+    shutil.copytree(store, writing)
+    copy = store_pack._database_copy
+
+    def record(key: str) -> None:
+        with ResultStore.create(writing) as running:
+            running.record_case({"case_key": key, "run_id": None, "status": "solved", "experiment": "forward",
+                                 "walk_path": f"cases/{key}/walk.json"}, {"walk.json": b"{}"})
+
+    def record_around_the_copy(database):
+        record("b" * 16)
+        taken = copy(database)
+        record("c" * 16)
+        return taken
+
+    monkeypatch.setattr(store_pack, "_database_copy", record_around_the_copy)
+    summary = pack_store(writing, tmp_path / "p.tar.xz")
+    assert summary.cases == 3
+    with tarfile.open(summary.path) as tar:
+        names = tar.getnames()
+    assert any(name.endswith(f"cases/{'b' * 16}/walk.json") for name in names)
+    assert not any("c" * 16 in name for name in names)
+    assert len(_rows(writing)) == 4  # the store itself has both

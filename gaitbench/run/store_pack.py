@@ -1,7 +1,8 @@
 """Packing a results store into one deterministic ``.tar.xz``, and unpacking one into a store that can be written.
 
 :func:`pack_store` writes what :mod:`gaitbench.run.pack_format` describes: a consistent copy of the database
-(SQLite's online backup, so a store a run is writing packs as it was at one moment; the claims of live runs
+(SQLite's online backup, so a store a run is writing packs as it was at one moment, with the files of the cases
+that moment held; the claims of live runs
 dropped, since no run travels with the pack; one file in rollback-journal mode, compacted), each case's files
 (every trajectory, or only those the caller names), and the manifest. Walks in flight (``checkpoints/``) are left
 out: a pack is read, never resumed.
@@ -67,14 +68,16 @@ def pack_store(store_dir: str | Path, out: str | Path, trajectories: str = "all"
         raise ValueError(f"trajectories must be one of {', '.join(TRAJECTORY_MODES)}, not {trajectories!r}")
     out = Path(out)
     with ResultStore.open(store_dir) as store:
-        directory, keys = store.directory, sorted(row["case_key"] for row in store.cases())
-        database = store.database
+        directory, database = store.directory, store.database
     name = directory.resolve().name  # a pack's own name in the cache (gaitbench.run.pack_cache)
     source = read_manifest(directory)
     if trajectories == "all" and source is not None and source.get("trajectories") != "all":
         raise PackError(f"{store_dir}: holds only some trajectories (a pack made with --trajectories "
                         f"{source.get('trajectories')}); pack the whole store for --trajectories all")
-    files = {DATABASE: _database_copy(database)}
+    # the cases are those of the database's copy: a case a run records after it has no row in the pack, and every row
+    # in it has its files (they are in place before the row is committed)
+    copied, keys = _database_copy(database)
+    files = {DATABASE: copied}
     kept = left_out = 0
     for key in keys:
         case_dir = directory / CASES_DIR / key
@@ -98,8 +101,9 @@ def pack_store(store_dir: str | Path, out: str | Path, trajectories: str = "all"
     return PackSummary(out, cases, len(files), kept, left_out, out.stat().st_size)
 
 
-def _database_copy(database: Path) -> bytes:
-    """The database as one file: an online backup (what the WAL holds merged in), claims dropped, compacted."""
+def _database_copy(database: Path) -> tuple[bytes, list[str]]:
+    """The database as one file: an online backup (what the WAL holds merged in), claims dropped, compacted; and
+    the case keys it holds, sorted."""
     with tempfile.TemporaryDirectory(prefix="gaitbench-pack-") as scratch:
         copy_path = Path(scratch) / DATABASE
         try:
@@ -110,9 +114,10 @@ def _database_copy(database: Path) -> bytes:
                     copy.execute("DELETE FROM claims")
                 copy.execute("PRAGMA journal_mode = DELETE")
                 copy.execute("VACUUM")
+                keys = sorted(key for (key,) in copy.execute("SELECT case_key FROM cases"))
         except sqlite3.Error as error:
             raise PackError(f"{database}: cannot copy the results store ({failure_cause(error)})") from None
-        return copy_path.read_bytes()
+        return copy_path.read_bytes(), keys
 
 
 def _read(path: Path) -> bytes:
