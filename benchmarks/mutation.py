@@ -170,7 +170,9 @@ class Outcome:
 
 def copy_tree(destination: Path) -> None:
     """The repository's files (tracked, and new ones not ignored), as they are in the working tree, copied under
-    ``destination``."""
+    ``destination``, with ``gaitbench_plugins`` (the package name of ``plugins/``) linked to the copy's
+    ``plugins/``: on ``PYTHONPATH`` it comes before the editable install's finder, which would import the working
+    tree's plugins, unmutated."""
     listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
                             capture_output=True, check=True).stdout
     for name in filter(None, listed.decode().split("\0")):
@@ -178,6 +180,18 @@ def copy_tree(destination: Path) -> None:
         if source.is_file():
             (destination / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(source, destination / name)
+    (destination / "gaitbench_plugins").symlink_to("plugins", target_is_directory=True)
+
+
+def check_imports_the_copy(tree: Path) -> None:
+    """Refuse to run when the tests would import gaitbench or its plugins from anywhere but the copy: a mutant
+    there would survive whatever the tests do."""
+    for package in ("gaitbench", "gaitbench_plugins"):
+        found = subprocess.run([sys.executable, "-c", f"import {package}; print({package}.__path__[0])"], cwd=tree,
+                               env={**_environment(), "PYTHONPATH": str(tree)}, capture_output=True, text=True)
+        if not found.stdout.strip().startswith(str(tree)):
+            raise SystemExit(f"Error: the tests would import {package} from {found.stdout.strip() or found.stderr}, "
+                             f"not from the mutated copy {tree}")
 
 
 def run_tests(tree: Path, tests: list[str]) -> tuple[str, str]:
@@ -217,6 +231,7 @@ def run(mutants: list[Mutant], tests: list[str]) -> list[Outcome]:
     with tempfile.TemporaryDirectory(prefix="gaitbench-mutation-") as directory:
         tree = Path(directory)
         copy_tree(tree)
+        check_imports_the_copy(tree)
         for mutant in mutants:  # every mutant's text must be found before anything runs
             (tree / mutant.path).write_text(apply(tree, mutant))
         status, failed = run_tests(tree, tests)
