@@ -632,6 +632,30 @@ def test_replace_never_puts_a_failed_walk_over_a_complete_one(tmp_path: Path) ->
     assert stored(tmp_path / "a")[case.key]["status"] == "solved"
 
 
+def test_a_case_a_run_records_while_the_merge_goes_on_keeps_the_runs_result(tmp_path: Path, monkeypatch) -> None:
+    """The merge reads the destination once, then copies case by case: a case a run records in the destination
+    meanwhile is not overwritten by the source's (even with ``replace``), and the summary says it was left."""
+    import gaitbench.run.merge as merge
+
+    case = fake_case(6)
+    crashing = SimpleNamespace(name="crashing", jobs=1,
+                               run=lambda cases: (failed_outcome(case, "crashed", "worker died") for case in cases))
+    run_suite(suite_of([case]), tmp_path / "a", crashing)
+    run_suite(suite_of([case], name="b"), tmp_path / "b", Tagged("b"))
+    read_files = merge.case_files
+
+    def files_while_a_run_records(directory, key):
+        run_suite(suite_of([case]), tmp_path / "a", Tagged("a"), resume=True, retry_failed=True)
+        return read_files(directory, key)
+
+    monkeypatch.setattr(merge, "case_files", files_while_a_run_records)
+    with ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
+        summary = merge.merge_store(into, source, replace=True)
+    assert summary.in_flight == [case.key] and not summary.replaced
+    row = stored(tmp_path / "a")[case.key]
+    assert row["status"] == "solved" and b'"store": "a"' in (tmp_path / "a" / row["walk_path"]).read_bytes()
+
+
 def test_a_run_id_taken_by_another_run_is_renamed_when_merged(tmp_path: Path) -> None:
     from gaitbench.run.merge import merge_store
 

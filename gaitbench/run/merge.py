@@ -37,7 +37,7 @@ class MergeSummary:
     kept: list[str] = field(default_factory=list)
     """Cases it held otherwise and kept: without ``replace``, or where only the destination's walk is complete."""
     in_flight: list[str] = field(default_factory=list)
-    """Cases a live run on the destination is solving now: left to it."""
+    """Cases a live run on the destination is solving now, or recorded while the merge went on: left to it."""
     runs: list[str] = field(default_factory=list)
 
 
@@ -77,8 +77,19 @@ def merge_store(destination: ResultStore, source: ResultStore, replace: bool = F
         except OSError as error:
             raise StoreError(f"{source.directory}: cannot read the files of case {row['case_key']} "
                              f"({error.strerror or error}); the cases before it were merged") from None
-        destination.record_case(row | {"run_id": run_id}, files)
+        before = held.get(row["case_key"])
+        if not destination.record_case(row | {"run_id": run_id}, files,
+                                       unchanged=(before is not None, before["finished_at"] if before else None)):
+            _moved(summary, row["case_key"], summary.in_flight)  # a run recorded or claimed it meanwhile
     return summary
+
+
+def _moved(summary: MergeSummary, key: str, to: list[str]) -> None:
+    """Move ``key`` from the copied or replaced cases of ``summary`` to ``to``."""
+    for done in (summary.copied, summary.replaced):
+        if key in done:
+            done.remove(key)
+    to.append(key)
 
 
 def _without_run(row: dict) -> dict:

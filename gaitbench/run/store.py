@@ -378,9 +378,14 @@ class ResultStore:
         with self._failing("read the cases"):
             return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
 
-    def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None) -> bool:
+    def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None,
+                    unchanged: tuple[bool, str | None] | None = None) -> bool:
         """Write one finished case: its files first (renamed into place as one directory), then its row, which
         releases the case's claim. True when written.
+
+        ``unchanged`` (whether the case had a row when the caller read the store, and that row's ``finished_at``)
+        makes the write conditional, for a writer that holds no claim (:mod:`gaitbench.run.merge`): a case whose row
+        changed since, or that a live run has claimed, is left alone, and False is returned.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
         :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``, and the
@@ -400,15 +405,19 @@ class ResultStore:
         if problem:
             raise BadRow(f"case {key}: {problem}")
         with self._failing(f"record case {key}"):
-            stored = self._db.execute("SELECT status, walk_path, tracking_path FROM cases WHERE case_key = ?",
-                                      (key,)).fetchone()
+            stored = self._db.execute("SELECT status, walk_path, tracking_path, finished_at FROM cases "
+                                      "WHERE case_key = ?", (key,)).fetchone()
+            if unchanged is not None and (
+                    (stored is not None, stored[3] if stored is not None else None) != tuple(unchanged)
+                    or key in self.live_claims()):
+                return False
             if stored is not None and stored[0] == "solved" and row.get("status") != "solved":
                 with self._write(f"release case {key}"):
                     self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
                 return False
             if files:
                 named = stored is not None and any(
-                    isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored[1:])
+                    isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored[1:3])
                 place_case(self.directory, key, files, 0o777 & ~umask(), replaceable=named)
         with self._write(f"record case {key}"):
             self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
