@@ -722,7 +722,7 @@ def test_a_verdict_is_not_written_onto_a_walk_recorded_again_since_it_was_read(t
     again meanwhile keeps its new row."""
     cases = [fake_case(6), fake_case(7)]
     run_suite(suite_of(cases), tmp_path, Tagged("first"))
-    read = {key: row["finished_at"] for key, row in stored(tmp_path).items()}
+    read = {key: (row["run_id"], row["finished_at"]) for key, row in stored(tmp_path).items()}
     with ResultStore.create(tmp_path) as store:
         store.update_cases({cases[1].key: {"finished_at": "2099-01-01T00:00:00+00:00"}})  # recorded again
         changed = store.update_cases({case.key: {"verified": True} for case in cases}, read)

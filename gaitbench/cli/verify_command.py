@@ -47,7 +47,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     console, failed, updates = Console(), 0, {}
     packed = store is not None and is_pack(store)
     if store is not None:
-        stored, absent, finished_at = _stored_walks(store)
+        stored, absent, recorded = _stored_walks(store)
         targets += stored
         if absent:  # a pack of the report's trajectories: one line for all it cannot verify
             note = (f"{count(len(absent), 'stored walk')} not verified: {absent[0]}"
@@ -81,7 +81,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
 
         try:
             with ResultStore.create(store) as writable:
-                changed = writable.update_cases(updates, finished_at)
+                changed = writable.update_cases(updates, recorded)
         except StoreError as exc:
             raise click.ClickException(str(exc)) from None
         if changed:
@@ -94,10 +94,11 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
         ctx.exit(1)
 
 
-def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any, dict]], list[str], dict[str, str | None]]:
+def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any, dict]], list[str],
+                                        dict[str, tuple[str | None, str | None]]]:
     """The store's walks as (walk file, case key, stored ACOT, transcription options), why each walk whose
     trajectories its pack left out cannot be verified (:func:`gaitbench.run.pack_format.left_out`), and when each
-    case was recorded (so that a verdict is not written onto a walk recorded again meanwhile)."""
+    case was recorded, by which run (so that a verdict is not written onto a walk recorded again meanwhile)."""
     from gaitbench.run.pack_format import left_out
     from gaitbench.run.store import ResultStore, StoreError
 
@@ -115,7 +116,7 @@ def _stored_walks(store: Path) -> tuple[list[tuple[Path, str, Any, dict]], list[
         else:
             walks.append((directory / row["walk_path"], row["case_key"], row.get("acot"),
                           dict(row.get("transcription_options") or {})))
-    return walks, absent, {row["case_key"]: row.get("finished_at") for row in rows}
+    return walks, absent, {row["case_key"]: (row.get("run_id"), row.get("finished_at")) for row in rows}
 
 
 def _report(path: Path, walk, stored_acot: Any, acot_is_claimed: bool = False) -> dict[str, Any]:

@@ -79,7 +79,7 @@ def merge_store(destination: ResultStore, source: ResultStore, replace: bool = F
                              f"({error.strerror or error}); the cases before it were merged") from None
         before = held.get(row["case_key"])
         if not destination.record_case(row | {"run_id": run_id}, files,
-                                       unchanged=(before is not None, before["finished_at"] if before else None)):
+                                       unchanged=(before["run_id"], before["finished_at"]) if before else (None, None)):
             _moved(summary, row["case_key"], summary.in_flight)  # a run recorded or claimed it meanwhile
     return summary
 

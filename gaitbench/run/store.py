@@ -379,13 +379,14 @@ class ResultStore:
             return {key: run_id or "" for key, run_id in self._db.execute("SELECT case_key, run_id FROM cases")}
 
     def record_case(self, row: dict[str, Any], files: dict[str, bytes] | None = None,
-                    unchanged: tuple[bool, str | None] | None = None) -> bool:
+                    unchanged: tuple[str, str | None] | None = None) -> bool:
         """Write one finished case: its files first (renamed into place as one directory), then its row, which
         releases the case's claim. True when written.
 
-        ``unchanged`` (whether the case had a row when the caller read the store, and that row's ``finished_at``)
-        makes the write conditional, for a writer that holds no claim (:mod:`gaitbench.run.merge`): a case whose row
-        changed since, or that a live run has claimed, is left alone, and False is returned.
+        ``unchanged`` (the ``run_id`` and ``finished_at`` of the case's row when the caller read the store; None for
+        each where it had no row) makes the write conditional, for a writer that holds no claim
+        (:mod:`gaitbench.run.merge`): a case whose row changed since, or that a live run has claimed, is left alone,
+        and False is returned.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
         :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``, and the
@@ -405,10 +406,10 @@ class ResultStore:
         if problem:
             raise BadRow(f"case {key}: {problem}")
         with self._failing(f"record case {key}"):
-            stored = self._db.execute("SELECT status, walk_path, tracking_path, finished_at FROM cases "
+            stored = self._db.execute("SELECT status, walk_path, tracking_path, run_id, finished_at FROM cases "
                                       "WHERE case_key = ?", (key,)).fetchone()
             if unchanged is not None and (
-                    (stored is not None, stored[3] if stored is not None else None) != tuple(unchanged)
+                    (tuple(stored[3:]) if stored is not None else (None, None)) != tuple(unchanged)
                     or key in self.live_claims()):
                 return False
             if stored is not None and stored[0] == "solved" and row.get("status") != "solved":
@@ -425,11 +426,11 @@ class ResultStore:
         return True
 
     def update_cases(self, updates: Mapping[str, Mapping[str, Any]],
-                     finished_at: Mapping[str, str | None] | None = None) -> list[str]:
+                     unchanged: Mapping[str, tuple[str | None, str | None]] | None = None) -> list[str]:
         """Set some columns of stored cases, ``{case_key: {column: value}}``, in one transaction: what a later
-        check of stored walks adds to their rows (``gaitbench verify --store``). With ``finished_at`` (each case's
-        ``finished_at`` when it was read), a case recorded again since then is left alone: its verdict was of the
-        walk before. Returns the keys left alone."""
+        check of stored walks adds to their rows (``gaitbench verify --store``). With ``unchanged`` (each case's
+        ``run_id`` and ``finished_at`` when it was read), a case recorded again since then is left alone: its
+        verdict was of the walk before. Returns the keys left alone."""
         for values in updates.values():
             unknown = set(values) - set(CASE_COLUMNS)
             if unknown:
@@ -439,11 +440,12 @@ class ResultStore:
             for case_key, values in updates.items():
                 assignments = ", ".join(f"{column} = ?" for column in values)
                 values = tuple(_encode(column, value) for column, value in values.items())
-                if finished_at is None:
+                if unchanged is None:
                     self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?", (*values, case_key))
                     continue
-                done = self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ? AND finished_at IS ?",
-                                        (*values, case_key, finished_at.get(case_key)))
+                run_id, finished_at = unchanged.get(case_key, (None, None))
+                done = self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ? AND run_id IS ? "
+                                        "AND finished_at IS ?", (*values, case_key, run_id, finished_at))
                 if not done.rowcount:
                     changed.append(case_key)
         return changed
