@@ -443,6 +443,8 @@ def test_the_run_summary_fits_80_columns(long_labelled_store):
         (["track", "{tmp}/missing.json"], 2, "no such result file"),
         (["track", "{tmp}/walk.json", "--observer", "nope"], 2, None),  # the file is checked first
         (["run", "{tmp}/bad.toml"], 2, "[sweep]: missing required key"),
+        (["run", "{tmp}/bad.toml", "--retry-unverified"], 2, "--retry-unverified runs stored cases again, so it "
+                                                             "needs --resume"),
         (["report", "{tmp}/nowhere", "--reporter", "nope"], 2, "unknown reporter 'nope'"),
         (["nocommand"], 2, "No such command"),
         (["runs", "show", "{tmp}/nowhere"], 1, "no results store here"),

@@ -89,6 +89,12 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
             [*map(str, state.plugin_dirs), *filter(None, [os.environ.get(PLUGINS_DIR_ENV)])])
     if store_dir is not None and is_pack(store_dir):
         raise click.ClickException(refusal(store_dir))
+    retries = [flag for flag, given in (("--retry-failed", retry_failed), ("--retry-incomplete", retry_incomplete),
+                                        ("--retry-unverified", retry_unverified),
+                                        ("--retry-inconsistent", retry_inconsistent)) if given]
+    if retries and not resume:
+        raise click.UsageError(f"{retries[0]} runs stored cases again, so it needs --resume (the store holding "
+                               "them); add --resume")
     try:
         suite = load_suite(suite_file)
     except SuiteError as error:  # the file names itself, the key and what was expected
