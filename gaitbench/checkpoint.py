@@ -9,7 +9,8 @@ was not stopped.
 The steps are kept as they are in memory (their solver results, verifications and trajectories with their
 interpolants), pickled with cloudpickle because the interpolants are closures. A checkpoint is resumed only by the
 same case under the same code (the runner's :func:`gaitbench.run.provenance.code_fingerprint`, a hash of the source
-that solves walks); any other is discarded, so a walk never mixes steps solved by different code.
+that solves walks, and :func:`~gaitbench.run.provenance.plugins_fingerprint`, the plugins from outside gaitbench);
+any other is discarded, so a walk never mixes steps solved by different code.
 
 Beside each checkpoint, a small JSON file (:func:`progress_file`) says how many of the walk's steps are saved, for a
 progress display that should not unpickle whole walks to show it.

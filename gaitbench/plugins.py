@@ -201,7 +201,7 @@ def load_registry(plugin_dirs: Sequence[str | Path] = (), *, use_entry_points: b
     problems: list[PluginProblem] = []
     if use_entry_points:
         _load_entry_points(manager, problems)
-    for path in _plugin_files(plugin_dirs):
+    for path in plugin_files(plugin_dirs):
         source = str(path)
         try:
             module = _import_file(path)
@@ -232,7 +232,7 @@ def _load_entry_points(manager: pluggy.PluginManager, problems: list[PluginProbl
         _register(manager, plugin, entry_point.value, problems)
 
 
-def _plugin_files(plugin_dirs: Sequence[str | Path]) -> list[Path]:
+def plugin_files(plugin_dirs: Sequence[str | Path]) -> list[Path]:
     """Every ``*.py`` file of the given directories, then of ``$GAITBENCH_PLUGINS_DIR``, each once."""
     env_dirs = [entry for entry in os.environ.get(PLUGINS_DIR_ENV, "").split(os.pathsep) if entry]
     directories = [(Path(d), "") for d in plugin_dirs]

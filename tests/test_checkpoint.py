@@ -248,3 +248,20 @@ def test_the_code_fingerprint_follows_the_source_that_solves_walks_not_the_commi
     assert changed != before
     (plugins / "sub" / "module.py").rename(plugins / "moved.py")  # the same text elsewhere is other code
     assert fingerprint() not in (before, changed)
+
+
+def test_a_suites_own_plugins_are_part_of_what_a_walk_resumes_under(tmp_path, monkeypatch) -> None:
+    """A plugin from a suite's plugin directory (or $GAITBENCH_PLUGINS_DIR) solves walks as much as a built-in one:
+    editing it sends a stopped walk back to step 1; without such plugins the checkpoint's fingerprint is as it was."""
+    from gaitbench.plugins import PLUGINS_DIR_ENV
+    from gaitbench.run.provenance import plugins_fingerprint
+
+    monkeypatch.delenv(PLUGINS_DIR_ENV, raising=False)
+    assert plugins_fingerprint([]) is None  # only the built-in plugins here
+    (tmp_path / "mine.py").write_text("STEP = 1\n")
+    before = plugins_fingerprint([tmp_path])
+    assert before is not None and plugins_fingerprint([tmp_path]) == before
+    (tmp_path / "mine.py").write_text("STEP = 2\n")
+    assert plugins_fingerprint([tmp_path]) != before
+    monkeypatch.setenv(PLUGINS_DIR_ENV, str(tmp_path))
+    assert plugins_fingerprint([]) == plugins_fingerprint([tmp_path])

@@ -12,8 +12,9 @@ import os
 import platform
 import socket
 import subprocess
+from collections.abc import Sequence
 from functools import lru_cache
-from importlib.metadata import PackageNotFoundError, version
+from importlib.metadata import PackageNotFoundError, entry_points, version
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +109,26 @@ def code_fingerprint() -> str:
             digest.update(path.relative_to(root.parent).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     digest.update(repr(sorted(package_versions().items())).encode())
     return f"{__version__} {digest.hexdigest()[:16]}"
+
+
+def plugins_fingerprint(plugin_dirs: Sequence[str | Path]) -> str | None:
+    """The plugins from outside gaitbench that a walk may be solved by, for its checkpoint beside
+    :func:`code_fingerprint`: a hash of the plugin files of ``plugin_dirs`` and ``$GAITBENCH_PLUGINS_DIR``
+    (:func:`gaitbench.plugins.plugin_files`, as they are on disk) and of the name and version of every distribution
+    other than gaitbench with entry points in its group; None when there are none, so a walk without such plugins
+    keeps the fingerprint it had before they were counted."""
+    from gaitbench.plugins import ENTRY_POINT_GROUP, plugin_files
+
+    digest, counted = hashlib.sha256(), False
+    for path in plugin_files(plugin_dirs):
+        digest.update(path.as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        counted = True
+    distributions = {(point.dist.name, point.dist.version) for point in entry_points(group=ENTRY_POINT_GROUP)
+                     if point.dist is not None and point.dist.name != "gaitbench"}
+    for name, release in sorted(distributions):
+        digest.update(f"{name}=={release}\0".encode())
+        counted = True
+    return digest.hexdigest()[:16] if counted else None
 
 
 FRONT_ENDS = frozenset({"cli", "reports", "reporters"})

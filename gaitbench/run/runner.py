@@ -24,7 +24,7 @@ from gaitbench.checkpoint import CheckpointError, WalkCheckpoint, remove_checkpo
 from gaitbench.cores import IdleCores
 from gaitbench.problem.build_cache import BuildCache
 from gaitbench.run.case import Case
-from gaitbench.run.provenance import code_fingerprint, provenance
+from gaitbench.run.provenance import code_fingerprint, plugins_fingerprint, provenance
 from gaitbench.run.store import LOCK_TIMEOUT_S, BadRow, ResultStore, case_file, checkpoint_file
 from gaitbench.run.store_schema import StoreError
 
@@ -110,8 +110,9 @@ def case_walk(case: Case, **walk: Any) -> tuple[Strategy, WalkProblem]:
 def _solve_walk(case: Case, builds: BuildCache, fan_out: FanOut | None = None) -> WalkResult:
     from gaitbench.solve.walk_verification import solve_verified
 
-    checkpoint = None if case.checkpoint is None else \
-        WalkCheckpoint.open(case.checkpoint, {"case": case.key, "code": code_fingerprint()})
+    plugins = plugins_fingerprint(case.plugin_dirs)
+    checkpoint = None if case.checkpoint is None else WalkCheckpoint.open(
+        case.checkpoint, {"case": case.key, "code": code_fingerprint(), **({"plugins": plugins} if plugins else {})})
     earlier = checkpoint.elapsed_s if checkpoint is not None else 0.0  # the time limit is the whole walk's
     deadline = None if case.time_limit_s is None else time.monotonic() + case.time_limit_s - earlier
     cores = IdleCores.machine()
