@@ -201,7 +201,7 @@ def test_a_run_records_its_suite_s_absolute_path_so_runs_list_finds_it_from_anyw
 
 
 def test_run_alive_ends_with_the_process_or_the_heartbeat() -> None:
-    from gaitbench.run.store import run_alive
+    from gaitbench.run.liveness import run_alive
 
     here = socket.gethostname()
     now = "2999-01-01T00:00:00+00:00"  # a heartbeat from the future is fresh
@@ -674,14 +674,14 @@ def test_a_case_being_solved_on_the_destination_is_left_to_its_run(tmp_path: Pat
 
     run_suite(suite_of([fake_case(6)]), tmp_path / "b", Tagged("b"))
     other_run(tmp_path / "a", "live", claims=(fake_case(6).key,), pid=os.getpid())
-    from gaitbench.run import store as store_module
+    from gaitbench.run import liveness
 
-    store_module._OPEN_RUNS.add("live")  # this process's run, so alive
+    liveness.OPEN_RUNS.add("live")  # this process's run, so alive
     try:
         with ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
             summary = merge_store(into, source)
     finally:
-        store_module._OPEN_RUNS.discard("live")
+        liveness.OPEN_RUNS.discard("live")
     assert summary.in_flight == [fake_case(6).key] and not summary.copied
     assert stored(tmp_path / "a") == {}
 

@@ -35,7 +35,8 @@ def runs_list(stores: tuple[Path, ...], wide: bool) -> None:
     suite is named under it where it does not), and its finish time is given to the minute in UTC. --wide shows
     the executor, the jobs and the finish time as recorded as well.
     """
-    from gaitbench.run.store import DATABASE, ResultStore, run_alive
+    from gaitbench.run.liveness import run_alive
+    from gaitbench.run.store import DATABASE, ResultStore
     from gaitbench.run.store_schema import StoreError
 
     paths = list(stores) or sorted(path.parent for path in Path("results").glob(f"*/{DATABASE}"))

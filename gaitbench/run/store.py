@@ -12,30 +12,29 @@ committed, so a row always has its files. A worker saves each step its walk solv
 crash or kill loses at most the steps in flight: the next run of the case goes on after the saved ones.
 
 Several runs may share a store: each claims a case (table ``claims``, under SQLite's write lock) right before it
-starts it, so no case is solved twice, and a claim dies with its run (same host: the process is gone; any host:
-no heartbeat for :data:`LEASE_S`). Readers open the store read-only and never change it; a file that is not a
-gaitbench store, or a directory with other files and no store, is refused before anything is written to it. The
-tables, their schema version and the migrations of older stores are in :mod:`gaitbench.run.store_schema`; what is
-checked of what they hold, in :mod:`gaitbench.run.store_check`; which files the store writes and may delete, in
-:mod:`gaitbench.run.store_files`. Every SQLite or file-system error of a store operation is a :class:`StoreError`
-naming the store, the operation and the cause (a full disk, a file-size limit, a lock held past the lock timeout).
+starts it, so no case is solved twice, and a claim dies with its run (:mod:`gaitbench.run.liveness`: same host, the
+process is gone; any host, no heartbeat for a lease). Readers open the store read-only and never change it; a file
+that is not a gaitbench store, or a directory with other files and no store, is refused before anything is written
+to it. The tables, their schema version, the migrations of older stores and how values are encoded for them are in
+:mod:`gaitbench.run.store_schema`; what is checked of what they hold, in :mod:`gaitbench.run.store_check`; which
+files the store writes and may delete, in :mod:`gaitbench.run.store_files`. Every SQLite or file-system error of a
+store operation is a :class:`StoreError` naming the store, the operation and the cause (a full disk, a file-size
+limit, a lock held past the lock timeout).
 """
 
 from __future__ import annotations
 
-import json
-import math
 import os
 import socket
 import sqlite3
 import threading
-import time
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager, suppress
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from gaitbench.run.liveness import OPEN_RUNS, run_alive
 from gaitbench.run.pack_cache import unpacked
 from gaitbench.run.pack_format import is_pack, refusal
 from gaitbench.run.store_check import check_store, decode_json, row_problem
@@ -47,21 +46,22 @@ from gaitbench.run.store_files import (
     holds_anything,
     leftovers,
     place_case,
-    process_alive,
     remove,
     umask,
 )
 from gaitbench.run.store_schema import (
     CASE_COLUMNS,
     CLAIM_COLUMNS,
-    JSON_COLUMNS,
     RETRYABLE_STATUSES,
     RUN_COLUMNS,
     StoreError,
     check_file,
     check_schema,
     connect_read_only,
+    encode_value,
+    encoded_row,
     failure_cause,
+    insert_statement,
     upgrade,
     upgrade_file,
 )
@@ -69,7 +69,7 @@ from gaitbench.run.store_schema import (
 DATABASE = "results.sqlite"
 
 __all__ = ["CASES_DIR", "CHECKPOINTS_DIR", "DATABASE", "BadRow", "ResultStore", "case_file", "checkpoint_file",
-           "load_results", "run_alive"]
+           "load_results"]
 
 LOCK_TIMEOUT_S = 60.0
 """How long a store operation waits for SQLite's write lock, which another run holds for milliseconds at a time,
@@ -78,12 +78,6 @@ before it fails (``gaitbench run --lock-timeout``)."""
 HEARTBEAT_S = 20.0
 """How often a running suite refreshes its run's ``heartbeat_at``."""
 
-LEASE_S = 120.0
-"""A run whose heartbeat is older than this is dead, and its claims free: the only test for a run on another host
-(on the same host a run is also dead as soon as its process is)."""
-
-_OPEN_RUNS: set[str] = set()
-"""Runs this process is running: a claim whose pid is this process's is alive only if its run is one of them."""
 
 
 @contextmanager
@@ -235,7 +229,7 @@ class ResultStore:
         when that is taken (runs of one suite started within a second), chosen under the write lock so that
         concurrent runs never collide."""
         run_id = self._add_run(run | {"host": socket.gethostname(), "pid": os.getpid(), "heartbeat_at": _now()})
-        _OPEN_RUNS.add(run_id)
+        OPEN_RUNS.add(run_id)
         return run_id
 
     def add_run(self, run: Mapping[str, Any]) -> str:
@@ -250,12 +244,13 @@ class ResultStore:
                 "SELECT run_id FROM runs WHERE run_id = ? OR run_id LIKE ?", (stem, f"{stem}-%"))}
             run_id = next(run_id for run_id in (stem, *(f"{stem}-{n}" for n in range(2, len(taken) + 2)))
                           if run_id not in taken)
-            self._db.execute(_insert("runs", RUN_COLUMNS, replace=False), _row(run | {"run_id": run_id}, RUN_COLUMNS))
+            self._db.execute(insert_statement("runs", RUN_COLUMNS, replace=False),
+                             encoded_row(run | {"run_id": run_id}, RUN_COLUMNS))
         return run_id
 
     def finish_run(self, run_id: str, finished_at: str | None) -> None:
         """End a run: its claims go, and ``finished_at`` is set (left null for a run that was stopped)."""
-        _OPEN_RUNS.discard(run_id)
+        OPEN_RUNS.discard(run_id)
         with self._write(f"end run {run_id}"):
             self._db.execute("DELETE FROM claims WHERE run_id = ?", (run_id,))
             if finished_at is not None:
@@ -264,7 +259,7 @@ class ResultStore:
     def forget_run(self, run_id: str) -> None:
         """End ``run_id`` in this process without writing (the store failed): its row stays unfinished, and its
         claims are dead at once here and with this process elsewhere (:func:`run_alive`)."""
-        _OPEN_RUNS.discard(run_id)
+        OPEN_RUNS.discard(run_id)
 
     @contextmanager
     def heartbeat(self, run_id: str) -> Iterator[None]:
@@ -325,8 +320,8 @@ class ResultStore:
             stored = self._db.execute("SELECT run_id FROM cases WHERE case_key = ?", (case_key,)).fetchone()
             if (None if stored is None else stored[0] or "") != expected:
                 return "done"
-            self._db.execute(_insert("claims", CLAIM_COLUMNS, replace=True),
-                             _row({"case_key": case_key, "run_id": run_id, "claimed_at": _now()}, CLAIM_COLUMNS))
+            self._db.execute(insert_statement("claims", CLAIM_COLUMNS, replace=True),
+                             encoded_row({"case_key": case_key, "run_id": run_id, "claimed_at": _now()}, CLAIM_COLUMNS))
         return "claimed"
 
     def clean_leftovers(self, run_id: str) -> list[str]:
@@ -402,7 +397,8 @@ class ResultStore:
         written.
         """
         key = row["case_key"]
-        problem = row_problem("cases", dict(zip(CASE_COLUMNS, _row(row, CASE_COLUMNS), strict=True)), self.database)
+        values = encoded_row(row, CASE_COLUMNS)
+        problem = row_problem("cases", dict(zip(CASE_COLUMNS, values, strict=True)), self.database)
         if problem:
             raise BadRow(f"case {key}: {problem}")
         with self._failing(f"record case {key}"):
@@ -421,7 +417,7 @@ class ResultStore:
                     isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored[1:3])
                 place_case(self.directory, key, files, 0o777 & ~umask(), replaceable=named)
         with self._write(f"record case {key}"):
-            self._db.execute(_insert("cases", CASE_COLUMNS, replace=True), _row(row, CASE_COLUMNS))
+            self._db.execute(insert_statement("cases", CASE_COLUMNS, replace=True), values)
             self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
         return True
 
@@ -439,7 +435,7 @@ class ResultStore:
         with self._write("update cases"):
             for case_key, values in updates.items():
                 assignments = ", ".join(f"{column} = ?" for column in values)
-                values = tuple(_encode(column, value) for column, value in values.items())
+                values = tuple(encode_value(column, value) for column, value in values.items())
                 if unchanged is None:
                     self._db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?", (*values, case_key))
                     continue
@@ -481,57 +477,6 @@ def load_results(path: str | Path):
     with ResultStore.open(path) as store:
         rows = store.cases()
     return pd.DataFrame(rows, columns=list(CASE_COLUMNS))
-
-
-def _insert(table: str, columns: dict[str, str], replace: bool) -> str:
-    verb = "INSERT OR REPLACE" if replace else "INSERT"
-    return f"{verb} INTO {table} ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})"
-
-
-def _row(values: dict[str, Any], columns: dict[str, str]) -> tuple:
-    unknown = set(values) - set(columns)
-    if unknown:
-        raise ValueError(f"unknown store columns: {', '.join(sorted(unknown))}")
-    return tuple(_encode(column, values.get(column)) for column in columns)
-
-
-def _encode(column: str, value: Any) -> Any:
-    if column in JSON_COLUMNS:
-        return None if value is None else json.dumps(value, sort_keys=True, default=_json_default)
-    if hasattr(value, "item"):  # NumPy scalars (np.int64, np.bool_) that SQLite cannot bind
-        value = value.item()
-    if isinstance(value, bool):
-        return int(value)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def _json_default(value: Any) -> Any:
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    return str(value)
-
-
-def run_alive(run: Mapping[str, Any]) -> bool:
-    """Whether a ``runs`` row is a run still working: not finished, its process alive when it is on this host, and
-    its heartbeat younger than :data:`LEASE_S` (which also ends a run whose pid was reused or that hangs)."""
-    if run["finished_at"]:
-        return False
-    keys = run.keys()
-    host = run["host"] if "host" in keys else None
-    pid = run["pid"] if "pid" in keys else None
-    if host == socket.gethostname() and pid:
-        if pid == os.getpid():
-            return run["run_id"] in _OPEN_RUNS
-        if not process_alive(pid):
-            return False
-    beat = (run["heartbeat_at"] if "heartbeat_at" in keys else None) or run["started_at"]
-    try:
-        age = time.time() - datetime.fromisoformat(beat).timestamp()
-    except (TypeError, ValueError):
-        return False
-    return age < LEASE_S
 
 
 def _now() -> str:

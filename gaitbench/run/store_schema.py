@@ -12,9 +12,12 @@ that the oldest schema migrated equals a new store.
 from __future__ import annotations
 
 import errno
+import json
+import math
 import sqlite3
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from gaitbench._version import __version__
 
@@ -335,3 +338,38 @@ def _tables(connection: sqlite3.Connection) -> set[str]:
 
 def _columns(connection: sqlite3.Connection, table: str) -> set[str]:
     return {row[1] for row in connection.execute(f"PRAGMA table_info({table})")}
+
+
+def insert_statement(table: str, columns: dict[str, str], replace: bool) -> str:
+    """An INSERT (or INSERT OR REPLACE) of every column of ``columns`` into ``table``, with one parameter each."""
+    verb = "INSERT OR REPLACE" if replace else "INSERT"
+    return f"{verb} INTO {table} ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})"
+
+
+def encoded_row(values: dict[str, Any], columns: dict[str, str]) -> tuple:
+    """``values`` as the parameters of :func:`insert_statement`: every column, null where missing, each encoded;
+    ValueError for a key that is no column."""
+    unknown = set(values) - set(columns)
+    if unknown:
+        raise ValueError(f"unknown store columns: {', '.join(sorted(unknown))}")
+    return tuple(encode_value(column, values.get(column)) for column in columns)
+
+
+def encode_value(column: str, value: Any) -> Any:
+    """A value as SQLite stores it in ``column``: JSON text for the JSON columns, plain Python numbers for NumPy
+    scalars, 0/1 for booleans, null for a non-finite number."""
+    if column in JSON_COLUMNS:
+        return None if value is None else json.dumps(value, sort_keys=True, default=_json_default)
+    if hasattr(value, "item"):  # NumPy scalars (np.int64, np.bool_) that SQLite cannot bind
+        value = value.item()
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _json_default(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return str(value)
