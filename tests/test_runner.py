@@ -459,6 +459,21 @@ def test_a_cluster_of_daemonic_workers_is_refused_with_the_fix(tmp_path: Path) -
     assert _stored(tmp_path / "store") == 0
 
 
+def test_a_lost_dask_scheduler_is_one_line_saying_how_to_go_on(tmp_path: Path, monkeypatch) -> None:
+    """distributed raises OSError subclasses when it cannot reach its scheduler or loses it (CommClosedError, connect
+    timeouts): the user gets the scheduler, the cause and --resume, not a traceback."""
+    import distributed
+
+    class Unreachable:
+        def __init__(self, *args, **kwargs):
+            raise OSError("Timed out trying to connect to tcp://10.0.0.9:8786 after 30 s")
+
+    monkeypatch.setattr(distributed, "Client", Unreachable)
+    with pytest.raises(ExecutorError, match=r"lost the Dask scheduler at tcp://10.0.0.9:8786 \(OSError: Timed out.*"
+                                            r"run again with --resume"):
+        run_suite(suite_of([walk_case(8)]), tmp_path / "store", DaskExecutor("tcp://10.0.0.9:8786"))
+
+
 @pytest.fixture
 def dask_task_pool():
     """The Dask tasks' case pools, closed after the test (a Dask worker keeps them for its life)."""

@@ -162,6 +162,10 @@ class DaskExecutor:
                             fill()
                         finally:  # taking a case failed (the store): the finished outcome goes first
                             yield _dask_outcome(future, case)
+            except OSError as error:  # the scheduler unreachable or lost (distributed's CommClosedError, timeouts)
+                where = f"the Dask scheduler at {self.scheduler}" if self.scheduler else "the local Dask cluster"
+                raise ExecutorError(f"lost {where} ({type(error).__name__}: {error}); the cases finished before are "
+                                    "stored: run again with --resume once it is reachable") from None
             finally:
                 if cluster is not None:
                     cluster.close()
