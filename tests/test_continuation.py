@@ -75,3 +75,20 @@ def test_a_walk_no_finer_than_the_coarse_grid_starts_from_the_blended_guess(forw
     walk = OnePhase(start="continuation", coarse_nodes=24).solve(forward_problem)
     assert walk.complete
     assert all("start" not in step.details for step in walk.steps)
+
+
+def test_no_second_start_begins_after_the_walks_deadline(forward_problem):
+    """The blended start solved, the deadline passed: the step keeps the blended motion rather than starting a
+    coarse solve and a continued one that could each run a whole solve's limit past the case's time."""
+    from dataclasses import replace
+
+    from gaitbench.solve.continuation import best_start
+
+    class Untouched:
+        def seed(self, index, state):
+            raise AssertionError("a second start began after the deadline")
+
+    late = replace(forward_problem, deadline=0.0)  # time.monotonic() is past it
+    blended = _outcome(0.3)
+    chosen = best_start(late, 1, np.zeros(4), blended, Untouched())
+    assert chosen is blended and chosen.details["start"] == {"used": "blended", "why": "the walk's time ran out"}

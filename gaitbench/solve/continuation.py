@@ -70,7 +70,11 @@ def cheaper_motion(candidates: dict[str, StepOutcome], n_nodes: int) -> tuple[st
 def best_start(problem: WalkProblem, index: int, state: np.ndarray, blended: StepOutcome,
                continuation: GridContinuation) -> StepOutcome:
     """The cheaper verified motion of the blended start (``blended``, already solved) and the grid continuation,
-    with both candidates' summaries in ``details["start"]``."""
+    with both candidates' summaries in ``details["start"]``; the blended start alone once the walk's time has run
+    out (a second start begun after the deadline could run a whole solve's limit past it)."""
+    if problem.out_of_time:
+        blended.details = {**blended.details, "start": {"used": "blended", "why": "the walk's time ran out"}}
+        return blended
     seed, note = continuation.seed(index, state)
     if seed is None:
         blended.details = {**blended.details, "start": note}
