@@ -747,7 +747,13 @@ def test_each_thesis_cell_gets_a_verdict():
             "thesis_reading_acot": math.nan}
     assert tables.verdict(base | {"acot": 0.21, "difference_percent": 5.0}) == "reproduced"
     below = tables.verdict(base | {"published_below_bound": True, "bound_acot": 0.5, "acot": 0.6})
-    assert below.startswith("published figure below the physical bound 0.5000")
+    assert below == "published figure below the physical bound 0.5000: no walk can cost that little"
+    between = tables.verdict(base | {"published_below_bound": True, "bound_acot": 0.5, "acot": 0.6,
+                                     "published_below_thesis_push_off_bound": False,
+                                     "thesis_push_off_bound_acot": 0.15})
+    assert between == ("published figure below the physical bound 0.5000: no walk can cost that little with its "
+                       "push-off charged at the energy the push-off gives the robot; the thesis's push-off term "
+                       "(3.77) would allow down to 0.1500")
     missed = tables.verdict(base | {"acot": 0.30, "difference_percent": 50.0, "claimed_acot": 0.25,
                                     "thesis_reading_acot": 0.22})
     assert missed == ("not reproduced: our verified minimum 0.3000 (+50.0 %), claimed 0.2500, read the thesis's way "

@@ -219,10 +219,15 @@ REPRODUCED_WITHIN = 0.10
 
 def verdict(row: Mapping[str, Any]) -> str:
     """One cell of the thesis comparison in words: the published figure below the physical bound (no motion can
-    cost that little), reproduced (our verified minimum within :data:`REPRODUCED_WITHIN`), or not reproduced, with
-    what we measured instead."""
+    cost that little; said apart when only the thesis's own push-off term, which counts less than the push-off's
+    energy, would allow it), reproduced (our verified minimum within :data:`REPRODUCED_WITHIN`), or not reproduced,
+    with what we measured instead."""
     if row.get("published_below_bound") is True:
-        return f"published figure below the physical bound {row['bound_acot']:.4f}: no walk can cost that little"
+        below = f"published figure below the physical bound {row['bound_acot']:.4f}: no walk can cost that little"
+        if row.get("published_below_thesis_push_off_bound") is False:
+            return (f"{below} with its push-off charged at the energy the push-off gives the robot; the thesis's "
+                    f"push-off term (3.77) would allow down to {row['thesis_push_off_bound_acot']:.4f}")
+        return below
     ours = row.get("acot")
     if ours is None or not math.isfinite(ours):
         return "not reproduced: no verified walk of this method"
