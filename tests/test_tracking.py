@@ -88,6 +88,20 @@ def test_exact_model_with_ideal_observer_tracks_to_integrator_tolerance(referenc
         assert step["cot_tracked"] == pytest.approx(step["cot_ideal"], rel=1e-2)
 
 
+def test_a_downhill_walk_tracked_exactly_does_not_fall():
+    """The downward slope's first step takes the stance leg to −1.9 rad, beyond the thesis's printed box and with
+    the hip below the stance foot's level: tracked exactly, the robot must not count as fallen (the walk was solved
+    in the physical windows; the hip's height is measured from the step's chord)."""
+    experiment = REGISTRY.create("experiment", "downward-slope")
+    walk = OnePhase().solve(WalkProblem(experiment, HermiteSimpson(), Ipopt(), 12, steps=1))
+    assert walk.complete, walk.failure
+    downhill = Reference.from_walk(walk, experiment)
+    assert min(downhill.step(1).q_nodes[:, 0]) < experiment.limits.angle_bounds[0]  # beyond the printed box
+    data = run(downhill, "thesis", "ideal", "none", steps=1).as_dict()
+    assert not data["fell"], data.get("fall")
+    assert data["max_position_error"] < 1e-6
+
+
 def test_thesis_closed_form_contact_force_breaks_the_linearization(reference):
     """PFL with the thesis's (3.39) contact force leaves q̈_a = M11⁻¹ M_a v_a: the swing foot misses the ground."""
     result = run(reference, "pfl", "ideal", "none", controller_options={"contact_force": "thesis"}, steps=1)
