@@ -20,7 +20,10 @@ from gaitbench.model.energetics import cost_of_transport, hip_energy, hip_power
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import PluginRegistry, load_registry
+from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import StepTrajectory
+from gaitbench.solve.verify import fine_grid_running_cost, push_off_charge
 from gaitbench.solve.walk_file import load_walk
 from gaitbench.step_info import StepInfo
 from gaitbench.walk_types import WalkResult
@@ -90,8 +93,15 @@ class Reference:
         A walk whose steps were polished (decrease and conquer) is tracked along its verified trajectories, the
         polished ones, and compared with their COT, the verified one; a step's own (chosen, patchwork) trajectory
         is tracked only when the walk has no polished trajectory for every solved step (``polish = false``).
+
+        The tracked robot's cost is measured as net hip power plus the push-off's energy (the thesis's COT), so each
+        step's reference COT is too: the verified COT of a walk solved under that measure, else the same measure
+        taken of the step's trajectory (:func:`net_power_cot`), so that the tracked ACOT's increase is the
+        control's and not a change of cost definition.
         """
         model = BipedModel(experiment.robot, 4 if walk.phase == "second" else 2)
+        own_measure = walk.objective == NET_POWER.describe() and \
+            walk.problem_options.get("push_off_cost", ProblemOptions.push_off_cost) == "impulse"
         solved = []
         for outcome in walk.steps:
             if not outcome.solved:
@@ -105,7 +115,8 @@ class Reference:
             geometry = experiment.terrain.steps[outcome.index - 1]
             info = StepInfo(outcome.index, outcome.stance, geometry.theta, geometry.D,
                             float(trajectory.times[1] - trajectory.times[0]), trajectory.duration, start)
-            steps.append(_reference_step(trajectory, info, outcome.verification.cot))
+            cot = outcome.verification.cot if own_measure else net_power_cot(trajectory, info, experiment, model)
+            steps.append(_reference_step(trajectory, info, cot))
             start += trajectory.duration
         if not steps:
             raise TrackingInputError(f"the {walk.experiment} walk has no solved step to track ({walk.failure})")
@@ -144,6 +155,16 @@ class Reference:
         ref = self.step(info)
         q, dq, _ = ref.desired(info.duration)
         return self.model.push_off(self.full(info, q), self.full(info, dq), ref.push_off, info.stance)[0]
+
+
+def net_power_cot(trajectory: StepTrajectory, info: StepInfo, experiment: Experiment, model: BipedModel) -> float:
+    """The step's COT measured as tracking measures the tracked robot's: ∫|τ·q̇| dt on a fine grid of its
+    interpolant plus the kinetic energy its push-off adds, over M g D."""
+    robot = experiment.robot
+    energy = fine_grid_running_cost(trajectory, NET_POWER, role_robot_vector(robot, info.stance))
+    if model.dof == 4:
+        energy += push_off_charge(model, trajectory, "impulse")
+    return float(cost_of_transport(energy, robot.total_mass, info.chord, robot.g))
 
 
 def _reference_step(trajectory: StepTrajectory, info: StepInfo, cot: float) -> ReferenceStep:
