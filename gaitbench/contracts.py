@@ -289,9 +289,12 @@ class Observer(Protocol):
     size: int
     """The number of internal states, which the core integrates with the robot's."""
 
-    def reset(self, q: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray, step: StepInfo) -> np.ndarray:
-        """The internal state whose estimates are exactly ``velocity`` (q̇1, q̇2) and ``disturbance`` (d1, d2) at the
-        configuration ``q``, at the start of ``step`` (after each impact)."""
+    def reset(self, q: np.ndarray, dq: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray,
+              step: StepInfo) -> np.ndarray:
+        """The internal state whose estimates (:meth:`estimate` at ``q`` and ``dq``) are exactly ``velocity``
+        (q̇1, q̇2) and ``disturbance`` (d1, d2), at the start of ``step`` (after each impact). ``dq`` is the true
+        velocity after the impact, which only observers that model a velocity sensor may use (and must, when their
+        estimates read it)."""
 
     def estimate(self, state: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The estimates (q̂̇1, q̂̇2) and (d̂1, d̂2) from the internal ``state`` and the robot's ``q`` and ``dq``."""

@@ -68,7 +68,7 @@ def test_an_object_of_a_value_kind_must_be_an_instance():
 class _Drifted:
     """An observer gone wrong in every way the check catches: no ``size``, and two changed signatures."""
 
-    def reset(self, q, velocity, disturbance, step):  # keeps to the contract
+    def reset(self, q, dq, velocity, disturbance, step):  # keeps to the contract
         return np.zeros(2)
 
     def estimate(self, state, q):  # lost a parameter
@@ -91,7 +91,7 @@ def test_optional_extra_parameters_and_instances_conform():
     class Patient:
         size = 0
 
-        def reset(self, q, velocity, disturbance, step, *, scale=1.0):
+        def reset(self, q, dq, velocity, disturbance, step, *, scale=1.0):
             return np.zeros(0)
 
         def estimate(self, state, q, dq, extra=None):

@@ -17,6 +17,7 @@ from gaitbench.control.falls import FallCriteria
 from gaitbench.control.reference import Reference
 from gaitbench.control.results import SERIES_KEYS
 from gaitbench.control.tracking import track_walk
+from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import UnknownPluginError, load_registry
 from gaitbench.solve.one_phase import OnePhase
 from gaitbench.solve.walk_file import WalkFileError, load_walk, write_walk
@@ -278,3 +279,17 @@ def test_a_decrease_and_conquer_walk_is_tracked_along_its_verified_trajectory(tm
     result = track_walk(unpolished, "thesis", "ideal", "none", registry=REGISTRY)
     assert result.walk["trajectory"] == "polished"
     assert result.acot_reference == pytest.approx(unpolished.acot, rel=1e-9)
+
+
+def test_the_disturbance_observers_estimate_is_kept_across_an_impact():
+    """Its velocity is the sensor's: reset with the measured post-impact velocity, its estimate d̂ = p − Φ q̇ is the
+    pre-impact d̂ exactly, whatever the model-mapped velocity estimate (which leaves out friction's impulse) says."""
+    from gaitbench_plugins.control.observers import DisturbanceObserver
+
+    model = BipedModel(REGISTRY.create("experiment", "forward").robot, 4)
+    observer = DisturbanceObserver(model)
+    q, dq_measured = np.array([0.2, -0.3, 0.0, 0.0]), np.array([-1.1, 0.4, 0.0, 0.0])
+    mapped, d_before = np.array([-1.0, 0.5]), np.array([7.0, -9.0])
+    state = observer.reset(q, dq_measured, mapped, d_before, None)
+    _, d_after = observer.estimate(state, q, dq_measured)
+    assert d_after == pytest.approx(d_before)

@@ -175,7 +175,7 @@ class _ClosedLoop:
                 strike = self.model.heel_strike(q_end, dq_plus, info.stance)
                 estimate = self.model.heel_strike(q_end, dq_hat_plus, info.stance).dq[:2]
                 next_info = self._info(info.index + 1, info.start_time + info.duration)
-                observer_state = (self.observer.reset(strike.q, estimate, d_hat, next_info)
+                observer_state = (self.observer.reset(strike.q, strike.dq, estimate, d_hat, next_info)
                                   if next_info else np.zeros(m))
                 next_state = np.concatenate([strike.q, strike.dq, observer_state, [0.0]])
         self._record(info, ref, times, states, torques, completed, impulse, energy)
@@ -236,7 +236,7 @@ class _ClosedLoop:
             q0[2:] = self.reference.experiment.initial_state[2:4]
         info = self._info(1, 0.0)
         _, dq_d, _ = first.desired(0.0)
-        x = np.concatenate([q0, dq0, self.observer.reset(q0, dq_d, np.zeros(2), info), [0.0]])
+        x = np.concatenate([q0, dq0, self.observer.reset(q0, dq0, dq_d, np.zeros(2), info), [0.0]])
         for index in range(1, n_steps + 1):
             x = self._step(info, x)
             if x is None or index == n_steps:

@@ -57,7 +57,8 @@ class IdealObserver:
     def __init__(self, model: BipedModel) -> None:
         self.model = model
 
-    def reset(self, q: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray, step: StepInfo) -> np.ndarray:
+    def reset(self, q: np.ndarray, dq: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray,
+              step: StepInfo) -> np.ndarray:
         return np.zeros(0)
 
     def estimate(self, state: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -76,7 +77,8 @@ class VelocityObserver:
     def __init__(self, model: BipedModel, l: float = DEFAULT_L) -> None:  # noqa: E741 - the thesis's symbol
         self.model, self.gain = model, _positive(l, "l")
 
-    def reset(self, q: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray, step: StepInfo) -> np.ndarray:
+    def reset(self, q: np.ndarray, dq: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray,
+              step: StepInfo) -> np.ndarray:
         return np.asarray(velocity, dtype=float) - self.gain * q[:2]
 
     def estimate(self, state: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -96,8 +98,10 @@ class DisturbanceObserver:
     def __init__(self, model: BipedModel, phi: float = DEFAULT_PHI) -> None:
         self.model, self.gain = model, _positive(phi, "phi")
 
-    def reset(self, q: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray, step: StepInfo) -> np.ndarray:
-        return np.asarray(disturbance, dtype=float) + self.gain * np.asarray(velocity, dtype=float)
+    def reset(self, q: np.ndarray, dq: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray,
+              step: StepInfo) -> np.ndarray:
+        # its velocity estimate is the sensor's, so p = d̂ + Φ q̇ with the measured q̇ keeps d̂ across the impact
+        return np.asarray(disturbance, dtype=float) + self.gain * np.asarray(dq[:2], dtype=float)
 
     def estimate(self, state: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.array(dq[:2], dtype=float), state - self.gain * dq[:2]
@@ -117,7 +121,8 @@ class ThesisObserver:
         self.model = model
         self.velocity_gain, self.disturbance_gain = _positive(l, "l"), _positive(phi, "phi")
 
-    def reset(self, q: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray, step: StepInfo) -> np.ndarray:
+    def reset(self, q: np.ndarray, dq: np.ndarray, velocity: np.ndarray, disturbance: np.ndarray,
+              step: StepInfo) -> np.ndarray:
         velocity = np.asarray(velocity, dtype=float)
         return np.r_[velocity - self.velocity_gain * q[:2],
                      np.asarray(disturbance, dtype=float) + self.disturbance_gain * velocity]
