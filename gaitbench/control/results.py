@@ -95,7 +95,8 @@ class TrackingResult:
 
     @property
     def acot_reference(self) -> float | None:
-        """ACOT of the reference over the steps the robot completed (the walk's verified COTs)."""
+        """ACOT of the reference over the steps the robot completed, in the tracked measure
+        (:meth:`gaitbench.control.reference.Reference.from_walk`)."""
         return self._acot("cot_reference")
 
     @property
@@ -104,8 +105,12 @@ class TrackingResult:
 
     @property
     def acot_increase_percent(self) -> float | None:
+        """How much more the tracked walk cost than its reference, in percent; None without both, or for a free
+        reference (a passive gait), against which no increase is a percentage."""
         reference, tracked = self.acot_reference, self.acot_tracked
-        return None if reference is None or tracked is None else 100.0 * (tracked - reference) / reference
+        if reference is None or tracked is None or reference == 0:
+            return None
+        return 100.0 * (tracked - reference) / reference
 
     def _max(self, attribute: str) -> float:
         return float(max((np.max(getattr(step, attribute)) for step in self.steps), default=0.0))
