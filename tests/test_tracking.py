@@ -293,3 +293,18 @@ def test_the_disturbance_observers_estimate_is_kept_across_an_impact():
     state = observer.reset(q, dq_measured, mapped, d_before, None)
     _, d_after = observer.estimate(state, q, dq_measured)
     assert d_after == pytest.approx(d_before)
+
+
+def test_a_free_reference_has_no_percentage_increase():
+    """A passive gait's reference costs 0: the tracked cost is reported, the increase as a percentage is not."""
+    from dataclasses import replace as with_
+
+    from gaitbench.control.results import StepTracking, TrackingResult
+
+    zeros = np.zeros(2)
+    step = StepTracking(1, 1, True, zeros, zeros, zeros, zeros, zeros, 0.0, 0.0, 0.0, 0.0, 0.0, cot_reference=0.0,
+                        cot_tracked=0.01, cot_ideal=0.0)
+    free = TrackingResult(walk={}, configuration={}, steps=[step], series={})
+    assert free.acot_tracked == pytest.approx(0.01) and free.acot_increase_percent is None
+    paid = TrackingResult(walk={}, configuration={}, steps=[with_(step, cot_reference=0.008)], series={})
+    assert paid.acot_increase_percent == pytest.approx(25.0)
