@@ -181,8 +181,10 @@ def test_shipped_suites_keep_the_file_text():
          ["[suite].problem_options.friction_coefficient: expected a non-negative number, found a string '0.8'"]),
         (BASE.replace('name = "t"', 'name = "t"\nplugins = ["no-such-dir"]'),
          ["[suite].plugins[0]: plugin directory 'no-such-dir'", "does not exist"]),
-        (BASE + '[[exclude]]\nsolver = "ipopz"\n', ["[[exclude]][0]: matches no case", "solver = ['ipopz']"]),
-        (BASE + "[[exclude]]\nN = [10, 30]\nstrategy = 'warm-start'\n", ["[[exclude]][0]: matches no case"]),
+        (BASE + '[[exclude]]\nsolver = "ipopz"\n', ["[[exclude]][0].solver: 'ipopz' matches no case (a typo?)"]),
+        (BASE + '[[exclude]]\ntranscription = ["dmoc", "dmco"]\n',  # one typo in an array is caught too
+         ["[[exclude]][0].transcription: 'dmco' matches no case (a typo?)"]),
+        (BASE + "[[exclude]]\nN = [10, 30]\nstrategy = 'warm-start'\n", ["[[exclude]][0].N: 30 matches no case"]),
         (BASE + '[[exclude]]\nsolvers = "ipopt"\n',
          ["[[exclude]][0]: unknown key 'solvers' (did you mean 'solver'?); allowed: experiment, N"]),
         (BASE + "[[exclude]]\nN = '10'\n", ["[[exclude]][0].N: expected an integer N or an array of them"]),
@@ -419,8 +421,8 @@ def test_exclusions_match_names_labels_lists_and_n(tmp_path):
     excluded = _load(tmp_path, text + '[[exclude]]\nsolver = "mine"\nstrategy = "decrease-and-conquer"\n')
     assert len(excluded.cases) == 16 - 4
     assert not any(c.solver.name == "sqp" and c.strategy.name == "decrease-and-conquer" for c in excluded.cases)
-    by_n = _load(tmp_path, text + '[[exclude]]\nN = [20]\ntranscription = ["dmoc", "nope"]\n')
-    assert len(by_n.cases) == 16 - 4
+    by_n = _load(tmp_path, text + '[[exclude]]\nN = [20]\ntranscription = ["dmoc", "hermite-simpson"]\n')
+    assert len(by_n.cases) == 16 - 8
     by_method = _load(tmp_path, text + '[[exclude]]\nmethod = "one-phase dmoc mine"\n'
                                        '[[exclude]]\nexperiment = "forward"\nN = 10\nsolver = "sqp"\n')
     assert {c.method for c in by_method.cases if c.n_nodes == 20} == set(by_method.methods) - {"one-phase dmoc mine"}

@@ -165,7 +165,14 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
             matched[index] += 1
         if not hits:
             kept.append(case)
+    known = {key: set().union(*(tags[key] for _, tags in planned)) for exclusion in spec.exclusions
+             for key in exclusion.match}
     for exclusion, count in zip(spec.exclusions, matched, strict=True):
+        for key, values in exclusion.match.items():  # each value of an array, not only the array as a whole
+            unknown = [value for value in values if value not in known[key]]
+            if unknown:
+                raise SuiteError(path, f"{exclusion.key}.{key}", f"{unknown[0]!r} matches no case (a typo?); names "
+                                                                 "and labels are matched exactly")
         if not count:
             given = "; ".join(f"{key} = {list(values)}" for key, values in exclusion.match.items())
             raise SuiteError(path, exclusion.key, f"matches no case (a typo?): no case has {given}; names "
@@ -177,7 +184,7 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
     for case in kept:
         earlier = cases.setdefault(case.key, case)
         if earlier is not case and earlier.method != case.method:
-            raise SuiteError(path, "", f"methods {earlier.method!r} and {case.method!r} are the same "
+            raise SuiteError(path, "[[method]]", f"methods {earlier.method!r} and {case.method!r} are the same "
                                        f"transcription, solver and strategy ({case.label}); remove one")
     memory = _check_memory(path, list(cases.values()), builder)
     return methods, list(cases.values()), memory
