@@ -122,10 +122,14 @@ def cubic_hermite(y0: np.ndarray, y1: np.ndarray, m0: np.ndarray, m1: np.ndarray
 
 
 def nodal_trajectory(times: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float,
-                     stance: int) -> StepTrajectory:
+                     stance: int, per_interval: bool = False) -> StepTrajectory:
     """Values at the nodes of a uniform grid (leg order, one torque per node) read as a step trajectory: cubic Hermite
     angles through the nodal (q, q̇), linear rates and torques. The smoothest reading of node values that carry no
-    interpolant of their own, such as decrease and conquer's node-wise patchworks."""
+    interpolant of their own, such as decrease and conquer's node-wise patchworks.
+
+    With ``per_interval`` the torque at node k is that of the interval k to k + 1, held on it (a transcription with
+    one control per interval, DMOC), and the last node's is left out: a transcription reading the torques back
+    gets the ones it solved for, not averages of two intervals'."""
     n, h = len(times), float(times[1] - times[0])
     q_roles, dq_roles, tau_roles = (legs_to_roles(np.asarray(a, dtype=float), stance) for a in (q, dq, tau))
 
@@ -136,8 +140,9 @@ def nodal_trajectory(times: np.ndarray, q: np.ndarray, dq: np.ndarray, tau: np.n
 
     def control(t: float) -> np.ndarray:
         k, s = locate_interval(t, h, n)
-        return (1 - s) * tau_roles[k] + s * tau_roles[k + 1]
+        return tau_roles[k] if per_interval else (1 - s) * tau_roles[k] + s * tau_roles[k + 1]
 
+    controls = slice(0, n - 1) if per_interval else slice(0, n)
     return StepTrajectory(times=np.asarray(times, dtype=float), q=np.asarray(q), dq=np.asarray(dq),
-                          tau=np.asarray(tau), control_times=np.asarray(times, dtype=float), push_off=push_off,
-                          stance=stance, _interpolant=Interpolant(state, control))
+                          tau=np.asarray(tau)[controls], control_times=np.asarray(times, dtype=float)[controls],
+                          push_off=push_off, stance=stance, _interpolant=Interpolant(state, control))

@@ -320,10 +320,12 @@ class NodeValues:
     """Every candidate's values at the step's N nodes (NaN before its start): states, torques, point costs."""
 
     def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: np.ndarray,
-                 push_off_energy: np.ndarray, costs: PointCosts) -> None:
+                 push_off_energy: np.ndarray, costs: PointCosts, per_interval: bool = False) -> None:
         self.q, self.dq, self.tau = q, dq, tau  # (J, N, 2), leg order
         self.push_off, self.push_off_energy = push_off, push_off_energy  # (J,)
         self.costs = costs
+        self.per_interval = per_interval
+        """The candidates hold one torque per interval (DMOC): ``tau`` at node k is the interval k's."""
 
     @classmethod
     def of(cls, candidates: list[StepTrajectory], starts: list[int], n_nodes: int, h: float, model,
@@ -334,10 +336,11 @@ class NodeValues:
         push_off, energy = np.zeros(len(candidates)), np.zeros(len(candidates))
         for j, (trajectory, start) in enumerate(zip(candidates, starts, strict=True)):
             q[j, start:], dq[j, start:] = trajectory.q, trajectory.dq
-            tau[j, start:] = [trajectory.control(t) for t in trajectory.times]
+            tau[j, start:] = [trajectory.control(t) for t in trajectory.times]  # per interval: the one starting there
             push_off[j] = trajectory.push_off
             energy[j] = push_off_charge(model, trajectory, push_off_cost)
-        return cls(q, dq, tau, push_off, energy, costs)
+        per_interval = all(len(c.control_times) == len(c.times) - 1 for c in candidates)
+        return cls(q, dq, tau, push_off, energy, costs, per_interval)
 
     @property
     def values(self) -> np.ndarray:
@@ -357,23 +360,25 @@ class NodeValues:
 
     def completed(self, starts: list[int]) -> NodeValues:
         return NodeValues(complete_sections(self.q, starts), complete_sections(self.dq, starts),
-                          complete_sections(self.tau, starts), self.push_off, self.push_off_energy, self.costs)
+                          complete_sections(self.tau, starts), self.push_off, self.push_off_energy, self.costs,
+                          self.per_interval)
 
     def patch(self, selection: list[int]) -> Patch:
         nodes = np.arange(len(selection))
         last = selection[-1]
         return Patch(self.q[selection, nodes], self.dq[selection, nodes], self.tau[selection, nodes],
-                     float(self.push_off[last]), float(self.push_off_energy[last]), self.costs)
+                     float(self.push_off[last]), float(self.push_off_energy[last]), self.costs, self.per_interval)
 
 
 class Patch:
     """A trajectory assembled node by node from candidates: what the thesis synthesizes and completes."""
 
     def __init__(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, push_off: float, push_off_energy: float,
-                 costs: PointCosts):
+                 costs: PointCosts, per_interval: bool = False):
         self.q, self.dq, self.tau = q, dq, tau
         self.push_off, self.push_off_energy = push_off, push_off_energy
         self.costs = costs
+        self.per_interval = per_interval
 
     @property
     def pcot(self) -> np.ndarray:
@@ -381,9 +386,10 @@ class Patch:
 
     def trajectory(self, stance: int, h: float) -> StepTrajectory:
         """The patch as a step trajectory: cubic Hermite angles through the nodal (q, q̇), linear rates and
-        torques (:func:`~gaitbench.problem.trajectory.nodal_trajectory`), the reading a saved walk's patchwork
-        gets back."""
-        return nodal_trajectory(np.arange(len(self.q)) * h, self.q, self.dq, self.tau, self.push_off, stance)
+        torques, or each node's interval torque held on its interval where the candidates have one per interval
+        (:func:`~gaitbench.problem.trajectory.nodal_trajectory`), the reading a saved walk's patchwork gets back."""
+        return nodal_trajectory(np.arange(len(self.q)) * h, self.q, self.dq, self.tau, self.push_off, stance,
+                                per_interval=self.per_interval)
 
 
 def walk_summary(walk: WalkResult) -> dict:
