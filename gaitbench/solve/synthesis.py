@@ -34,8 +34,9 @@ def relation_holds(candidate: np.ndarray, previous: np.ndarray, reference: np.nd
                    tolerance: float = 1e-9) -> bool:
     """Whether every variable changes from ``previous`` to ``candidate`` in the direction the reference changes.
 
-    The thesis's "typical value relation" (§3.7) is not defined further; this is the reading of ch3b
-    §6.4: the signs of the increments agree, with changes within ``tolerance`` counting as "equal".
+    The thesis's "typical value relation" (§3.7) is not defined further; here it holds when the signs of the
+    increments agree, with changes within ``tolerance`` counting as "equal"
+    (docs/deviations.md, "D&C verification (relation check)").
     """
     return bool(relations_hold(candidate[None], previous, _direction(reference - reference_previous, tolerance),
                                tolerance)[0])
@@ -110,7 +111,8 @@ def _ranked(costs: np.ndarray) -> list[int]:
 
 def complete_sections(values: np.ndarray, starts: list[int]) -> np.ndarray:
     """Each candidate's missing nodes filled in (thesis §3.7): node m < start comes from the candidate starting at m
-    (whose values there are the First Phase's), or from the reference where no candidate starts at m.
+    (whose state there is the First Phase's, with its own torque), or from the reference where no candidate starts
+    at m (the start of a section that did not converge).
 
     ``values`` is (J, N, ...) with NaN before each start; returns the completed copy.
     """

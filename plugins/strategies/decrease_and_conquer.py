@@ -12,8 +12,9 @@ Per step:
 5. the sectional trajectories completed with the earlier nodes, and the final choice by the thesis's candidate COT
    among the synthesized and completed trajectories;
 6. the chosen trajectory verified, and the complete problem re-solved from it (the polish);
-7. the next step from the post-impact state of the step's motion: the polish, or the complete solution where that
-   is cheaper or the polish fails (:func:`reported_motion`), never the chosen trajectory itself.
+7. the next step from the post-impact state of the step's motion (:func:`reported_motion`): of the polish and the
+   complete solution, the cheaper of those that pass verification's thresholds, else the cheaper of those solved;
+   never the chosen trajectory itself.
 
 The synthesized (and completed) trajectories are node-wise patchworks of different NLP solutions, so in general
 they are not motions of the robot: a patchwork's end state is not where the robot would be. The thesis chains its
@@ -22,10 +23,10 @@ reported beside the verified one, labelled "patchwork, not a motion") and walks 
 that the walk's steps join into one motion of the robot (:mod:`gaitbench.solve.walk_verification`). The complete
 Second Phase solution (the same problem from the same state, solved from the First-Phase seed) stands in for the
 polish where the polish fails after its remedies, fails verification while the complete solution passes, or costs
-more (:func:`reported_motion`; ``details["polished"]["stand_in"]``). With ``rescue`` (the default), a
-First Phase that still fails is solved on coarser grids from the same state, and the N-node First Phase started from
-that solution (:func:`~gaitbench.solve.rescue.coarse_grid_rescue`); a walk that completes without it is the same
-walk with it.
+more while both pass verification or neither does (:func:`reported_motion`; ``details["polished"]["stand_in"]``).
+With ``rescue`` (the default), a First Phase that still fails is solved on coarser grids from the same state, and
+the N-node First Phase started from that solution (:func:`~gaitbench.solve.rescue.coarse_grid_rescue`); a walk that
+completes without it is the same walk with it.
 """
 
 from __future__ import annotations
@@ -305,7 +306,9 @@ def _label(start: int) -> str:
 @dataclass
 class PointCosts:
     """The walk's objective as point costs at one step's nodes (:meth:`Objective.point_costs`): what synthesis
-    ranks candidates by and the candidate COT sums, so that decrease and conquer chooses by the cost it reports."""
+    ranks candidates by and the candidate COT sums. Decrease and conquer thus chooses by the objective it reports,
+    read at the nodes rather than integrated: every COT a step reports is recomputed from a trajectory's
+    interpolant (docs/model.md §5)."""
 
     objective: Objective
     stance: int
