@@ -36,7 +36,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from gaitbench.run.store import load_results
+from gaitbench.run.store import ResultStore, load_results
 
 WORKERS = (2, 8, 32, 128)
 
@@ -95,9 +95,11 @@ def case_work(row: pd.Series, store: Path) -> CaseWork:
     whole."""
     wall = float(row["wall_time_s"])
     walk_path = row.get("walk_path")
-    if row.get("strategy") != "decrease-and-conquer" or not isinstance(walk_path, str) \
-            or not (store / walk_path).exists():
+    if row.get("strategy") != "decrease-and-conquer" or not isinstance(walk_path, str):
         return CaseWork(((wall, ()),))
+    if not (store / walk_path).exists():
+        raise SystemExit(f"{store / walk_path}: a decrease-and-conquer walk's file is missing; its sections cannot be "
+                         "modelled (pack the store with its walk files)")
     steps = [step.get("details") or {} for step in json.loads((store / walk_path).read_text())["steps"]]
     serial = [sum((details.get(part) or {}).get("solve_time_s") or 0.0
                   for part in ("first_phase", "complete", "polished")) for details in steps]
@@ -186,7 +188,9 @@ def report(store: Path, workers: tuple[int, ...], suite_file: Path | None) -> st
         missing = missing_cases(store, suite_file)
         lines += [f"Not measured yet: {len(missing)} of the suite's cases (not in the model).", ""]
     ordered = schedule_order(cases)
-    works = [case_work(row, store) for _, row in ordered.iterrows()]
+    with ResultStore.open(store) as opened:  # a pack's walk files are in its unpacked copy
+        directory = opened.directory
+    works = [case_work(row, directory) for _, row in ordered.iterrows()]
     fanned = fanned_scaling(works, workers)
     fanning = [(work, row) for work, (_, row) in zip(works, ordered.iterrows(), strict=True)
                if any(sections for _, sections in work.steps)]

@@ -1,12 +1,14 @@
 """What a whole sweep took, read off its store: the record of a suite run once, on one commit, for the targets.
 
-Run:    .venv/bin/python benchmarks/sweep_record.py STORE [--against EARLIER] [--record]
+Run:    .venv/bin/python benchmarks/sweep_record.py STORE [--suite SUITE] [--against EARLIER] [--record]
 
 A sweep as long as ``thesis-all`` runs over several sessions (``gaitbench run --smallest-first``, then ``--resume``),
-so its wall time is the sum of its runs' spans: each run from its start to its end, or, for a run that was stopped
-(a session's end, a kill), to its last heartbeat or its last finished case, whichever is later. Beside it: the
-cases the suite asks for and those stored, how many are complete and how many verified, the total case time, and
-the commits and machines the cases ran on.
+so its wall time is the time during which at least one of its runs ran: the union of the runs' spans, each run
+from its start to its end, or, for a run that was stopped (a session's end, a kill), to its last heartbeat or its
+last finished case, whichever is later (runs at the same time, a column run on another machine and merged in, are
+counted once). Beside it: the cases stored, how many are complete and how many verified, the total case time, and
+the commits, machines and hosts they ran on. With ``--suite``, the cases are those of that suite file: every one
+must be stored for the row to be recorded.
 
 With ``--against EARLIER`` (a store or pack of the same suite, such as the committed snapshot) it also says how far
 a sweep still running has come by the earlier sweep's measure: the share of the earlier sweep's case time that the
@@ -24,7 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -47,34 +49,57 @@ def run_span_s(run: dict[str, Any], cases: list[dict[str, Any]]) -> float:
     return (end - start).total_seconds()
 
 
-def sweep_record(store_path: str | Path) -> dict[str, Any]:
+def union_s(spans: list[tuple[datetime, datetime]]) -> float:
+    """Seconds covered by at least one of the (start, end) intervals."""
+    covered, reach = 0.0, None
+    for start, end in sorted(spans):
+        if reach is None or start > reach:
+            covered += (end - start).total_seconds()
+            reach = end
+        elif end > reach:
+            covered += (end - reach).total_seconds()
+            reach = end
+    return covered
+
+
+def sweep_record(store_path: str | Path, suite_path: str | Path | None = None) -> dict[str, Any]:
     """The sweep's row: suite, cases asked for and stored, complete and verified walks, wall and case time, runs,
-    commits and machines."""
+    commits, machines and hosts. With ``suite_path``, only that suite's cases, all of which it asks for."""
     with ResultStore.open(store_path) as store:
         runs, cases = store.runs(), store.cases()
     if not runs:
         raise SystemExit(f"{store_path}: the store holds no run")
+    cases_total = max(run["cases_total"] or 0 for run in runs)
+    if suite_path is not None:
+        from gaitbench.run.suite import load_suite
+
+        asked = {case.key for case in load_suite(suite_path).cases}
+        cases, cases_total = [case for case in cases if case["case_key"] in asked], len(asked)
     suites = sorted({run["suite"] for run in runs})
     commits = sorted({(case["provenance"] or {}).get("git_commit") or "unknown" for case in cases})
     machines = sorted({f"{(case['provenance'] or {}).get('cpu', '?')} × {(case['provenance'] or {}).get('cpus', '?')}"
                        for case in cases})
-    spans = [{"run_id": run["run_id"], "started_at": run["started_at"], "jobs": run["jobs"],
+    spans = [{"run_id": run["run_id"], "started_at": run["started_at"], "host": run["host"], "jobs": run["jobs"],
               "span_s": round(run_span_s(run, cases), 1),
               "cases_done": sum(case["run_id"] == run["run_id"] for case in cases)} for run in runs]
+    intervals = [(start, start + timedelta(seconds=span["span_s"]))
+                 for span in spans if (start := _time(span["started_at"])) is not None]
     complete = [case for case in cases if case["status"] == "solved" and case["stop_cause"] == "complete"]
     return {
         "suite": suites[0] if len(suites) == 1 else suites,
         "store": str(store_path),
-        "cases_total": max(run["cases_total"] or 0 for run in runs),
+        "cases_total": cases_total,
         "cases": len(cases),
         "complete": len(complete),
         "verified": sum(bool(case["verified"]) for case in complete),
-        "wall_s": round(sum(span["span_s"] for span in spans), 1),
+        "wall_s": round(union_s(intervals), 1),
         "case_time_s": round(sum(case["wall_time_s"] or 0.0 for case in cases), 1),
         "git_commits": commits,
         "one_clean_commit": len(commits) == 1 and commits[0] != "unknown" and not commits[0].endswith("+dirty"),
         "machines": machines,
+        "hosts": sorted({run["host"] for run in runs if run["host"]}),
         "runs": spans,
+        "checked_against_suite": suite_path is not None,
     }
 
 
@@ -82,9 +107,10 @@ def progress_against(row: dict[str, Any], store_path: str | Path, earlier_path: 
     """How much of the sweep is done by ``earlier_path``'s case times, and the whole sweep's case and wall time
     projected from the cases done (their time here over their time there)."""
     def case_times(path: str | Path) -> dict[tuple, float]:
+        """Each complete walk's case time: a crashed, stopped or timed-out case is not work done."""
         with ResultStore.open(path) as store:
             return {(case["experiment"], case["method"], case["N"]): case["wall_time_s"] or 0.0
-                    for case in store.cases()}
+                    for case in store.cases() if case["status"] == "solved"}
 
     here, there = case_times(store_path), case_times(earlier_path)
     done = [key for key in here if key in there]
@@ -103,7 +129,11 @@ def progress_against(row: dict[str, Any], store_path: str | Path, earlier_path: 
 
 def record(row: dict[str, Any], performance: Path = PERFORMANCE) -> None:
     """Put ``row`` into ``performance.json``'s ``sweeps``, replacing the row of its suite; refused for a sweep that
-    is not whole or not on one clean commit."""
+    is not whole (by its suite file), of several suites, or not on one clean commit."""
+    if not isinstance(row["suite"], str):
+        raise SystemExit(f"{row['store']}: holds runs of several suites ({', '.join(row['suite'])}); record one")
+    if not row.get("checked_against_suite"):
+        raise SystemExit(f"{row['store']}: name the suite file (--suite), whose every case must be stored")
     if row["cases"] < row["cases_total"]:
         raise SystemExit(f"{row['store']}: {row['cases']} of {row['cases_total']} cases stored; a sweep is recorded "
                          f"whole (gaitbench run SUITE --store STORE --resume does the rest)")
@@ -118,11 +148,12 @@ def record(row: dict[str, Any], performance: Path = PERFORMANCE) -> None:
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("store", help="the sweep's results store (a directory or a pack)")
+    parser.add_argument("--suite", help="the suite file: count its cases only, and require every one for --record")
     parser.add_argument("--record", action="store_true", help="write the row into benchmarks/results/performance.json")
     parser.add_argument("--against", metavar="EARLIER",
                         help="an earlier store or pack of the suite: the share of its work done, and a projection")
     arguments = parser.parse_args(argv)
-    row = sweep_record(arguments.store)
+    row = sweep_record(arguments.store, arguments.suite)
     progress = progress_against(row, arguments.store, arguments.against) if arguments.against else {}
     print(json.dumps(row | {"progress": progress} if progress else row, indent=1))
     if arguments.record:

@@ -391,16 +391,41 @@ def test_a_sweep_over_sessions_adds_its_runs_spans_and_is_recorded_only_whole_on
     assert row["one_clean_commit"] and [run["cases_done"] for run in row["runs"]] == [1, 2]
     performance = tmp_path / "performance.json"
     performance.write_text(json.dumps({"steps": [], "sweeps": [{"suite": "s", "wall_s": 1}]}))
+    with pytest.raises(SystemExit, match="name the suite file"):
+        module.record(row, performance)  # without its suite, "every case stored" is the runs' word only
+    row |= {"checked_against_suite": True}
     module.record(row, performance)
     assert json.loads(performance.read_text())["sweeps"] == [json.loads(json.dumps(row))]
 
     _sweep_store(tmp_path / "two", ["a" * 40, "b" * 40, "a" * 40])
-    mixed = module.sweep_record(tmp_path / "two")
+    mixed = module.sweep_record(tmp_path / "two") | {"checked_against_suite": True}
     assert not mixed["one_clean_commit"]
     with pytest.raises(SystemExit, match="ran on a{40}, b{40}"):
         module.record(mixed, performance)
     with pytest.raises(SystemExit, match="3 of 4 cases stored"):
         module.record(row | {"cases_total": 4}, performance)
+
+
+def test_runs_at_the_same_time_are_counted_once_and_a_suite_file_says_which_cases_the_sweep_needs(tmp_path):
+    """A column run beside the main run (another machine, merged in) overlaps it: the sweep's wall time is the time
+    during which any run ran. With --suite, the cases are that suite's, all of which --record needs."""
+    from gaitbench.run.store import ResultStore
+
+    module = _benchmark("sweep_record")
+    _sweep_store(tmp_path / "store", ["a" * 40] * 3)
+    with ResultStore.create(tmp_path / "store") as store:  # from 00:30 on day 1, half an hour past r1's end
+        store.add_run({"run_id": "r3", "suite": "s", "cases_total": 3, "jobs": 1, "host": "elsewhere",
+                       "started_at": "2026-01-01T00:30:00+00:00", "finished_at": "2026-01-01T01:30:00+00:00"})
+    row = module.sweep_record(tmp_path / "store")
+    assert row["wall_s"] == 5400 + 2400  # day 1: 00:00 to 01:30 once, not 3,600 + 3,600
+    assert "elsewhere" in row["hosts"]
+    suite = tmp_path / "s.toml"
+    suite.write_text('[suite]\nname = "s"\n[sweep]\nexperiments = ["forward"]\nN = [10]\n'
+                     'transcriptions = ["dmoc"]\nsolvers = ["ipopt"]\nstrategies = ["one-phase"]\n')
+    against = module.sweep_record(tmp_path / "store", suite)
+    assert (against["cases_total"], against["cases"]) == (1, 0)  # its one case is not among the hand-made ones
+    with pytest.raises(SystemExit, match="0 of 1 cases stored"):
+        module.record(against, tmp_path / "performance.json")
 
 
 def test_a_sweep_s_progress_is_measured_by_an_earlier_sweep_s_case_times(tmp_path):
@@ -416,6 +441,9 @@ def test_a_sweep_s_progress_is_measured_by_an_earlier_sweep_s_case_times(tmp_pat
     assert (progress["cases_matched"], progress["work_done_share"], progress["case_time_ratio"]) == (2, 0.25, 1.0)
     assert progress["projected_case_time_s"] == 800
     assert progress["projected_wall_s"] == 800 * 4800 / 200  # 200 s of case time in 3,600 + 1,200 s of wall time
+    with ResultStore.create(tmp_path / "now") as store:  # a crashed case is no work done
+        store.update_cases({"0000000000000001": {"status": "crashed"}})
+    assert module.progress_against(row, tmp_path / "now", tmp_path / "earlier")["cases_matched"] == 1
     _sweep_store(tmp_path / "other", ["a" * 40])
     with ResultStore.create(tmp_path / "other") as store:
         store.update_cases({"0000000000000000": {"method": "another"}})
