@@ -225,6 +225,9 @@ def test_gait_choice_and_dc_claims(store):
     assert any("patchwork" in note for note in section.gait.notes)
     claims = report.tables["dc_claims"]
     assert set(claims["case_key"]) == set(df[df["is_dc"]]["case_key"])
+    # whether the walk is ranked is its whole-walk verdict, beside the ACOT of its reported motions
+    ranked = df.set_index("case_key")["ranked"]
+    assert all(row.ranked == bool(ranked[row.case_key]) for row in claims.itertuples())
     from gaitbench.reports import ReportError
 
     with pytest.raises(ReportError, match="not a case"):

@@ -132,31 +132,36 @@ def acot_figure(acot: pd.DataFrame, experiment: str, spread: pd.DataFrame | None
         f"N − {half_width} … N + {half_width} (repetitions included; acot_spread.csv): how far a figure moves between "
         "neighbouring grids of the same problem, i.e. with the optimizer's path rather than the method.")
     return Figure(f"fig-acot-{slug(experiment)}", f"ACOT against N: {experiment}",
-                  "Average cost of transport of each method at each N, over its complete walks only (verified; "
-                  "dashed: the claimed ACOT of Decrease & Conquer's synthesized trajectory). A gap: no complete walk "
-                  "at that N. Red circles: each method's minimum." + band_text
+                  "Average cost of transport of each method at each N, over its verified walks only (complete and "
+                  "passing the whole-walk verification; dashed: the claimed ACOT of Decrease & Conquer's synthesized "
+                  "trajectory). A gap: no verified walk at that N. Red circles: each method's minimum." + band_text
                   + _thesis(experiment, "acot"), render(fig))
 
 
 def completion_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
-    """The fraction of each method's walks that were complete, against N: what the ACOT figure beside it rests on."""
+    """The fraction of each method's walks that were complete, and that were also verified, against N: what the ACOT
+    figure beside it rests on."""
     data = acot[acot["experiment"] == experiment]
     if data.empty:
         return None
     fig, ax = subplots(figsize=(7, 4))
     for method, rows, color in _by_method(data):
+        cases = int(rows["cases"].sum())
         ax.plot(rows["N"], 100 * rows["completion_rate"], "o-", color=color, ms=4,
-                label=f"{method} ({int(rows['solved'].sum())} of {int(rows['cases'].sum())})")
+                label=f"{method}: complete ({int(rows['solved'].sum())} of {cases})")
+        ax.plot(rows["N"], 100 * rows["verified"] / rows["cases"], "s--", color=color, ms=3,
+                label=f"{method}: verified ({int(rows['verified'].sum())} of {cases})")
     ax.set_ylim(-5, 105)
     ax.set_xlabel("N (nodes per step)")
     _integer_n(ax)
-    ax.set_ylabel("complete walks (%)")
-    ax.set_title(f"{experiment}: completion rate against N")
-    legend_below(fig)
+    ax.set_ylabel("walks (%)")
+    ax.set_title(f"{experiment}: complete and verified walks against N")
+    legend_below(fig, ncol=2)
     return Figure(f"fig-completion-{slug(experiment)}", f"Completion rate against N: {experiment}",
-                  "Share of each method's walks at each N that walked every requested step, solved and verified "
-                  "(the legend counts them over all N). Only these complete walks enter the ACOT beside it; why the "
-                  "others stopped is in the stop-cause table.", render(fig))
+                  "Solid: the share of each method's walks at each N that walked every requested step (complete); "
+                  "dashed: the share that also passed the whole-walk verification (the legend counts both over all "
+                  "N). Only the verified walks enter the ACOT beside it; why the others stopped is in the stop-cause "
+                  "table, why complete ones failed verification in the list of unverified walks.", render(fig))
 
 
 def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
@@ -174,8 +179,9 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
     ax.set_title(f"{experiment}: minimum and maximum per-step COT")
     legend_below(fig, ncol=2)
     return Figure(f"fig-cot-bounds-{slug(experiment)}", f"Per-step COT bounds: {experiment}",
-                  "Lowest and highest COT of a single step of the walk, per method and N, over complete walks "
-                  "(store columns cot_min, cot_max; for D&C the chosen, synthesized trajectory)."
+                  "Lowest and highest COT of a single step of the walk, per method and N, over the verified walks "
+                  "(store columns cot_min, cot_max; for D&C its reported motions, the polish or the complete "
+                  "solution of each step)."
                   + _thesis(experiment, "cot_bounds"), render(fig))
 
 
@@ -186,7 +192,8 @@ def savings_figure(savings: pd.DataFrame, experiment: str, paired: pd.DataFrame 
     data = savings[savings["experiment"] == experiment]
     if data.empty:
         return None
-    data = data[data["savings_percent"].notna() | data["claimed_savings_percent"].notna()]
+    if not (data["savings_percent"].notna() | data["claimed_savings_percent"].notna()).any():
+        return None  # the missing N stay: a line breaks where a pair has no verified walk, as in the ACOT figure
     kinds = [kind for kind in ("one-phase", "reference") if (data["baseline_kind"] == kind).any()]
     if not kinds:
         return None
@@ -217,7 +224,8 @@ def savings_figure(savings: pd.DataFrame, experiment: str, paired: pd.DataFrame 
     legend_below(fig, ncol=2)
     roles = " and ".join(thesis_values.figure(experiment, role) or "" for role in ("savings_op", "savings_reference"))
     return Figure(f"fig-savings-{slug(experiment)}", f"Energy savings of Decrease & Conquer: {experiment}",
-                  "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N both methods solved. "
+                  "S(N) = 100 (ACOT_baseline(N) − ACOT_D&C(N)) / ACOT_baseline(N) at each N where both methods have a "
+                  "verified walk (a break in a line: an N where one has none). "
                   "Solid: D&C's verified ACOT; dashed: its claim, as the thesis computes it."
                   + ("" if paired is None else " Dotted: the median verified saving over N, shaded: its bootstrap 95 % "
                      "interval (savings_paired.csv).")

@@ -45,7 +45,7 @@ PUBLISHED_COLUMNS = ["experiment", "thesis_method", "method", "published_acot", 
 PUBLISHED_SAVINGS_COLUMNS = ["experiment", "comparison", "published_min_percent", "published_min_N",
                              "published_max_percent", "published_max_N", "min_percent", "min_N", "max_percent",
                              "max_N", "claimed_max_percent", "claimed_max_N", "source"]
-DC_CLAIMS_COLUMNS = ["experiment", "method", "N", "case_key", "status", "claimed_acot", "verified_acot",
+DC_CLAIMS_COLUMNS = ["experiment", "method", "N", "case_key", "status", "claimed_acot", "verified_acot", "ranked",
                      "difference_percent", "steps", "steps_satisfying_dynamics", "max_defect", "max_resim_error",
                      "candidates", "backtracks"]
 ENERGETICS_COLUMNS = ["method", "N", *ENERGETICS_OPTIONS, "status", "acot", "claimed_acot", "cot_min", "cot_max",
@@ -286,8 +286,9 @@ def published_savings(savings: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame
 # --- D&C claimed against verified --------------------------------------------------------------------------------
 
 def dc_claims(df: pd.DataFrame) -> pd.DataFrame:
-    """Every D&C case: the claimed ACOT (patchwork) beside the verified (polished) one, and how many chosen
-    trajectories satisfy the dynamics."""
+    """Every D&C case: the claimed ACOT (patchwork) beside that of the motions the walk reports (each step verified
+    on its own), whether the walk as a whole passed verification (``ranked``), and how many chosen trajectories
+    satisfy the dynamics."""
     rows = []
     for _, case in df[df["is_dc"]].iterrows() if not df.empty else []:
         details = parse_details(case["strategy_details"])
@@ -295,7 +296,7 @@ def dc_claims(df: pd.DataFrame) -> pd.DataFrame:
         verified = number(details.get("verified_acot"))
         rows.append({"experiment": case["experiment"], "method": case["method"], "N": int(case["N"]),
                      "case_key": case["case_key"], "status": case["status"], "claimed_acot": claimed,
-                     "verified_acot": verified,
+                     "verified_acot": verified, "ranked": bool(case["ranked"]),
                      "difference_percent": 100 * (verified - claimed) / claimed if claimed else math.nan,
                      "steps": len(details.get("chosen", [])) or None,
                      "steps_satisfying_dynamics": details.get("steps_satisfying_dynamics"),
