@@ -4,12 +4,11 @@
 tables and figures share; every function of :mod:`gaitbench.reports.tables` takes its result. Column names are
 documented in docs/reports.md.
 
-Which ACOT is "verified": for One Phase and the other per-step strategies the store's ``acot`` (every step's COT
-recomputed from its trajectory). For Decrease & Conquer the store's ``acot`` is the mean COT of the synthesized
-patchwork, i.e. the thesis's claim (``claimed_acot``); the figure of trajectories that satisfy the dynamics is the
-polished one in ``strategy_details.verified_acot`` (plugins/strategies/decrease_and_conquer.py). The tables use
-that as the verified ACOT of D&C and keep the claim beside it; with ``polish = false`` there is no verified D&C
-figure (NaN).
+Which ACOT is "verified": the mean COT of the motions the walk reports, each recomputed from its trajectory: the
+store's ``acot`` for One Phase and the other per-step strategies, and ``strategy_details.verified_acot`` for
+Decrease & Conquer (its reported motions, the polish or the complete solution of each step; the store's ``acot``
+holds the same figure in rows written since walk files record it, and the patchwork's claim in older rows). The
+tables keep D&C's claim (``claimed_acot``) beside it.
 
 Verified walks only: a case is complete when its status is ``solved`` (every requested step solved), and ranked
 when it is complete and its walk passed the whole-walk verification (the store's ``verified`` flag:

@@ -243,14 +243,17 @@ def verdict(row: Mapping[str, Any]) -> str:
 
 
 def _bound_cells(published: float, bounds: ExperimentBounds | None) -> dict[str, Any]:
-    """The bounds and whether ``published`` lies below each (never below a bound of no use, NaN; unknown, None,
-    without bounds)."""
+    """The bounds and whether ``published`` lies below each (None, not "no", where a bound is of no use, NaN, or
+    there are no bounds)."""
     if bounds is None:
         return {"bound_acot": math.nan, "published_below_bound": None, "thesis_push_off_bound_acot": math.nan,
                 "published_below_thesis_push_off_bound": None}
-    return {"bound_acot": bounds.impulse, "published_below_bound": bool(published < bounds.impulse),
+    def below(bound: float) -> bool | None:
+        return None if math.isnan(bound) else bool(published < bound)
+
+    return {"bound_acot": bounds.impulse, "published_below_bound": below(bounds.impulse),
             "thesis_push_off_bound_acot": bounds.thesis_push_off,
-            "published_below_thesis_push_off_bound": bool(published < bounds.thesis_push_off)}
+            "published_below_thesis_push_off_bound": below(bounds.thesis_push_off)}
 
 
 def published_savings(savings: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
