@@ -245,15 +245,10 @@ def verdict(row: Mapping[str, Any]) -> str:
 def _bound_cells(published: float, bounds: ExperimentBounds | None) -> dict[str, Any]:
     """The bounds and whether ``published`` lies below each (None, not "no", where a bound is of no use, NaN, or
     there are no bounds)."""
-    if bounds is None:
-        return {"bound_acot": math.nan, "published_below_bound": None, "thesis_push_off_bound_acot": math.nan,
-                "published_below_thesis_push_off_bound": None}
-    def below(bound: float) -> bool | None:
-        return None if math.isnan(bound) else bool(published < bound)
-
-    return {"bound_acot": bounds.impulse, "published_below_bound": below(bounds.impulse),
-            "thesis_push_off_bound_acot": bounds.thesis_push_off,
-            "published_below_thesis_push_off_bound": below(bounds.thesis_push_off)}
+    impulse, thesis = (math.nan, math.nan) if bounds is None else (bounds.impulse, bounds.thesis_push_off)
+    return {"bound_acot": impulse, "published_below_bound": None if math.isnan(impulse) else bool(published < impulse),
+            "thesis_push_off_bound_acot": thesis,
+            "published_below_thesis_push_off_bound": None if math.isnan(thesis) else bool(published < thesis)}
 
 
 def published_savings(savings: pd.DataFrame, info: pd.DataFrame) -> pd.DataFrame:
