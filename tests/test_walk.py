@@ -76,6 +76,23 @@ def test_enforced_ground_reaction_constraints_hold_at_the_solution():
     assert violations["unilateral_contact"] < 1e-7 and violations["friction_cone"] < 1e-7
 
 
+def test_the_friction_cone_stands_on_the_ground_not_on_the_horizontal():
+    """On the upward slope (θ = 0.698 rad) a foot stays put only with a friction coefficient near tan θ = 0.84 or
+    more: with μ = 0.5 the step has no solution, with μ = 1.5 it does (a cone taken in world axes let μ = 0.5 walk
+    the slope)."""
+    from dataclasses import replace
+
+    experiment = REGISTRY.create("experiment", "upward-slope")
+    problem = WalkProblem(experiment, HermiteSimpson(), Ipopt(), 10, steps=1)
+    data = problem.step_data(1, problem.start_state())
+    outcomes = {}
+    for mu in (0.5, 1.5):
+        options = replace(ProblemOptions(limits=experiment.limits), unilateral_contact=True, friction_coefficient=mu)
+        built = HermiteSimpson().build(StepStructure("second", 10, options))
+        outcomes[mu] = Ipopt().solve(built.nlp, data.parameter_vector(), built.initial_guess(data)).converged
+    assert outcomes == {0.5: False, 1.5: True}
+
+
 @pytest.mark.parametrize("n_nodes", [20, 50, 100])
 def test_a_flat_step_converges_and_lands_on_its_heel_strike_configuration(n_nodes):
     experiment, data, built, result = solve_step(HermiteSimpson(), "second", n_nodes)

@@ -295,19 +295,19 @@ def _add_step_constraints(
         qk, dqk = ca.vertcat(q[:, k], 0, 0), ca.vertcat(dq[:, k], 0, 0)
         mass = model4.mass(qk, symbols.robot)
         bias = ca.mtimes(model4.coriolis(qk, dqk, symbols.robot), dqk) + model4.gravity(qk, symbols.robot)
-        # Rows 3–4 of M q̈ + C q̇ + G with the foot held: the exact stance-foot reaction (friction, normal).
+        # Rows 3–4 of M q̈ + C q̇ + G with the foot held: the exact stance-foot reaction, horizontal and vertical.
         reactions.append(ca.mtimes(mass[2:4, 0:2], ddq) + bias[2:4])
-    reaction = ca.horzcat(*reactions)
+    world = ca.horzcat(*reactions)
+    # Along and normal to the ground the cone stands on: the step's chord, as the lift-off above (a slope's 40° would
+    # otherwise read a reaction that needs little friction as one at |f_x| = f_y).
+    tangential = ca.cos(theta) * world[0, :] + ca.sin(theta) * world[1, :]
+    normal = -ca.sin(theta) * world[0, :] + ca.cos(theta) * world[1, :]
     if options.unilateral_contact:
-        builder.constrain_columns("unilateral_contact", reaction[1, :], 0.0, np.inf)
+        builder.constrain_columns("unilateral_contact", normal, 0.0, np.inf)
     if options.friction_coefficient is not None:
         mu = options.friction_coefficient
-        builder.constrain_columns(
-            "friction_cone",
-            ca.vertcat(reaction[0, :] - mu * reaction[1, :], -reaction[0, :] - mu * reaction[1, :]),
-            -np.inf,
-            0.0,
-        )
+        builder.constrain_columns("friction_cone", ca.vertcat(tangential - mu * normal, -tangential - mu * normal),
+                                  -np.inf, 0.0)
     return push_off_energy
 
 

@@ -38,7 +38,7 @@ class GaitStep:
     cot: float | None
     max_defect: float | None
     resim_error: float | None
-    reaction: np.ndarray | None = None  # (N, 2): friction f_t, normal f_n
+    reaction: np.ndarray | None = None  # (N, 2): horizontal f_x, vertical f_y
 
 
 @dataclass
@@ -161,7 +161,8 @@ def _steps(walk: WalkFile, records: list[dict], figures, name: str = "") -> list
 
 
 def _reactions(model, foot: np.ndarray, step: GaitStep) -> np.ndarray:
-    """The stance foot's ground reaction (f_t, f_n) at each node, torques interpolated to the node times."""
+    """The stance foot's ground reaction (horizontal f_x, vertical f_y) at each node, torques interpolated to the
+    node times."""
     local, local_tau = step.t - step.t[0], step.tau_t - step.t[0]
     reactions = []
     for k in range(len(local)):
@@ -243,8 +244,8 @@ def gait_figures(gait: Gait) -> list[Figure]:
         fig, ax = subplots(figsize=(7, 3.2))
         t = np.concatenate([s.t for s in gait.steps])
         reaction = np.vstack([s.reaction for s in gait.steps])
-        ax.plot(t, reaction[:, 1], ".-", ms=3, label="normal f_n")
-        ax.plot(t, reaction[:, 0], ".-", ms=3, label="friction f_t")
+        ax.plot(t, reaction[:, 1], ".-", ms=3, label="vertical f_y")
+        ax.plot(t, reaction[:, 0], ".-", ms=3, label="horizontal f_x")
         ax.axhline(0, color="black", lw=0.6)
         _boundaries(ax, gait)
         ax.set_xlabel("t (s)")

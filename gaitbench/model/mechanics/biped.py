@@ -71,7 +71,7 @@ class BipedFunctions:
     swing_foot_jacobian: ca.Function  # (q, p) -> ∂Y/∂q
     forward_dynamics: (
         ca.Function
-    )  # (q, dq, tau, p) -> (ddq, ground reaction (f_t, f_n)) ; 2-DOF: ground reaction = 0
+    )  # (q, dq, tau, p) -> (ddq, ground reaction (horizontal f_x, vertical f_y)) ; 2-DOF: ground reaction = 0
     heel_strike: ca.Function  # (q, dq, p) -> (dq⁺, impact impulse at the swing foot (x, y))
     angular_momentum_about_swing_foot: ca.Function  # (q, dq, p) -> scalar
     push_off: ca.Function | None  # (q, dq, impulse, p) -> dq⁺ ; 4-DOF only
