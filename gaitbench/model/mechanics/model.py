@@ -20,8 +20,8 @@ class HeelStrike:
     dq: np.ndarray  # velocities just after impact, new stance foot at rest
     impulse: np.ndarray  # impact impulse on the striking foot (x, y), N·s
     lift_off_velocity: (
-        float  # vertical velocity of the old stance foot after impact (4-DOF); > 0 means it lifts off
-    )
+        float  # vertical velocity of the old stance foot after impact (4-DOF); > 0 lifts off on level ground only:
+    )  # on a slope lifting off is along the ground's normal (docs/model.md §3), from lifting_foot_velocity
     lifting_foot_velocity: np.ndarray | None = None  # (x, y) velocity of the old stance foot after impact (4-DOF)
 
 
