@@ -65,6 +65,8 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     info = case_frame.method_info(df)
     acot = tables.acot_table(df)
     minima = tables.method_minima(acot, info)
+    # the minimum is over the N with a verified walk: D&C has none at N = 30
+    assert minima.set_index("method")["N_verified"].to_dict() == {"OP-DC": 4, "D&C-DC": 3}
     savings = tables.savings_table(acot, info)
     paired = statistics.paired_savings(savings, minima)
     assert list(paired.columns) == statistics.PAIRED_SAVINGS_COLUMNS

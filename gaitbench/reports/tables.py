@@ -34,13 +34,13 @@ ACOT_COLUMNS = ["experiment", "method", "N", "cases", "solved", "verified", "com
                 "thesis_reading_acot", "cot_min",
                 "cot_max", "wall_time_s", "iterations", "retries", "max_defect", "max_resim_error", "is_minimum"]
 MINIMA_COLUMNS = ["experiment", "method", "thesis_method", "min_acot", "N_at_min", "claimed_acot_at_min",
-                  "thesis_reading_at_min", "N_values", "N_solved"]
+                  "thesis_reading_at_min", "N_values", "N_solved", "N_verified"]
 COT_BOUNDS_COLUMNS = ["experiment", "method", "N", "cot_min", "cot_max", "acot"]
 SAVINGS_COLUMNS = ["experiment", "method", "baseline", "baseline_kind", "N", "acot", "baseline_acot",
                    "savings_percent", "claimed_acot", "claimed_savings_percent"]
 PUBLISHED_COLUMNS = ["experiment", "thesis_method", "method", "published_acot", "published_N", "acot", "N_at_min",
-                     "difference", "difference_percent", "claimed_acot", "claimed_difference", "thesis_reading_acot",
-                     "bound_acot", "published_below_bound", "thesis_push_off_bound_acot",
+                     "N_verified", "difference", "difference_percent", "claimed_acot", "claimed_difference",
+                     "thesis_reading_acot", "bound_acot", "published_below_bound", "thesis_push_off_bound_acot",
                      "published_below_thesis_push_off_bound", "verdict", "source"]
 PUBLISHED_SAVINGS_COLUMNS = ["experiment", "comparison", "published_min_percent", "published_min_N",
                              "published_max_percent", "published_max_N", "min_percent", "min_N", "max_percent",
@@ -121,7 +121,8 @@ def method_minima(acot: pd.DataFrame, info: pd.DataFrame | None = None) -> pd.Da
         best = group[group["is_minimum"]]
         row = {"experiment": experiment, "method": method, "thesis_method": thesis.get((experiment, method)),
                "min_acot": math.nan, "N_at_min": None, "claimed_acot_at_min": math.nan,
-               "thesis_reading_at_min": math.nan, "N_values": len(group), "N_solved": int((group["solved"] > 0).sum())}
+               "thesis_reading_at_min": math.nan, "N_values": len(group), "N_solved": int((group["solved"] > 0).sum()),
+               "N_verified": int((group["verified"] > 0).sum())}
         if not best.empty:
             row |= {"min_acot": float(best["acot"].iloc[0]), "N_at_min": int(best["N"].iloc[0]),
                     "claimed_acot_at_min": float(best["claimed_acot"].iloc[0]),
@@ -205,12 +206,12 @@ def published_comparison(minima: pd.DataFrame, bounds: Mapping[str, ExperimentBo
                 m = match.iloc[0]
                 ours_acot, claimed = m["min_acot"], m["claimed_acot_at_min"]
                 row |= {"method": m["method"], "acot": ours_acot, "N_at_min": m["N_at_min"],
-                        "difference": ours_acot - value, "difference_percent": 100 * (ours_acot - value) / value,
-                        "claimed_acot": claimed, "claimed_difference": claimed - value,
-                        "thesis_reading_acot": m["thesis_reading_at_min"]}
+                        "N_verified": m.get("N_verified"), "difference": ours_acot - value,
+                        "difference_percent": 100 * (ours_acot - value) / value, "claimed_acot": claimed,
+                        "claimed_difference": claimed - value, "thesis_reading_acot": m["thesis_reading_at_min"]}
             row["verdict"] = verdict(row)
             rows.append(row)
-    return _integers(pd.DataFrame(rows, columns=PUBLISHED_COLUMNS), "N_at_min")
+    return _integers(pd.DataFrame(rows, columns=PUBLISHED_COLUMNS), "N_at_min", "N_verified")
 
 
 REPRODUCED_WITHIN = 0.10
