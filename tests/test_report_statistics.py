@@ -72,10 +72,19 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     assert list(paired.columns) == statistics.PAIRED_SAVINGS_COLUMNS
     row = paired.set_index("baseline").loc["OP-DC"]
     assert row["pairs"] == 3
-    # 10 % at every N: both summaries and both intervals are 10 % exactly.
-    for column in ("median_percent", "median_ci_low", "median_ci_high", "mean_percent", "mean_ci_low",
-                   "mean_ci_high"):
-        assert row[column] == pytest.approx(10.0), column
+    # 10 % at every N: both summaries are 10 % exactly; three pairs are too few for an interval.
+    assert row["median_percent"] == pytest.approx(10.0) and row["mean_percent"] == pytest.approx(10.0)
+    assert statistics.MIN_PAIRS_FOR_CI > 3
+    for column in ("median_ci_low", "median_ci_high", "mean_ci_low", "mean_ci_high"):
+        assert math.isnan(row[column]), column
+    more = {"OP-DC": {n: 0.5 for n in (10, 20, 30, 40, 50)}}
+    rows = [{"method": "OP-DC", "N": n, "acot": acot} for n, acot in more["OP-DC"].items()]
+    rows += [_dc(n, 0.45) for n in more["OP-DC"]]
+    five = _cases(rows)
+    info5, acot5 = case_frame.method_info(five), tables.acot_table(five)
+    wide = statistics.paired_savings(tables.savings_table(acot5, info5), tables.method_minima(acot5, info5))
+    wide = wide.set_index("baseline").loc["OP-DC"]
+    assert wide["pairs"] == 5 and wide[["median_ci_low", "median_ci_high"]].tolist() == pytest.approx([10.0, 10.0])
     # Minimum against minimum: D&C's 0.36 at N = 10 against OP-DC's 0.30 at N = 30, a loss.
     assert row["min_vs_min_percent"] == pytest.approx(100 * (0.30 - 0.36) / 0.30)
     # The thesis's forward minima: D&C-DC 0.0695 against OP-DC 0.3615 (thesis §5.2–5.5).
@@ -84,7 +93,7 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     published = statistics.with_paired_savings(tables.published_savings(savings, info), paired, info)
     quoted = published.set_index("comparison").loc["D&C-DC vs OP-DC"]
     assert (quoted["published_max_percent"], quoted["pairs"]) == (85.41, 3)
-    assert quoted[["median_percent", "median_ci_low", "median_ci_high"]].tolist() == pytest.approx([10.0] * 3)
+    assert quoted["median_percent"] == pytest.approx(10.0) and math.isnan(quoted["median_ci_low"])
     assert quoted["min_vs_min_percent"] == pytest.approx(row["min_vs_min_percent"])
 
 

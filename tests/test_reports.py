@@ -177,7 +177,7 @@ def test_csv_files_have_their_documented_columns(report_dir):
     paired = pd.read_csv(report_dir / "savings_paired.csv").set_index(["method", "baseline"])
     pair = paired.loc[("D&C-DC", "OP-DC")]
     assert pair["pairs"] == 2 and pair["median_percent"] == pytest.approx(vs_op["savings_percent"].median())
-    assert pair["median_ci_low"] <= pair["median_percent"] <= pair["median_ci_high"]
+    assert np.isnan(pair["median_ci_low"]) and np.isnan(pair["median_ci_high"])  # two pairs: too few for an interval
     assert paired.loc[("D&C-DC", "reference"), "pairs"] == 0  # the reference never completed a walk
     spread = pd.read_csv(report_dir / "acot_spread.csv")
     walked = spread.dropna(subset=["acot"])  # the reference's failed walk has no ACOT and no spread

@@ -212,10 +212,13 @@ def savings_figure(savings: pd.DataFrame, experiment: str, paired: pd.DataFrame 
                                                          & (paired["baseline"] == baseline)]
             if summary is not None and not summary.empty and summary["pairs"].iloc[0] > 0:
                 median = summary.iloc[0]
-                ax.axhspan(median["median_ci_low"], median["median_ci_high"], color=color, alpha=0.12, lw=0)
+                interval = np.isfinite(median["median_ci_low"])  # none from too few pairs (statistics.MIN_PAIRS_FOR_CI)
+                if interval:
+                    ax.axhspan(median["median_ci_low"], median["median_ci_high"], color=color, alpha=0.12, lw=0)
                 ax.axhline(median["median_percent"], color=color, ls=":", lw=1.2,
-                           label=f"{label}: median {median['median_percent']:.1f} % "
-                                 f"[{median['median_ci_low']:.1f}, {median['median_ci_high']:.1f}]")
+                           label=f"{label}: median {median['median_percent']:.1f} % " + (
+                               f"[{median['median_ci_low']:.1f}, {median['median_ci_high']:.1f}]" if interval
+                               else f"({int(median['pairs'])} pairs: no interval)"))
         ax.axhline(0, color="black", lw=0.8)
         ax.set_xlabel("N (nodes per step)")
         _integer_n(ax)

@@ -30,6 +30,9 @@ OWN_STEPS_RTOL = 1e-6
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
 CONFIDENCE = 0.95
+MIN_PAIRS_FOR_CI = 5
+"""Fewer paired savings than this get no interval: a percentile bootstrap over two or three values only restates
+them (two pairs give their range as the "95 %" interval)."""
 
 SPREAD_COLUMNS = ["experiment", "method", "N", "acot", "spread_walks", "spread_low", "spread_high", "spread_median",
                   "spread_percent"]
@@ -87,8 +90,8 @@ def bootstrap_ci(values, statistic: Callable[[np.ndarray], np.ndarray] = np.medi
 
 def paired_savings(savings: pd.DataFrame, minima: pd.DataFrame) -> pd.DataFrame:
     """Per D&C method × baseline: the savings at every N where both have a complete verified walk, summarised as
-    median and mean with their bootstrap 95 % intervals over N, beside the saving from the two minima (ours, and the
-    thesis's from its published minima).
+    median and mean with their bootstrap 95 % intervals over N (from :data:`MIN_PAIRS_FOR_CI` pairs on), beside the
+    saving from the two minima (ours, and the thesis's from its published minima).
 
     The median is the headline: one N stuck in a local optimum moves a single saving by hundreds of percent, which
     moves the mean but not the median. The mean is kept beside it; where the two disagree, outliers decide the mean.
@@ -109,9 +112,10 @@ def paired_savings(savings: pd.DataFrame, minima: pd.DataFrame) -> pd.DataFrame:
                "published_min_vs_min_percent": _published_saving(experiment, thesis.get((experiment, method)),
                                                                  thesis.get((experiment, baseline)))}
         if len(paired):
+            row |= {"median_percent": float(np.median(paired)), "mean_percent": float(np.mean(paired))}
+        if len(paired) >= MIN_PAIRS_FOR_CI:
             median_ci, mean_ci = bootstrap_ci(paired, np.median), bootstrap_ci(paired, np.mean)
-            row |= {"median_percent": float(np.median(paired)), "median_ci_low": median_ci[0],
-                    "median_ci_high": median_ci[1], "mean_percent": float(np.mean(paired)),
+            row |= {"median_ci_low": median_ci[0], "median_ci_high": median_ci[1],
                     "mean_ci_low": mean_ci[0], "mean_ci_high": mean_ci[1]}
         rows.append(row)
     return pd.DataFrame(rows, columns=PAIRED_SAVINGS_COLUMNS)
