@@ -690,3 +690,22 @@ def test_a_plugin_value_the_store_cannot_hold_costs_its_case_not_the_store(tmp_p
     assert rows[bad.key]["status"] == "error"
     assert "its result cannot be stored" in rows[bad.key]["message"] and "column acot" in rows[bad.key]["message"]
     assert not isinstance(rows[bad.key]["walk_path"], str)  # no file of a walk whose row was refused
+
+
+def test_a_method_renamed_in_the_suite_renames_its_stored_cases_on_resume(tmp_path: Path) -> None:
+    """The label is not part of a case's key, so a resumed run skips the case; its row takes the new label, or the
+    reports would show the method's N under two names."""
+    case = walk_case(8)
+
+    class Solving:
+        name, jobs = "solving", 1
+
+        def run(self, cases):
+            for case in cases:
+                yield CaseOutcome(case, "solved", "", 1.0, {"acot": 0.3}, {"walk.json": b"{}"})
+
+    run_suite(suite_of([case]), tmp_path, Solving())
+    renamed = replace(case, method="OP-DC renamed")
+    assert renamed.key == case.key
+    run_suite(suite_of([renamed]), tmp_path, Solving(), resume=True)
+    assert rows_by_key(tmp_path)[case.key]["method"] == "OP-DC renamed"

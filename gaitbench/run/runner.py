@@ -329,6 +329,7 @@ def run_suite(suite, store_dir: str | Path, executor, *, resume: bool = False, r
                 f"{store.directory} already holds {len(present)} of the {len(suite.cases)} cases of this suite; "
                 "pass --resume to run only the missing ones, or --store to write somewhere else"
             )
+        _relabel(store, present)
         pending = [case for case in suite.cases if case.key not in finished]
         pending = sorted(pending, key=lambda case: case.n_nodes) if smallest_first else largest_first(pending)
         if 0 < len(pending) < executor.jobs and not getattr(executor, "fans_out", False):
@@ -442,6 +443,17 @@ def _run_stem(suite_name: str) -> str:
 
 class RunRefused(Exception):
     """A run that would mix with or overwrite stored results; the message says which flag to pass."""
+
+
+def _relabel(store: ResultStore, present: list[Case]) -> None:
+    """Give the stored cases a resumed suite skips the method labels it gives them now: a label is not part of a
+    case's key, so a method renamed in the suite would otherwise split its column in the reports between the old
+    name (the N stored before) and the new."""
+    labels = {case.key: case.method for case in present}
+    stored = {row["case_key"]: row["method"] for row in store.cases() if row["case_key"] in labels}
+    renamed = {key: {"method": labels[key]} for key, method in stored.items() if method != labels[key]}
+    if renamed:
+        store.update_cases(renamed)
 
 
 def _now() -> str:
