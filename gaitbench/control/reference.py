@@ -20,10 +20,10 @@ from gaitbench.model.energetics import cost_of_transport, hip_energy, hip_power
 from gaitbench.model.experiment import Experiment
 from gaitbench.model.mechanics import BipedModel
 from gaitbench.plugins import PluginRegistry, load_registry
-from gaitbench.problem.gait_problem import ProblemOptions, role_robot_vector
+from gaitbench.problem.gait_problem import ProblemOptions
 from gaitbench.problem.objective import NET_POWER
 from gaitbench.problem.trajectory import StepTrajectory
-from gaitbench.solve.verify import fine_grid_running_cost, push_off_charge
+from gaitbench.solve.verify import trajectory_cost
 from gaitbench.solve.walk_file import load_walk
 from gaitbench.step_info import StepInfo
 from gaitbench.walk_types import WalkResult
@@ -160,11 +160,7 @@ class Reference:
 def net_power_cot(trajectory: StepTrajectory, info: StepInfo, experiment: Experiment, model: BipedModel) -> float:
     """The step's COT measured as tracking measures the tracked robot's: ∫|τ·q̇| dt on a fine grid of its
     interpolant plus the kinetic energy its push-off adds, over M g D."""
-    robot = experiment.robot
-    energy = fine_grid_running_cost(trajectory, NET_POWER, role_robot_vector(robot, info.stance))
-    if model.dof == 4:
-        energy += push_off_charge(model, trajectory, "impulse")
-    return float(cost_of_transport(energy, robot.total_mass, info.chord, robot.g))
+    return float(trajectory_cost(trajectory, NET_POWER, experiment.robot, info.chord, model, "impulse")[2])
 
 
 def _reference_step(trajectory: StepTrajectory, info: StepInfo, cot: float) -> ReferenceStep:

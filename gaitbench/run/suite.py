@@ -165,8 +165,8 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
             matched[index] += 1
         if not hits:
             kept.append(case)
-    known = {key: set().union(*(tags[key] for _, tags in planned)) for exclusion in spec.exclusions
-             for key in exclusion.match}
+    excluded_by = {key for exclusion in spec.exclusions for key in exclusion.match}
+    known = {key: set().union(*(tags[key] for _, tags in planned)) for key in excluded_by}  # every case's tags
     for exclusion, count in zip(spec.exclusions, matched, strict=True):
         for key, values in exclusion.match.items():  # each value of an array, not only the array as a whole
             unknown = [value for value in values if value not in known[key]]

@@ -19,6 +19,7 @@ import numpy as np
 from gaitbench.acceptance import OBJECTIVE_RTOL, StepVerification, objective_gap
 from gaitbench.model.energetics import cost_of_transport, hip_energy, push_off_work
 from gaitbench.model.mechanics import BipedModel
+from gaitbench.model.robot import RobotParameters
 from gaitbench.model.simulate import OpenLoop, simulate
 from gaitbench.problem.gait_problem import StepData, role_robot_vector
 from gaitbench.problem.objective import Objective
@@ -38,12 +39,8 @@ def verify_step(
     p = data.parameter_vector()
     max_defect = built.nlp.block_violations(x, p)["dynamics"]
 
-    objective = built.structure.objective
-    energy = fine_grid_running_cost(trajectory, objective, role_robot_vector(data.robot, data.stance))
-    push_off_energy = push_off_charge(model, trajectory, built.structure.options.push_off_cost) \
-        if model.dof == 4 else 0.0
-    cot = cost_of_transport(energy + objective.event_cost(push_off_energy), data.robot.total_mass, data.chord,
-                            data.robot.g)
+    energy, push_off_energy, cot = trajectory_cost(trajectory, built.structure.objective, data.robot, data.chord,
+                                                   model, built.structure.options.push_off_cost)
 
     resim = resimulate(trajectory, data, model)
     errors = np.abs(np.hstack([resim.q[:, :2] - trajectory.q, resim.dq[:, :2] - trajectory.dq])).max(axis=1)
@@ -60,6 +57,16 @@ def verify_step(
         objective_gap=gap,
         objective_agrees=None if gap is None else bool(abs(gap) <= OBJECTIVE_RTOL),
     )
+
+
+def trajectory_cost(trajectory: StepTrajectory, objective: Objective, robot: RobotParameters, chord: float,
+                    model: BipedModel, push_off_cost: str) -> tuple[float, float, float]:
+    """What a step's trajectory costs under ``objective``, read exactly from its interpolant: the running cost on a
+    fine grid (J), what the push-off is charged (J; 4-DOF ``model`` only) and the COT of both over the chord."""
+    energy = fine_grid_running_cost(trajectory, objective, role_robot_vector(robot, trajectory.stance))
+    push_off_energy = push_off_charge(model, trajectory, push_off_cost) if model.dof == 4 else 0.0
+    cot = cost_of_transport(energy + objective.event_cost(push_off_energy), robot.total_mass, chord, robot.g)
+    return energy, push_off_energy, cot
 
 
 def push_off_charge(model: BipedModel, trajectory: StepTrajectory, accounting: str) -> float:
