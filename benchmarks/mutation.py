@@ -59,7 +59,7 @@ MUTANTS = (
     Mutant("verify: COT without the push-off energy", "gaitbench/solve/verify.py",
            "energy + objective.event_cost(push_off_energy)", "energy"),
     Mutant("verify: push-off only in 2 DOF", "gaitbench/solve/verify.py",
-           "        if model.dof == 4 else 0.0", "        if model.dof == 2 else 0.0"),
+           "push_off_cost) if model.dof == 4 else 0.0", "push_off_cost) if model.dof == 2 else 0.0"),
     Mutant("verify: resim_error at the first node", "gaitbench/solve/verify.py",
            "resim_error=float(errors[-1])", "resim_error=float(errors[0])"),
     Mutant("verify: resim_max_error at the last node", "gaitbench/solve/verify.py",
