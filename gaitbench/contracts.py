@@ -318,7 +318,8 @@ class Disturbance(Protocol):
 
     def impulse(self, q: np.ndarray, dq: np.ndarray, step: StepInfo) -> np.ndarray:
         """The generalized impulse acting with the push-off at the end of ``step``, evaluated at the configuration
-        ``q`` and the post-push-off velocity ``dq``."""
+        ``q`` and the post-push-off velocity ``dq``. It resists the motion: the loop applies it at most until a
+        velocity it resists comes to rest, never reversing it."""
 
 
 @runtime_checkable

@@ -186,7 +186,8 @@ class _ClosedLoop:
         dq_plus = self.model.push_off(q, dq, impulse, info.stance)[0]
         extra = np.asarray(self.disturbance.impulse(q, dq_plus, info), dtype=float)
         if np.any(extra):
-            dq_plus = dq_plus - np.linalg.solve(self.model.mass_matrix(q, info.stance), extra)
+            dq_plus = resisted_velocities(dq_plus, np.linalg.solve(self.model.mass_matrix(q, info.stance), extra),
+                                          extra)
         st = info.stance - 1
         axis = np.r_[0.0, 0.0, -math.sin(q[st]), math.cos(q[st])]
         return dq_plus, float(impulse * axis @ (dq + dq_plus) / 2)
@@ -255,3 +256,18 @@ def _rms(times: np.ndarray, values: np.ndarray) -> np.ndarray:
     if duration <= 0:
         return np.abs(values[-1])
     return np.sqrt(np.trapezoid(values**2, times, axis=0) / duration)
+
+
+def resisted_velocities(dq: np.ndarray, change: np.ndarray, impulse: np.ndarray) -> np.ndarray:
+    """The velocities ``dq − α·change`` after a disturbance's generalized ``impulse`` (whose effect on the
+    velocities is ``change`` = M⁻¹ impulse), with α ≤ 1 as large as lets no velocity the impulse resists change sign.
+
+    A disturbance's impulse resists the motion (friction's does, evaluated at the velocities ``dq``); applied in full
+    it would, on a slow foot, reverse the very velocity it brakes and add energy. Scaled this way it at most brings
+    that velocity to rest, as a Coulomb impulse does."""
+    alpha = 1.0
+    for velocity, delta, push in zip(dq, change, impulse, strict=True):
+        if push * velocity > 0 and delta * velocity > 0 and abs(delta) > abs(velocity):
+            alpha = min(alpha, velocity / delta)
+    return dq - alpha * change
+
