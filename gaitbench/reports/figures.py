@@ -165,7 +165,8 @@ def completion_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
 
 
 def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
-    """Lowest (solid) and highest (dashed) per-step COT of every method against N."""
+    """Lowest (solid) and highest (dashed) per-step COT of every method against N, on a log axis: a walk's cheapest
+    step (near-passive) and its dearest differ by orders of magnitude."""
     data = acot[acot["experiment"] == experiment]
     if data["cot_min"].notna().sum() == 0:
         return None
@@ -175,7 +176,8 @@ def cot_bounds_figure(acot: pd.DataFrame, experiment: str) -> Figure | None:
         ax.plot(rows["N"], rows["cot_max"], "^--", color=color, ms=4, label=f"{method} max")
     ax.set_xlabel("N (nodes per step)")
     _integer_n(ax)
-    ax.set_ylabel("per-step COT")
+    ax.set_yscale("log", nonpositive="mask")
+    ax.set_ylabel("per-step COT (log scale)")
     ax.set_title(f"{experiment}: minimum and maximum per-step COT")
     legend_below(fig, ncol=2)
     return Figure(f"fig-cot-bounds-{slug(experiment)}", f"Per-step COT bounds: {experiment}",
