@@ -729,3 +729,27 @@ def test_a_verdict_is_not_written_onto_a_walk_recorded_again_since_it_was_read(t
     assert changed == [cases[1].key]
     rows = stored(tmp_path)
     assert rows[cases[0].key]["verified"] == 1 and rows[cases[1].key]["verified"] is None
+
+
+def test_a_merge_holds_the_write_lock_from_its_check_to_its_row(tmp_path: Path, monkeypatch) -> None:
+    """Between the merge's check that a case is unchanged and its row, no other writer gets in: one placing the
+    case's files finds the store locked (before, it could record the case there and have it overwritten)."""
+    import gaitbench.run.merge as merge
+    import gaitbench.run.store as store_module
+
+    case = fake_case(6)
+    run_suite(suite_of([case], name="b"), tmp_path / "b", Tagged("b"))
+    other = ResultStore.create(tmp_path / "a", lock_timeout=0.2)
+    place = store_module.place_case
+    attempts = []
+
+    def place_while_another_writer_tries(*args, **kwargs):
+        with pytest.raises(StoreError, match="lock"):
+            other.update_cases({case.key: {"message": "written meanwhile"}})
+        attempts.append("refused")
+        return place(*args, **kwargs)
+
+    monkeypatch.setattr(store_module, "place_case", place_while_another_writer_tries)
+    with other, ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
+        summary = merge.merge_store(into, source)
+    assert attempts == ["refused"] and summary.copied == [case.key]

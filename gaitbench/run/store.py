@@ -381,7 +381,8 @@ class ResultStore:
         ``unchanged`` (the ``run_id`` and ``finished_at`` of the case's row when the caller read the store; None for
         each where it had no row) makes the write conditional, for a writer that holds no claim
         (:mod:`gaitbench.run.merge`): a case whose row changed since, or that a live run has claimed, is left alone,
-        and False is returned.
+        and False is returned. The check, the files and the row are one write transaction, so no run records the
+        case between them.
 
         ``files`` maps file names to their contents; the row's path columns should name them through
         :func:`case_file`. The case directory has the permissions of the umask, as if made by ``mkdir``, and the
@@ -401,24 +402,23 @@ class ResultStore:
         problem = row_problem("cases", dict(zip(CASE_COLUMNS, values, strict=True)), self.database)
         if problem:
             raise BadRow(f"case {key}: {problem}")
-        with self._failing(f"record case {key}"):
+        with self._write(f"record case {key}"):
             stored = self._db.execute("SELECT status, walk_path, tracking_path, run_id, finished_at FROM cases "
                                       "WHERE case_key = ?", (key,)).fetchone()
             if unchanged is not None and (
                     (tuple(stored[3:]) if stored is not None else (None, None)) != tuple(unchanged)
                     or key in self.live_claims()):
                 return False
+            release = "DELETE FROM claims WHERE case_key = ? AND run_id = ?"
             if stored is not None and stored[0] == "solved" and row.get("status") != "solved":
-                with self._write(f"release case {key}"):
-                    self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
+                self._db.execute(release, (key, row.get("run_id")))
                 return False
             if files:
                 named = stored is not None and any(
                     isinstance(path, str) and path.startswith(case_file(key) + "/") for path in stored[1:3])
                 place_case(self.directory, key, files, 0o777 & ~umask(), replaceable=named)
-        with self._write(f"record case {key}"):
             self._db.execute(insert_statement("cases", CASE_COLUMNS, replace=True), values)
-            self._db.execute("DELETE FROM claims WHERE case_key = ? AND run_id = ?", (key, row.get("run_id")))
+            self._db.execute(release, (key, row.get("run_id")))
         return True
 
     def update_cases(self, updates: Mapping[str, Mapping[str, Any]],
