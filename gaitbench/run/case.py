@@ -76,7 +76,9 @@ class Case:
     objective: PluginChoice = DEFAULT_OBJECTIVE
     """What every step minimises and every COT measures."""
     time_limit_s: float | None = None
-    """The walk's deadline: no solve starts after it (:class:`gaitbench.contracts.WalkProblem`)."""
+    """The walk's deadline: no solve starts after it (:class:`gaitbench.contracts.WalkProblem`). Not part of the
+    key: it bounds how long the case may take, not what it computes, so a longer limit does not re-solve the cases
+    that finished; the ones that ran out of time run again with ``--resume --retry-failed``."""
     plugin_dirs: tuple[str, ...] = ()
     checkpoint: str | None = None
     """Where the walk saves its solved steps as it goes, so that a run of the case after this one was stopped goes on
