@@ -77,14 +77,14 @@ def test_paired_savings_over_the_n_where_both_walks_are_complete():
     assert statistics.MIN_PAIRS_FOR_CI > 3
     for column in ("median_ci_low", "median_ci_high", "mean_ci_low", "mean_ci_high"):
         assert math.isnan(row[column]), column
-    more = {"OP-DC": {n: 0.5 for n in (10, 20, 30, 40, 50)}}
+    more = {"OP-DC": {n: 0.5 for n in (10, 20, 30, 40, 50, 60)}}
     rows = [{"method": "OP-DC", "N": n, "acot": acot} for n, acot in more["OP-DC"].items()]
     rows += [_dc(n, 0.45) for n in more["OP-DC"]]
     five = _cases(rows)
     info5, acot5 = case_frame.method_info(five), tables.acot_table(five)
     wide = statistics.paired_savings(tables.savings_table(acot5, info5), tables.method_minima(acot5, info5))
     wide = wide.set_index("baseline").loc["OP-DC"]
-    assert wide["pairs"] == 5 and wide[["median_ci_low", "median_ci_high"]].tolist() == pytest.approx([10.0, 10.0])
+    assert wide["pairs"] == 6 and wide[["median_ci_low", "median_ci_high"]].tolist() == pytest.approx([10.0, 10.0])
     # Minimum against minimum: D&C's 0.36 at N = 10 against OP-DC's 0.30 at N = 30, a loss.
     assert row["min_vs_min_percent"] == pytest.approx(100 * (0.30 - 0.36) / 0.30)
     # The thesis's forward minima: D&C-DC 0.0695 against OP-DC 0.3615 (thesis §5.2–5.5).
@@ -289,3 +289,14 @@ def test_the_dearest_step_of_a_dc_exception_comes_from_its_verified_steps_not_a_
     assert set(exceptions.index) == {110, 130}
     assert (exceptions.loc[110, "dearest_step"], exceptions.loc[110, "dearest_step_excess"]) == (2, pytest.approx(0.8))
     assert pd.isna(exceptions.loc[130, "dearest_step"])
+
+
+def test_the_fewest_pairs_given_an_interval_get_one_narrower_than_their_range():
+    """An interval that is only the savings' range says nothing a table of them does not: at the fewest pairs that
+    get one, the median's interval of distinct savings lies strictly inside their range."""
+    savings = np.linspace(-30.0, 40.0, statistics.MIN_PAIRS_FOR_CI)
+    low, high = statistics.bootstrap_ci(savings, np.median)
+    assert savings.min() < low < high < savings.max()
+    fewer = savings[:-1]
+    assert statistics.bootstrap_ci(fewer, np.median) == pytest.approx((fewer.min(), fewer.max()))
+

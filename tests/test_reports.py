@@ -206,7 +206,7 @@ def test_html_contains_every_figure_and_table(report_dir, store):
         assert element in html, element
     assert "data:image/svg+xml;base64," in html
     assert "http://" not in html.replace("http://www.w3.org/2000/svg", "")  # self-contained: no network
-    for figure in ("fig-acot-forward", "fig-savings-forward"):
+    for figure in ("fig-acot-forward-1-step", "fig-savings-forward-1-step"):  # the store walks 1 step of 11
         assert (report_dir / "figures" / f"{figure}.svg").is_file()
     failed = pd.read_csv(report_dir / "failed_cases.csv")
     assert failed["message"].iloc[0].split(":")[0] in html  # the failed case's reason is listed
@@ -250,11 +250,11 @@ def test_a_dc_gait_shows_its_verified_trajectory_with_the_patchwork_over_it(stor
     assert gait.acot == pytest.approx(walk["strategy_details"]["verified_acot"])
     assert any("verified trajectory" in note and "dashed" in note for note in gait.notes)
     angles = next(figure for figure in section.figures if figure.id.startswith("fig-gait-angles-"))
-    assert "chosen patchwork (claimed)" in angles.svg and "Solid: the verified trajectory" in angles.caption
+    assert "chosen patchwork (claimed)" in angles.svg and "Solid: the reported trajectory" in angles.caption
     from gaitbench.reports.html import HtmlReporter
 
     page = HtmlReporter().write(build_report(store, gait=key), store.parent / "dc-page")[-1].read_text()
-    assert "claimed COT (patchwork)" in page and "shown: the verified (polished) trajectory" in page
+    assert "claimed COT (patchwork)" in page and "shown: the reported (polished or stand-in) trajectory" in page
 
 
 def test_a_dc_walk_stored_without_its_polished_trajectory_shows_the_patchwork(store, tmp_path):
@@ -354,7 +354,7 @@ def test_writing_a_report_tells_its_progress(store, tmp_path):
     write_report(store, tmp_path / "out", progress=lambda what, done, total: calls.append((what, done, total)))
     parts = [what for what, _, _ in calls]
     assert parts[0] == "reading the store" and parts[-1] == "done"
-    assert "figures of forward" in parts and any(part.startswith("gait of forward") for part in parts)
+    assert "figures of forward [1 step]" in parts and any(part.startswith("gait of forward") for part in parts)
     assert parts.index("writing csv") < parts.index("writing html")
     assert [done for _, done, _ in calls] == list(range(len(calls)))
     assert all(done <= total for _, done, total in calls) and calls[-1][1] == calls[-1][2]
@@ -552,7 +552,7 @@ def test_empty_tables_say_why(store, report_dir, tmp_path):
     page = write_report(copy, tmp_path / "no-dc-report").read_text()
     reason = "No decrease-and-conquer method in this store for this experiment"
     assert page.count(reason) == 2  # the paired savings and the savings at each N
-    assert 'id="tbl-savings-forward">' + reason in page
+    assert 'id="tbl-savings-forward-1-step">' + reason in page
 
 
 def test_empty_cells_show_a_dash(report_dir):
@@ -561,7 +561,20 @@ def test_empty_cells_show_a_dash(report_dir):
     assert {format_value(value) for value in (None, math.nan, pd.NA, pd.NaT, np.nan)} == {"—"}
     html = (report_dir / "index.html").read_text()
     assert "&lt;NA&gt;" not in html and "<NA>" not in html and ">nan<" not in html
-    published = pd.read_csv(report_dir / "published_savings.csv")
+
+
+def test_a_shortened_walk_is_its_own_experiment_and_never_set_against_the_thesis(store, report_dir, tmp_path):
+    """The store walks 1 of the forward experiment's 11 steps: its rows are labelled so, and the thesis's
+    whole-walk figures meet none of them. The same rows as whole walks are compared."""
+    assert set(pd.read_csv(report_dir / "acot.csv")["experiment"]) == {"forward [1 step]"}
+    assert pd.read_csv(report_dir / "published_acot.csv").empty
+    assert pd.read_csv(report_dir / "published_savings.csv").empty
+    whole = tmp_path / "whole"
+    shutil.copytree(store, whole)
+    with sqlite3.connect(whole / "results.sqlite") as db:
+        db.execute("UPDATE cases SET steps = NULL")
+    published = build_report(whole).tables["published_savings"]
+    assert set(published["experiment"]) == {"forward"}
     assert published["min_N"].isna().any()  # the reference's rows have none: the page shows them as "—"
 
 
@@ -634,7 +647,7 @@ def _synthetic_store(directory: Path) -> Path:
     (only a partial walk), OP-DM complete at both; one row stored before stop causes were recorded."""
     from gaitbench.run.store import ResultStore
 
-    base = {"suite": "synthetic", "run_id": "r1", "experiment": "forward", "experiment_options": {}, "steps": 2,
+    base = {"suite": "synthetic", "run_id": "r1", "experiment": "forward", "experiment_options": {}, "steps": None,
             "transcription": "hermite-simpson", "solver": "ipopt", "strategy": "one-phase", "repetition": 0,
             "wall_time_s": 1.0, "iterations": 10, "message": ""}
     complete = {"status": "solved", "stop_cause": "complete", "retries": 0, "steps_solved": 2,
@@ -723,7 +736,27 @@ def test_a_partial_gait_chosen_by_hand_is_labelled_partial(store, tmp_path):
     assert section.gait.notes[0].startswith("Partial walk: it stopped at step 2 (solver;")
     assert all("partial walk" in figure.title for figure in section.figures)
     assert key not in set(report.tables["acot"].get("case_key", []))
-    assert tables.chosen_gaits(report.cases)["forward"] != key
+    assert tables.chosen_gaits(report.cases)["forward [1 step]"] != key
+
+
+def test_an_unverified_gait_chosen_by_hand_is_labelled_and_never_called_verified(store, tmp_path):
+    """A complete walk that failed verification, shown with ``--gait``: its label, its first note and its page say
+    so, with the reason, and its ACOT is shown as unranked, not as a verified figure."""
+    copy = tmp_path / "unverified"
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        (key,) = db.execute("SELECT case_key FROM cases WHERE method = 'OP-DC' AND N = 8").fetchone()
+        db.execute("UPDATE cases SET verified = 0, verification_failure = 'step 2: re-simulation error 0.9 > 0.5' "
+                   "WHERE case_key = ?", (key,))
+    report = build_report(copy, gait=key)
+    (section,) = report.gaits
+    assert "unverified walk" in section.gait.label and section.gait.acot is None
+    assert section.gait.unranked_acot is not None and section.gait.unranked_acot > 0
+    assert section.gait.notes[0].startswith("Unverified walk: step 2: re-simulation error 0.9 > 0.5.")
+    html = write_report(copy, tmp_path / "out", gait=key).read_text()
+    assert "not verified (ACOT" in html
+    heading = html[html.index(f'id="gait-{key}'):]
+    assert "verified ACOT" not in heading[:heading.index("</p>")]
 
 
 def test_provenance_lists_the_plugins_that_failed_to_load():

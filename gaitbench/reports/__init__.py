@@ -157,6 +157,9 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
             continue
         if loaded.partial:
             loaded.notes.insert(0, _partial_note(case))
+        elif loaded.verification_failure:
+            loaded.notes.insert(0, f"Unverified walk: {loaded.verification_failure}. It is in no ranking of this "
+                                   "report; what follows describes the motion, not a verified result.")
         claim = None
         if case["is_dc"]:
             claims = tables["dc_claims"]

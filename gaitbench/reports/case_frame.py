@@ -46,17 +46,18 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     """The store's case rows with the columns every table uses.
 
     ``experiment`` becomes a label (the plugin name, with its options for parametrized experiments other than
-    ``energetics``), ``method`` falls back to strategy/transcription/solver when a case has no label and names its
-    objective in brackets unless it is the thesis's ``net-power`` (``objective``; null in stores that predate it),
-    so that no table sets numbers of different objectives side by side unnamed,
+    ``energetics``, and ``[K steps]`` where the suite walked only K), ``method`` falls back to
+    strategy/transcription/solver when a case has no label and names its objective in brackets unless it is the
+    thesis's ``net-power`` (``objective``; null in stores that predate it), so that no table sets numbers of
+    different objectives side by side unnamed,
     ``store_acot`` keeps the store's ``acot`` and ``acot`` becomes the verified ACOT (see the module docstring).
     ``complete`` marks complete walks; ``acot``, ``claimed_acot``, ``cot_min`` and ``cot_max`` are kept only for them,
     and ``partial_acot`` holds the mean COT of the steps an incomplete walk solved. ``stop_cause`` is filled from the
     status where a store predates the column.
     """
     df = cases.copy()
-    for column in ("stop_cause", "stop_step", "stop_status", "retries", "back_ups", "cot_steps", "steps_solved",
-                   "objective", "verified", "verification_failure", "max_join_mismatch", "join_energy",
+    for column in ("steps", "stop_cause", "stop_step", "stop_status", "retries", "back_ups", "cot_steps",
+                   "steps_solved", "objective", "verified", "verification_failure", "max_join_mismatch", "join_energy",
                    "thesis_reading_acot"):
         if column not in df.columns:
             df[column] = None
@@ -66,8 +67,8 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
             df[column] = pd.Series(dtype=object)
         return df
     df["experiment_name"] = df["experiment"]
-    df["experiment"] = [_experiment_label(name, options) for name, options in
-                        zip(df["experiment"], df["experiment_options"], strict=True)]
+    df["experiment"] = [_experiment_label(name, options, steps) for name, options, steps in
+                        zip(df["experiment"], df["experiment_options"], df["steps"], strict=True)]
     df["method"] = [method if isinstance(method, str) and method else
                     f"{strategy} {transcription} {solver}" for method, strategy, transcription, solver in
                     zip(df["method"], df["strategy"], df["transcription"], df["solver"], strict=True)]
@@ -119,11 +120,17 @@ def _partial_acot(cot_steps: Any) -> float:
     return float(np.mean(solved)) if solved else math.nan
 
 
-def _experiment_label(name: str, options: Any) -> str:
-    if not options or name == ENERGETICS:
+def _experiment_label(name: str, options: Any, steps: Any) -> str:
+    """The experiment's name, with its options, and with the number of steps where the suite walked only those: a
+    shortened walk is another problem than the experiment's whole walk, never averaged with it or set against the
+    thesis's figures."""
+    if name == ENERGETICS:
         return name
-    listed = ", ".join(f"{key}={value}" for key, value in sorted(dict(options).items()))
-    return f"{name}({listed})"
+    label = name
+    if options:
+        label += "(" + ", ".join(f"{key}={value}" for key, value in sorted(dict(options).items())) + ")"
+    walked = number(steps)
+    return f"{label} [{int(walked)} step{'' if walked == 1 else 's'}]" if math.isfinite(walked) else label
 
 
 def parse_details(value: Any) -> dict:

@@ -58,6 +58,11 @@ class Gait:
     notes: list[str] = field(default_factory=list)
     partial: bool = False
     """The walk stopped early (a ``--gait`` choice can be one): its label, and so every figure's title, says so."""
+    verification_failure: str | None = None
+    """Why a complete walk failed verification (a ``--gait`` choice can be one): its label says so, and its ACOT
+    is shown as the unranked figure it is, never as a verified one."""
+    unranked_acot: float | None = None
+    """An unverified walk's ACOT of its reported motions."""
     overlay: list[GaitStep] = field(default_factory=list)
     """Decrease and conquer's chosen (patchwork) trajectory when :attr:`steps` are the polished ones: drawn dashed."""
     trajectory: str = "walk"
@@ -69,8 +74,8 @@ class Gait:
 
     @property
     def label(self) -> str:
-        partial = ", partial walk" if self.partial else ""
-        return f"{self.experiment}, {self.method}, N = {self.N} (case {self.case_key}{partial})"
+        status = ", partial walk" if self.partial else ", unverified walk" if self.verification_failure else ""
+        return f"{self.experiment}, {self.method}, N = {self.N} (case {self.case_key}{status})"
 
 
 def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
@@ -109,9 +114,9 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
         worst = max((step.max_defect for step in overlay if step.max_defect is not None), default=None)
         notes.append("Decrease & Conquer: the gait shown is the verified trajectory, the motion each step reports: "
                      "the complete problem re-solved (polished) from the chosen synthesized trajectory, or the "
-                     "complete Second Phase solution where that is cheaper or the polish failed; its ACOT is the "
-                     "verified one. The chosen trajectory itself, a node-wise patchwork of NLP solutions whose COT "
-                     "is the thesis's claim, is drawn dashed"
+                     "complete Second Phase solution where that is cheaper or the polish failed; the walk's ACOT "
+                     "is this trajectory's. The chosen trajectory itself, a node-wise patchwork of NLP solutions "
+                     "whose COT is the thesis's claim, is drawn dashed"
                      + (f"; it need not satisfy the dynamics (largest dynamics residual {worst:.3g})" if worst
                         is not None else "") + ". "
                      + ("Each step starts from the post-impact state of the motion before it, so the steps join "
@@ -130,12 +135,15 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
                      "The verified ACOT is that of the polished trajectories, re-solved from it, which this walk "
                      "does not hold for every step (solved with polish = false, a polish that failed, or stored "
                      "before gaitbench kept them).")
+    complete = bool(case.get("complete", case["status"] == "solved"))
+    unverified = case.get("verification_failure") if complete and not case.get("ranked", True) else None
     return Gait(case_key=case["case_key"], experiment=case["experiment"], method=case["method"],
                 strategy=case["strategy"], transcription=case["transcription"], N=int(case["N"]), phase=phase,
                 acot=_float(case["acot"]), claimed_acot=_float(case["claimed_acot"]), steps=steps,
                 footholds=footholds, leg_length=experiment.robot.l, notes=notes,
-                partial=not bool(case.get("complete", case["status"] == "solved")), overlay=overlay,
-                trajectory=trajectory)
+                partial=not complete, overlay=overlay, trajectory=trajectory,
+                verification_failure=unverified,
+                unranked_acot=_float(case.get("verified_acot")) if unverified else None)
 
 
 def _steps(walk: WalkFile, records: list[dict], figures, name: str = "") -> list[GaitStep]:
@@ -206,8 +214,9 @@ def _series(ax, gait: Gait, attribute: str, times: str, names: tuple[str, str]) 
 def _shown(gait: Gait) -> str:
     """What the figures draw, said in their captions."""
     if gait.trajectory == "polished":
-        return (" Solid: the verified trajectory (each step polished: re-solved from the chosen trajectory); dashed: "
-                "the chosen synthesized patchwork, whose COT is the claim.")
+        return (" Solid: the reported trajectory (each step polished, re-solved from the chosen trajectory, or the "
+                "complete Second Phase solution standing in); dashed: the chosen synthesized patchwork, whose COT is "
+                "the claim.")
     return ""
 
 

@@ -82,8 +82,8 @@ def acot_table(df: pd.DataFrame) -> pd.DataFrame:
     if sweep.empty:
         return pd.DataFrame(columns=ACOT_COLUMNS)
     complete, ranked = sweep["complete"].astype(bool), sweep["ranked"].astype(bool)
-    solved = sweep.assign(is_solved=complete, is_ranked=ranked, complete_defect=sweep["max_defect"].where(ranked),
-                          complete_resim=sweep["max_resim_error"].where(ranked))
+    solved = sweep.assign(is_solved=complete, is_ranked=ranked, ranked_defect=sweep["max_defect"].where(ranked),
+                          ranked_resim=sweep["max_resim_error"].where(ranked))
     grouped = solved.groupby(["experiment", "method", "N"], sort=False)
     table = grouped.agg(cases=("case_key", "size"), solved=("is_solved", "sum"), verified=("is_ranked", "sum"),
                         acot=("acot", "mean"),
@@ -91,7 +91,7 @@ def acot_table(df: pd.DataFrame) -> pd.DataFrame:
                         cot_min=("cot_min", "min"),
                         cot_max=("cot_max", "max"), wall_time_s=("wall_time_s", "mean"),
                         iterations=("iterations", "mean"), retries=("retries", "sum"),
-                        max_defect=("complete_defect", "max"), max_resim_error=("complete_resim", "max")).reset_index()
+                        max_defect=("ranked_defect", "max"), max_resim_error=("ranked_resim", "max")).reset_index()
     table["completion_rate"] = table["solved"] / table["cases"]
     table["retries"] = table["retries"].astype(int)
     table["verified"] = table["verified"].astype(int)
