@@ -141,9 +141,10 @@ def test_the_spread_is_over_every_complete_walk_at_neighbouring_n():
 def _consistency_cases() -> pd.DataFrame:
     """OP-DC: 3.0 at the coarse N = 10–30 (not checked), median 1.0 over N = 40–90, then 1.10 (inside 15 %), 1.30
     (alone outside, its second step the dear one), 1.0, 0.80 and 1.5 (two neighbours outside), and no complete walk
-    at N = 150. D&C-DC has no complete walk in the band: no reference, not checked."""
+    at N = 150; 1.55 at N = 300, with no N near it. D&C-DC has no complete walk in the band: no reference, not
+    checked."""
     ladder = {10: 3.0, 20: 3.0, 30: 3.0, 40: 1.0, 50: 1.0, 60: 0.9, 70: 1.1, 80: 1.0, 90: 1.0, 100: 1.10, 110: 1.30,
-              120: 1.0, 130: 0.80, 140: 1.5}
+              120: 1.0, 130: 0.80, 140: 1.5, 300: 1.55}
     rows = [{"method": "OP-DC", "N": n, "acot": acot, "cot_steps": [1.0, 1.6] if n == 110 else [acot, acot]}
             for n, acot in ladder.items()]
     rows.append({"method": "OP-DC", "N": 150, "acot": 9.0, "status": "incomplete"})
@@ -157,7 +158,8 @@ def test_the_consistency_check_lists_every_finer_n_outside_the_tolerance():
     exceptions = statistics.consistency_exceptions(acot, df)
     assert list(exceptions.columns) == statistics.CONSISTENCY_COLUMNS
     found = {row.N: (row.ratio, row.isolated) for row in exceptions.itertuples()}
-    assert found.keys() == {110, 130, 140}
+    assert found.keys() == {110, 130, 140, 300}
+    assert found[300] == (pytest.approx(1.55), None)  # no neighbour: neither alone nor part of a drift
     assert found[110] == (pytest.approx(1.30), True)
     assert found[130] == (pytest.approx(0.80), False) and found[140] == (pytest.approx(1.5), False)
     row = exceptions.set_index("N").loc[110]
@@ -174,7 +176,7 @@ def test_the_consistency_check_lists_every_finer_n_outside_the_tolerance():
     # The tolerance and the band are parameters.
     assert statistics.consistency_exceptions(acot, df, tolerance=0.6).empty
     moved = statistics.consistency_exceptions(acot, df, band=(100, 120))  # median 1.10 over N = 100–120
-    assert set(moved["N"]) == {130, 140} and moved["reference_median"].iloc[0] == pytest.approx(1.10)
+    assert set(moved["N"]) == {130, 140, 300} and moved["reference_median"].iloc[0] == pytest.approx(1.10)
 
 
 # --- selecting the inconsistent walks for solving again ------------------------------------------------------------

@@ -177,7 +177,8 @@ def consistency_exceptions(acot: pd.DataFrame, df: pd.DataFrame | None = None,
                          "acot": float(group["acot"].iloc[i]), "reference_median": median,
                          "reference_N": f"{low}–{high}", "ratio": float(ratios[i]),
                          "deviation_percent": 100 * float(ratios[i] - 1),
-                         "isolated": bool(len(neighbours)) and bool((np.abs(neighbours - 1) <= tolerance).all()),
+                         "isolated": (bool((np.abs(neighbours - 1) <= tolerance).all()) if len(neighbours)
+                                      else None),  # no verified neighbour: neither isolated nor a drift
                          "dearest_step": dearest, "dearest_step_excess": excess,
                          "ground_at_dearest_step": ground(experiment, dearest) if ground and dearest else None,
                          "case_keys": " ".join(keys.get((experiment, method, int(n_values[i])), []))})
