@@ -16,6 +16,7 @@ join are the solver's and the chain's own accuracy, independent of N.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 MAX_DEFECT = 1e-6
@@ -109,7 +110,9 @@ def step_failures(check: StepVerification, limits: Thresholds, walk_cot: float |
     reasons = []
     if not check.max_defect <= limits.max_defect:
         reasons.append(f"dynamics defect {check.max_defect:.1e} > {limits.max_defect:.0e}")
-    if not check.resim_error <= limits.max_resim_error:
+    if math.isinf(check.resim_error):
+        reasons.append("re-simulation failed before the step's end")
+    elif not check.resim_error <= limits.max_resim_error:
         reasons.append(f"re-simulation error {check.resim_error:.2g} > {limits.max_resim_error:.2g}")
     gap = judged_gap(check, walk_cot)
     if gap is not None and not abs(gap) <= limits.max_objective_gap:

@@ -98,6 +98,23 @@ def test_a_stopped_walk_goes_on_after_its_saved_steps(tmp_path: Path) -> None:
     assert walk.resumed["steps"] == 3 and walk.wall_time_s >= walk.resumed["elapsed_s"] > 0
 
 
+def test_a_step_that_ends_after_the_deadline_is_not_saved_for_a_resume(tmp_path: Path, monkeypatch) -> None:
+    """A step finished past the walk's deadline may have skipped starts or retries for time; a resumed walk with
+    more time must solve it in full, so the checkpoint keeps only the steps finished in time."""
+    problem = _problem(steps=3)
+    late = {"now": False}
+    monkeypatch.setattr(WalkProblem, "out_of_time", property(lambda self: late["now"]))
+
+    def solve(problem, index, state):
+        late["now"] = index == 2  # the deadline passes during step 2
+        return StepOutcome(index, problem.experiment.stance_leg(index), "converged", "",
+                           trajectory=SimpleNamespace(seed=lambda: None),
+                           verification=SimpleNamespace(cot=0.1, resim_error=0.0), next_state=state + 1.0)
+
+    walk_step_by_step(_with(problem, WalkCheckpoint(tmp_path / "walk", FINGERPRINT)), "test", solve)
+    assert [step.index for step in WalkCheckpoint.open(tmp_path / "walk", FINGERPRINT).steps] == [1]
+
+
 def _with(problem: WalkProblem, checkpoint: WalkCheckpoint) -> WalkProblem:
     from dataclasses import replace
 

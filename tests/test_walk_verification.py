@@ -94,6 +94,35 @@ def test_each_threshold_fails_a_step_beyond_it(figures, reason):
     assert len(failures) == 1 and reason in failures[0]
 
 
+def test_a_step_whose_re_simulation_fails_inside_it_fails_verification_and_says_so(forward, monkeypatch):
+    """An integration that gives up inside the step returns the states it reached: the step is no motion the robot
+    follows (its end error is infinite), not a crash of the whole case, nor an error of the states it did reach."""
+    import gaitbench.model.simulate as simulate
+    from gaitbench.solve.verify import verify_step
+
+    problem = WalkProblem(forward, REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 12, steps=1)
+    state = problem.start_state()
+    data = problem.step_data(1, state)
+    built = problem.transcription.build(problem.structure("second"))
+    times = np.arange(12) * data.time_step
+    trajectory = nodal_trajectory(times, np.tile(state[:2], (12, 1)), np.tile(state[2:], (12, 1)), np.zeros((12, 2)),
+                                  0.0, 1)
+    integrate, calls = simulate.solve_ivp, []
+
+    def gives_up_on_the_fifth_interval(*args, **kwargs):
+        calls.append(1)
+        result = integrate(*args, **kwargs)
+        if len(calls) == 5:
+            result.status, result.message = -1, "Required step size is less than spacing between numbers."
+        return result
+
+    monkeypatch.setattr(simulate, "solve_ivp", gives_up_on_the_fifth_interval)
+    check = verify_step(built, built.variables(trajectory, data), data, trajectory, BipedModel(forward.robot, 4))
+    assert check.resim_error == np.inf and check.resim_max_error == np.inf
+    assert "re-simulation failed before the step's end" in step_failures(check, Thresholds.for_nodes(12))
+
+
 def test_the_thresholds_scale_with_the_grid():
     coarse, fine = Thresholds.for_nodes(10), Thresholds.for_nodes(200)
     assert coarse.max_resim_error == pytest.approx(0.5) and fine.max_resim_error == pytest.approx(0.025)

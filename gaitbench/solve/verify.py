@@ -43,7 +43,10 @@ def verify_step(
                                                    model, built.structure.options.push_off_cost)
 
     resim = resimulate(trajectory, data, model)
-    errors = np.abs(np.hstack([resim.q[:, :2] - trajectory.q, resim.dq[:, :2] - trajectory.dq])).max(axis=1)
+    reached = min(len(resim.q), len(trajectory.q))  # fewer nodes when the integration failed inside the step
+    errors = np.abs(np.hstack([resim.q[:reached, :2] - trajectory.q[:reached],
+                               resim.dq[:reached, :2] - trajectory.dq[:reached]])).max(axis=1)
+    errors = np.r_[errors, np.full(len(trajectory.q) - reached, np.inf)]  # a motion the robot could not follow
     objective_cot = built.objective_cot(x, data) if built.cost_of_transport is not None else None
     gap = None if objective_cot is None else objective_gap(float(cot), objective_cot)
     return StepVerification(

@@ -100,7 +100,9 @@ def walk_step_by_step(problem: WalkProblem, strategy: str, solve_step: StepSolve
             on_step(outcome)
         if not outcome.solved:
             break
-        if checkpoint is not None:
+        if checkpoint is not None and not problem.out_of_time:
+            # A step that ends after the deadline may have been cut short (starts, retries or a polish skipped for
+            # time): a resumed walk, given more time, solves it again in full rather than walk on from it.
             checkpoint.save(walk.steps, backed_up, earlier + time.perf_counter() - started, of=problem.n_steps)
         states.append(outcome.next_state)
         index += 1
