@@ -797,3 +797,27 @@ def test_look_ahead_must_be_a_positive_whole_number_of_second_phase_steps():
         REGISTRY.create("strategy", "one-phase", look_ahead=0)
     with pytest.raises(ValueError, match="needs phase = 'second'"):
         REGISTRY.create("strategy", "one-phase", phase="first", look_ahead=2)
+
+
+@pytest.mark.parametrize(("late_after", "where"), [("first", "before its complete Second Phase"),
+                                                    ("second", "before its sections")])
+def test_decrease_and_conquer_stops_a_step_the_deadline_passes_in(monkeypatch, late_after, where):
+    """Each of a step's sections and its polish may run a whole solve's share of the time limit: once the walk's
+    deadline has passed, the step ends with ``time_limit`` instead of starting them."""
+    import gaitbench_plugins.strategies.decrease_and_conquer as dc
+
+    late = {"now": False}
+    monkeypatch.setattr(WalkProblem, "out_of_time", property(lambda self: late["now"]))
+    solve = dc.solve_with_retries
+
+    def deadline_passes_during(problem, index, built, data, phase="second", **kwargs):
+        outcome = solve(problem, index, built, data, phase=phase, **kwargs)
+        late["now"] = late["now"] or phase == late_after
+        return outcome
+
+    monkeypatch.setattr(dc, "solve_with_retries", deadline_passes_during)
+    problem = WalkProblem(REGISTRY.create("experiment", "forward"), REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 8, steps=2)
+    walk = DecreaseAndConquer().solve(problem)
+    (step,) = walk.steps
+    assert step.status == SolverStatus.TIME_LIMIT.value and where in step.message and not walk.complete

@@ -52,7 +52,7 @@ from gaitbench.solve.solver import prepare, section_solver
 from gaitbench.solve.synthesis import complete_sections, synthesize
 from gaitbench.solve.verify import push_off_charge, verify_step
 from gaitbench.solve.walk import solve_with_retries, walk_step_by_step
-from gaitbench.solver_result import SolverResult
+from gaitbench.solver_result import SolverResult, SolverStatus
 from gaitbench.walk_types import StepOutcome, WalkResult
 
 FIRST_PHASE = "first phase"
@@ -116,6 +116,8 @@ class DecreaseAndConquer:
             first.message = f"First Phase: {first.message}"
             first.details = {**first.details, "failed_in": FIRST_PHASE}
             return first
+        if problem.out_of_time:
+            return _time_ran_out(index, data, "before its complete Second Phase")
         complete_built = transcription.build(problem.structure("second"))
         complete = solve_with_retries(problem, index, complete_built, data, seed=first.trajectory.seed())
         details = {"first_phase": first.summary(), "complete": complete.summary(),
@@ -127,6 +129,8 @@ class DecreaseAndConquer:
             complete.details = details
             return complete
 
+        if problem.out_of_time:  # each section, and the polish, may run a whole solve's limit past the deadline
+            return _time_ran_out(index, data, "before its sections")
         h = data.time_step
         candidates, starts, failed = [complete.trajectory], [0], []
         section_data = {k0: StepData(data.robot, data.stance, np.r_[first.trajectory.q[k0 - 1],
@@ -169,6 +173,8 @@ class DecreaseAndConquer:
             "verified": verification.max_defect <= DYNAMICS_TOLERANCE,
         }
         polished = None
+        if self.polish and problem.out_of_time:
+            return _time_ran_out(index, data, "before its polish")
         if self.polish:
             # IPOPT calls some of these feasible problems infeasible from a good start (stairs, N = 30, step 6): the
             # solver's own remedies from the same seed, never another seed, which would polish another trajectory
@@ -182,6 +188,12 @@ class DecreaseAndConquer:
                    f"{verification.max_defect:.1e}); the walk goes on from its {source['motion']} motion")
         return StepOutcome(index, data.stance, motion.status, message, complete.solver_result, trajectory,
                            verification, next_state=motion.next_state, details=details, polished=motion)
+
+
+def _time_ran_out(index: int, data: StepData, where: str) -> StepOutcome:
+    """A step the walk's deadline stopped partway: not finished, so neither reported nor saved for a resume."""
+    return StepOutcome(index, data.stance, SolverStatus.TIME_LIMIT.value,
+                       f"time limit: the walk's time ran out during step {index}, {where}")
 
 
 def reported_motion(complete: StepOutcome, polished: StepOutcome | None, n_nodes: int
