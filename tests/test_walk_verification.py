@@ -312,3 +312,26 @@ def test_gaitbench_verify_store_writes_each_walks_verdict_into_its_row(tmp_path,
     assert good["thesis_reading_acot"] == pytest.approx(walk.thesis_reading_acot)
     assert good["max_join_mismatch"] < 1e-9
     assert bad["verified"] == 0 and bad["verification_failure"].startswith("walk file unreadable")
+
+
+def test_gaitbench_verify_store_leaves_a_walk_whose_plugin_is_not_installed_unjudged(tmp_path, forward):
+    """A walk solved with a plugin this environment lacks is not a broken file: its row keeps the verdict it had,
+    and the command says which plugin is missing and how to go on."""
+    from gaitbench.run.store import ResultStore, case_file
+
+    walk, path = _solved_walk(tmp_path / "walk", forward)
+    header = json.loads((path.parent / "walk.json").read_text())
+    files = {"walk.json": json.dumps(header | {"objective": "no-such-objective"}).encode(),
+             "walk.npz": (path.parent / "walk.npz").read_bytes()}
+    store, key = tmp_path / "store", "c" * 16
+    with ResultStore.create(store) as results:
+        results.start_run({"run_id": "r1", "suite": "s", "started_at": "2026-01-01T00:00:00+00:00"})
+        results.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 10, "status": "solved",
+                             "acot": walk.acot, "walk_path": case_file(key, "walk.json"), "verified": 1}, files)
+    result = CliRunner().invoke(main, ["verify", "--store", str(store)])
+    assert result.exit_code == 1 and "not installed here" in result.output and "no-such-objective" in result.output
+    with ResultStore.open(store) as results:
+        (row,) = results.cases()
+    assert row["verified"] == 1 and row["verification_failure"] is None
+    alone = CliRunner().invoke(main, ["verify", str(store / case_file(key, "walk.json"))])
+    assert alone.exit_code == 1 and "cannot be verified here" in alone.output

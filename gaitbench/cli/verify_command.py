@@ -37,6 +37,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     Exit status 0 when every walk is verified, 1 when one is not (or its stored ACOT is off by more than 1 %),
     2 when a file cannot be read.
     """
+    from gaitbench.plugins import UnknownPluginError
     from gaitbench.run.pack_format import is_pack
     from gaitbench.solve.walk_file import WalkFileError, read_walk
     from gaitbench.solve.walk_verification import reverify
@@ -44,7 +45,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     if not walks and store is None:
         raise click.UsageError("name walk files, or a store with --store")
     targets: list[tuple[Path, str | None, float | None, dict]] = [(path, None, None, {}) for path in walks]
-    console, failed, updates = Console(), 0, {}
+    console, failed, updates, missing = Console(), 0, {}, []
     packed = store is not None and is_pack(store)
     if store is not None:
         stored, absent, recorded = _stored_walks(store)
@@ -59,6 +60,12 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             # a walk file that predates its transcription's options: the store's row has them
             walk_file.header.setdefault("transcription_options", transcription_options)
             walk = reverify(walk_file, ctx.obj.registry)
+        except UnknownPluginError as exc:  # the walk is fine; this environment lacks a plugin it was solved with
+            if case_key is None:
+                raise click.ClickException(f"{path}: cannot be verified here: {exc}") from None
+            missing.append(f"{path}: {exc}")
+            failed += 1
+            continue
         except WalkFileError as exc:
             if case_key is None:
                 raise click.BadParameter(str(exc), param_hint="WALKS") from None
@@ -73,6 +80,11 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             click.echo(json.dumps(report))
         else:
             _print(console, report)
+    if missing:  # no verdict: the walk was not checked, and its row keeps the one it had
+        note = (f"{count(len(missing), 'stored walk')} not verified, verdicts not recorded: a plugin they were solved "
+                f"with is not installed here; install it and run again. {missing[0]}"
+                + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""))
+        click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
     if packed and not as_json:
         console.print(f"verdicts not recorded: {store} is a pack, which is read-only; `gaitbench runs unpack` "
                       "makes a store that can record them")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class WholeWalk:
 
     def _initial_guess(self, problem: WalkProblem, chain: WalkChain, start: np.ndarray) -> tuple[np.ndarray, dict]:
         if self.guess == "one-phase":
-            baseline = OnePhase().solve(problem)
+            baseline = OnePhase().solve(replace(problem, checkpoint=None))  # a guess: never the case's checkpoint
             if baseline.complete:
                 states = [start] + [step.next_state for step in baseline.steps[:-1]]
                 known = [(state, step.trajectory.seed()) for state, step in zip(states, baseline.steps, strict=True)]
