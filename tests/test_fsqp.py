@@ -395,3 +395,29 @@ def test_phase_one_takes_an_elastic_step_where_the_projection_leaves_the_bounds(
     assert calls[:4] == [("piqp", 1), ("piqp", 1), ("clarabel", 1), ("piqp", 2)]
     phase_one = [record for record in solver.log if record.phase == "feasibility"]
     assert phase_one[0].step < 1  # the elastic step reaches the bound, and the line search takes part of it
+
+
+@pytest.mark.parametrize(("name", "objective", "rows", "x0", "optimum"), [
+    # a flat direction: one QP step reaches the bound; the QP's bound multiplier belongs to x + d, not to x
+    ("linear to its bound", lambda x: -x[0], lambda x: [], [0.5], -1.0),
+    # the gait steps' power split P = s⁺ − s⁻, cost s⁺ + s⁻: both parts start far above zero
+    ("power split", lambda x: x[1] + x[2], lambda x: [("split", x[0] - x[1] + x[2], 0.0, 0.0), ("P", x[0], 0.3, 0.3)],
+     [0.3, 0.8, 0.5], 0.3),
+])
+def test_the_qp_subproblem_is_not_converged_before_the_optimum(name, objective, rows, x0, optimum):
+    """Where the exact Hessian has no curvature the QP steps straight to a bound and its stationarity identity at x
+    holds to rounding: only the bound multipliers' complementarity at x shows that x is not optimal (both were
+    reported converged at their starting points)."""
+    b = NLPBuilder()
+    x = b.variable("x", (len(x0), 1), 0.0 if len(x0) > 1 else 0.0, 10.0 if len(x0) > 1 else 1.0)
+    for row, expression, lower, upper in rows(x):
+        b.constrain(row, expression, lower, upper)
+    nlp = b.build(ca.SX.sym("p", 0), objective(x))
+    result = FSQP().solve(nlp, np.zeros(0), np.array(x0, dtype=float))
+    assert result.status == SolverStatus.CONVERGED, result.message
+    assert result.objective == pytest.approx(optimum, abs=1e-7), name
+    functions = nlp.functions
+    jacobian = np.asarray(ca.DM(functions.jacobian(result.x, np.zeros(0))))
+    residual = np.asarray(functions.gradient(result.x, np.zeros(0))).ravel() + jacobian.T @ result.multipliers
+    interior = (result.x > nlp.lbx + 1e-6) & (result.x < nlp.ubx - 1e-6)
+    assert np.max(np.abs(residual[interior]), initial=0.0) < 1e-7  # the multipliers returned are those of x*

@@ -20,6 +20,15 @@ then Clarabel, which solves the convexified QPs PIQP stops on. Each tries a QP w
 swaps only once its crawl shows (docs/decisions/0002-qp-backends.md)."""
 
 
+_QP_SETTINGS: dict[str, dict] = {
+    "piqp": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100},
+    "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10},
+}
+"""Each backend's accuracy, ``sqp``'s default ``qp_tolerance`` (and its PIQP iteration limit): the convergence test
+reads stationarity off the QP's own optimality conditions, so a QP solved only to the NLP's tolerance (the backends'
+defaults, ~1e-8) leaves that much KKT error where there is none."""
+
+
 def solve_qp(problem: qpsolvers.Problem, order: RetryOrder) -> qpsolvers.Solution:
     """The QP by each backend under each of its settings in ``order``'s turn, until one solves it (or returns a
     reduced-accuracy optimum)."""
@@ -30,8 +39,8 @@ def solve_qp(problem: qpsolvers.Problem, order: RetryOrder) -> qpsolvers.Solutio
             try:
                 with warnings.catch_warnings(), quiet_stdout():
                     warnings.simplefilter("ignore")
-                    solution = qpsolvers.solve_problem(problem, solver=solver,
-                                                       **{**BACKEND_SETTINGS.get(solver, {}), **extra})
+                    solution = qpsolvers.solve_problem(problem, solver=solver, **{
+                        **BACKEND_SETTINGS.get(solver, {}), **_QP_SETTINGS.get(solver, {}), **extra})
             except Exception as error:  # a backend that rejects the problem counts as a failed QP
                 statuses.append(f"{label}: {type(error).__name__}")
                 continue

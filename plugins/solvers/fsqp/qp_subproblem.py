@@ -115,13 +115,17 @@ def minimize_qp(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.n
             normals = sp.diags(1 / row_norms(jacobian[loose])) @ jacobian[loose] if loose.size else None
             curvature = base @ d + (augmentation * (normals.T @ (normals @ d)) if normals is not None else 0.0)
             stationarity = np.max(np.abs(curvature), initial=0.0)
-            complementarity = np.max(np.abs(u[general]) * np.minimum(1.0, -c[general]), initial=0.0)
+            # The QP's bound multipliers hold the bounds at x + d: one at a bound x is far from leaves ∇f + Jᵀu
+            # unbalanced at x, which the QP's identity above does not show (a flat direction stepped to its bound).
+            complementarity = max(np.max(np.abs(u[general]) * np.minimum(1.0, -c[general]), initial=0.0),
+                                  _bound_complementarity(form, x, bound_multipliers))
             scale = max(1.0, (np.sum(np.abs(u)) + np.sum(np.abs(bound_multipliers))) / (100 * (m + n)))
             violation = max(np.max(c[general], initial=0.0), np.max(np.abs(c[equal]), initial=0.0))
             error = max(stationarity / scale, complementarity / scale, violation)
             if error > options.tolerance:  # the same test with least-squares multipliers at x (see _refined_error)
-                error = min(error, max(_refined_error(form, x, c, jacobian, linear, u, bound_multipliers, -curvature)
-                                       / scale, violation))
+                refined, corrected = _refined_error(form, x, c, jacobian, linear, u, bound_multipliers, -curvature)
+                if max(refined / scale, violation) < error:
+                    error, u = max(refined / scale, violation), corrected  # the multipliers that error is of
             streak = streak + 1 if error <= _ACCEPTABLE_TOLERANCE else 0
             if options.print_level >= 2:
                 print(f"      KKT {error:.2e}: stationarity {stationarity / scale:.2e}, complementarity "
@@ -185,16 +189,26 @@ def _shift(form: NLPForm, x: np.ndarray, multipliers: np.ndarray, base: sp.csc_m
     return float(np.max((base - form.hessian(x, clipped)).diagonal(), initial=0.0))
 
 
+def _bound_complementarity(form: NLPForm, x: np.ndarray, z: np.ndarray) -> float:
+    """max |z_i|·min(1, distance from x to the bound z_i holds) over the free variables: zero when every bound the
+    QP's multipliers hold is active at x (``qpsolvers``: z_i > 0 holds the upper bound, z_i < 0 the lower)."""
+    distance = np.where(z > 0, form.ubx - x, x - form.lbx)
+    return float(np.max(np.where(form.free, np.abs(z) * np.minimum(1.0, np.abs(distance)), 0.0), initial=0.0))
+
+
 def _refined_error(form: NLPForm, x: np.ndarray, c: np.ndarray, jacobian: sp.csr_matrix, linear: np.ndarray,
-                   u: np.ndarray, z: np.ndarray, residual: np.ndarray) -> float:
+                   u: np.ndarray, z: np.ndarray, residual: np.ndarray) -> tuple[float, np.ndarray]:
     """Stationarity, sign and complementarity error (unscaled by IPOPT's s_d) with the QP's multipliers corrected by
-    least squares over the rows the step holds (the thesis's π of (11.8), on the QP's active set).
+    least squares over the rows the step holds (the thesis's π of (11.8), on the QP's active set), and those
+    corrected multipliers.
 
     The QP's multipliers belong to x + d: ∇f + Jᵀu + z = −Hd at x. On the thesis cost's flat valleys d stays ~0.03
     long while f moves by 1e-9, and ∇²L d (~1e-5) keeps that test from ever passing (forward step 2, DMOC, N = 50).
     Most of ∇²L d lies in the span of the active gradients, where other multipliers absorb it; what they cannot
-    absorb, or absorb only with the wrong sign, is the KKT error at x."""
+    absorb, or absorb only with the wrong sign, is the KKT error at x. The QP's bound multipliers ``z`` are taken
+    out of ``residual`` (∇f + Jᵀu + z): at x only the bounds active there may take up what remains."""
     general, equal = np.arange(form.n_general), np.arange(form.n_inequalities, form.m)
+    residual = residual - z
     rows = np.concatenate([general[(linear[general] >= -_ACTIVE) | (u[general] > 0)], equal])
     lower = form.free & (x - form.lbx <= _ACTIVE)
     upper = form.free & (form.ubx - x <= _ACTIVE)
@@ -206,16 +220,18 @@ def _refined_error(form: NLPForm, x: np.ndarray, c: np.ndarray, jacobian: sp.csr
     try:
         factor = spla.splu(normal)
     except RuntimeError:
-        return np.inf
+        return np.inf, u
     correction = np.zeros(rows.size)
     for _ in range(3):  # iterative refinement of the normal equations
         remaining = residual - active.T @ correction
         correction += factor.solve(inner @ remaining[interior])
     remaining = residual - active.T @ correction
-    multipliers = u[rows] - correction  # ∇f + Jᵀ(u − Δ) + z = the remaining residual
+    multipliers = u[rows] - correction  # ∇f + Jᵀ(u − Δ) = the remaining residual
     is_general = rows < form.n_general
-    bound = z - remaining  # the bound multipliers that take up the rest on variables at a bound
+    bound = -remaining  # the bound multipliers that take up the rest on variables at a bound
     sign = max(np.max(-multipliers[is_general], initial=0.0), np.max(bound[lower & ~upper], initial=0.0),
                np.max(-bound[upper & ~lower], initial=0.0))
     complementarity = np.max(np.abs(multipliers[is_general]) * np.minimum(1.0, -c[rows[is_general]]), initial=0.0)
-    return max(float(np.max(np.abs(remaining[interior]), initial=0.0)), sign, complementarity)
+    corrected = u.copy()
+    corrected[rows] = multipliers
+    return max(float(np.max(np.abs(remaining[interior]), initial=0.0)), sign, complementarity), corrected

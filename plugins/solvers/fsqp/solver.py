@@ -100,9 +100,12 @@ class FSQP(FSQPOptions):
     - d̃ = s − d, s the QP again with the rows linearised at x + d (second-order correction); the arc x + t d + t²d̃
       is searched with every inequality row ≤ ``tolerance`` (scaled units) and Armijo on the merit.
     - Converged when IPOPT's scaled KKT error, with the QP's multipliers, is below ``tolerance``, or below 1e-6 for
-      15 iterations (IPOPT's acceptable level). The QP's multipliers belong to x + d, so the error is also taken
-      with them corrected by least squares over the rows the step holds (at x; signs and complementarity checked):
-      on the flat valleys ‖∇²L d‖ stays ~1e-5 while f no longer moves, which the first test never passes.
+      15 iterations (IPOPT's acceptable level), or below 1e-6 where the arc search finds no step. The QP's
+      multipliers belong to x + d, so its bound multipliers must hold bounds active at x (complementarity at x),
+      and the error is also taken with the row multipliers corrected by least squares over the rows the step
+      holds (at x; signs and complementarity checked; the multipliers returned are the corrected ones): on the
+      flat valleys ‖∇²L d‖ stays ~1e-5 while f no longer moves, which the first test never passes. The QPs are
+      solved to 1e-10, as ``sqp``'s, since the test reads stationarity off their optimality conditions.
     - Phase 1 projects onto every linearised row, equalities too (a QP: least-norm step within the bounds; when
       that QP is inconsistent, the bounded Levenberg–Marquardt step on the violation, an elastic QP), until the
       inequalities hold and the equalities are within 1e-6, so that the first QP is consistent.
