@@ -882,3 +882,22 @@ def test_a_row_the_qp_keeps_off_its_bound_leaves_the_working_set():
     assert result.status is SolverStatus.CONVERGED, result.message
     assert result.iterations == _INSIDE_STEPS
     assert result.multipliers[1] == pytest.approx(1e-5, rel=1e-6)
+
+
+def test_infeasible_only_where_the_violation_cannot_decrease():
+    """x₂ = x₁² and x₂ = 2 − x₁² from (0, 5), maximising x₂ hard: the elastic QP, which still weighs the objective,
+    predicts no decrease of the violation (8) at the start; the restoration, on the violation alone, brings it down
+    to x = (0, 2), a stationary point of the violation on the symmetry line x₁ = 0, before calling it infeasible."""
+    from gaitbench.problem.nlp import NLPBuilder
+    from gaitbench_plugins.solvers.sqp import SQP
+
+    b = NLPBuilder()
+    x = b.variable("x", (2, 1))
+    b.constrain("a", x[1] - x[0] ** 2)
+    b.constrain("b", x[1] + x[0] ** 2 - 2)
+    nlp = b.build(ca.SX.sym("p", 0), -1e4 * x[1])
+    result = SQP().solve(nlp, np.zeros(0), np.array([0.0, 5.0]))
+    assert result.status == SolverStatus.INFEASIBLE, result.message
+    np.testing.assert_allclose(result.x, [0.0, 2.0], atol=1e-4)
+    off_the_line = SQP().solve(nlp, np.zeros(0), np.array([0.3, 5.0]))
+    assert off_the_line.status == SolverStatus.CONVERGED and np.allclose(off_the_line.x, [1.0, 1.0], atol=1e-6)

@@ -94,9 +94,10 @@ multipliers then restart from least squares.
 Both try one second-order correction against the Maratos effect when the full step is rejected and did not reduce θ:
 the QP again, with the constraints linearised as g(x + d) − J d + J s, accepted on the test for α = 1.
 
-INFEASIBLE (local infeasibility): x violates the constraints, and the elastic QP predicts no decrease of θ (x is a
-stationary point of the violation) or no step along its direction reduces the merit (θ, in restoration); the
-message names the backend status of the QP that failed.
+INFEASIBLE (local infeasibility): x violates the constraints, and the restoration's QP (P = I, no objective)
+predicts no decrease of θ (x is a stationary point of the violation) or no step along its direction reduces θ. The
+ℓ1 merit's elastic QP, which still weighs the objective, only hands over to the restoration when it predicts no
+decrease; the message names the backend status of the QP that failed.
 
 Convergence: the violation (max-norm) below ``tolerance`` and the stationarity/complementarity residual below
 ``tolerance`` times IPOPT's dual scaling s_d, with the current multipliers or with the ones the QP at x has just

@@ -111,7 +111,7 @@ class Run(Restoration):
         return self._stall()
 
     def _elastic_step(self, model: Model, reason: str) -> SolverResult | None:
-        """The ℓ1 merit's answer to an unusable QP: the elastic QP's step, or INFEASIBLE when it cannot reduce θ.
+        """The ℓ1 merit's answer to an unusable QP: the elastic QP's step, or the restoration when it cannot reduce θ.
         Its multipliers (up to W on relaxed rows) set the merit weights, not the next Hessian."""
         self.log["flags"] += "e"
         weight = max(1e2, 10 * float(np.max(np.abs(self.lam), initial=0.0)))
@@ -122,12 +122,15 @@ class Run(Restoration):
         # Only a clear violation can be a local infeasibility: below the acceptable level a degenerate QP's failure
         # to predict a decrease is rounding (forward HS N = 50, step 2: "infeasible" at θ = 2e-7)
         infeasible = self.lin.max_violation(self.g) > self.o.acceptable_tolerance
+        # The elastic QP still weighs the objective (against W): that it predicts no decrease of the violation does
+        # not show the violation cannot decrease; the restoration, on the violation alone, decides infeasibility
         if infeasible and self.theta - self.lin.theta(self.g + self.jac @ d) <= 1e-6 * self.theta:
-            return self._infeasible(reason, "its elastic version predicts no decrease of the violation")
+            return self._start_restoration(f"{reason}, and its elastic version predicts no decrease of the violation")
         self._update_weights(model, d, self._multipliers(outcome, model))
         accepted = self._l1_search(model, d)
         if accepted is None and infeasible:
-            return self._infeasible(reason, "no step along its elastic version's direction reduces the merit")
+            return self._start_restoration(f"{reason}, and no step along its elastic version's direction reduces "
+                                           "the merit")
         if accepted is None:
             return self._failure(f"{reason}, and no step along its elastic version's direction reduces the merit")
         # The multipliers restart from least squares, as after restoration: kept, the ones that made the QP fail
