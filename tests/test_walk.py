@@ -74,6 +74,23 @@ def test_enforced_ground_reaction_constraints_hold_at_the_solution():
     assert result.converged, result.message
     violations = built.nlp.block_violations(result.x, data.parameter_vector())
     assert violations["unilateral_contact"] < 1e-7 and violations["friction_cone"] < 1e-7
+    assert violations["impact_contact"] < 1e-7 and violations["impact_friction_cone"] < 1e-7
+
+
+
+@pytest.mark.parametrize(("mu", "holds"), [(0.25, False), (0.6, True)])
+def test_the_push_off_is_held_to_the_friction_cone(mu, holds):
+    """The push-off acts along the stance leg, at α = asin(D / 2l) to the ground's normal (tan α = 0.31 on this
+    step): a push-off of 10 N·s needs μ ≥ tan α (it was unconstrained, and a verified walk pushed off at
+    |f_t| / f_n = 1.6)."""
+    options = ProblemOptions(torque_regularization=1e-3, unilateral_contact=True, friction_coefficient=mu)
+    experiment, data, built, result = solve_step(HermiteSimpson(), "second", 21, options)
+    assert result.converged, result.message
+    assert 0.25 < np.tan(np.arcsin(data.chord / (2 * experiment.robot.l))) < 0.6
+    pushed = result.x.copy()
+    pushed[built.nlp.variable_blocks["push_off"]] = 10.0
+    violations = built.nlp.block_violations(pushed, data.parameter_vector())
+    assert (violations["impact_friction_cone"] == 0.0) == holds and violations["impact_contact"] == 0.0
 
 
 def test_the_friction_cone_stands_on_the_ground_not_on_the_horizontal():

@@ -66,7 +66,7 @@ class SimulatedStep:
     q: np.ndarray
     dq: np.ndarray
     tau: np.ndarray
-    ground_reaction: np.ndarray | None  # (friction, normal) at the stance foot, 4-DOF only
+    ground_reaction: np.ndarray | None  # (horizontal f_x, vertical f_y) at the stance foot, 4-DOF only
     scuffed: bool = False  # swing foot below the chord line just after leg crossing
     push_off_impulse: float = 0.0
     push_off_energy: float = 0.0

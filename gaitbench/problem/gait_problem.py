@@ -82,8 +82,10 @@ class ProblemOptions:
     # What the First Phase (2-DOF) minimises: "objective", the walk's objective (its COT); "effort", the thesis's
     # control effort ∫ (τ1² + τ2²) dt (§2.5; :data:`gaitbench.problem.objective.CONTROL_EFFORT`).
     first_phase_cost: str = "objective"
-    unilateral_contact: bool = False  # f_n ≥ 0 at every node (second phase)
-    friction_coefficient: float | None = None  # |f_t| ≤ μ f_n at every node (second phase)
+    # f_n ≥ 0, and |f_t| ≤ μ f_n, for the stance foot's reaction at the nodes with an acceleration (DMOC: the
+    # interior ones) and the push-off and heel-strike impulses (second phase; docs/model.md §2)
+    unilateral_contact: bool = False
+    friction_coefficient: float | None = None
 
 
 @dataclass(frozen=True)

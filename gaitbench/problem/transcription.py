@@ -308,6 +308,21 @@ def _add_step_constraints(
         mu = options.friction_coefficient
         builder.constrain_columns("friction_cone", ca.vertcat(tangential - mu * normal, -tangential - mu * normal),
                                   -np.inf, 0.0)
+    if options.unilateral_contact or options.friction_coefficient is not None:
+        # The step's largest ground impulses come at its end: the push-off's, along the stance leg from the foot, and
+        # the heel strike's at the landing foot (a no-slip plastic impact). The same cone holds them: a push-off
+        # along a leg at angle α to the ground's normal needs μ ≥ tan α.
+        _, impact = model4.heel_strike(q_end4, dq_plus, symbols.robot)
+        impulses = ca.horzcat(impulse * ca.vertcat(-ca.sin(q[0, -1]), ca.cos(q[0, -1])), impact)
+        along = ca.cos(theta) * impulses[0, :] + ca.sin(theta) * impulses[1, :]
+        across = -ca.sin(theta) * impulses[0, :] + ca.cos(theta) * impulses[1, :]
+        if options.unilateral_contact:
+            builder.constrain("impact_contact", across.T / symbols.total_mass, 0.0, np.inf)  # in m/s
+        if options.friction_coefficient is not None:
+            mu = options.friction_coefficient
+            builder.constrain("impact_friction_cone",
+                              ca.vertcat((along - mu * across).T, (-along - mu * across).T) / symbols.total_mass,
+                              -np.inf, 0.0)
     return push_off_energy
 
 

@@ -261,7 +261,9 @@ def gait_figures(gait: Gait) -> list[Figure]:
         ax.set_ylabel("ground reaction (N)")
         legend_below(fig)
         figures.append(Figure(f"fig-gait-grf-{key}", f"Ground reactions (butterfly diagram): {gait.label}",
-                              "Stance-foot ground reaction, friction and normal components, computed at each node "
+                              "Stance-foot ground reaction, horizontal f_x and vertical f_y (world axes, as the "
+                              "thesis plots it; on a slope not the friction and normal components), computed at "
+                              "each node "
                               "as the exact constraint force of the 4-DOF model (docs/model.md §2)"
                               + (", of the verified trajectory." if gait.trajectory == "polished" else ".")
                               + _thesis(gait, "ground_reaction"), render(fig)))

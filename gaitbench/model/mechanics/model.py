@@ -90,7 +90,8 @@ class BipedModel:
         return self._eval("swing_foot", stance, q)
 
     def forward_dynamics(self, q, dq, tau, stance: int):
-        """Accelerations and the stance-foot ground reaction (friction, normal); zero reaction for 2 DOF."""
+        """Accelerations and the stance-foot ground reaction (horizontal f_x, vertical f_y: world axes, not the
+        ground's); zero reaction for 2 DOF."""
         return self._eval("forward_dynamics", stance, q, dq, tau)
 
     def angular_momentum_about_swing_foot(self, q, dq, stance: int):
