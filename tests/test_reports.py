@@ -819,3 +819,22 @@ def test_the_opening_names_the_one_commit_that_solved_every_case(report_dir):
     html = (report_dir / "index.html").read_text()
     assert f"Every case was solved by one commit, <code>{commits['git_commit'][0][:12]}</code>." in html
     assert 'id="tbl-case-commits"' in html
+
+
+def test_a_gait_whose_stance_foot_pulls_on_the_ground_says_so():
+    """The reaction normal to each step's chord (on a slope, not the vertical): a foot on the ground can only push.
+    Step 2 climbs at 45°: (−400, −100) N pulls down but pushes out of the slope (normal +212 N), no pull; step 1's
+    −0.2 body weights are one."""
+    from types import SimpleNamespace
+
+    from gaitbench.reports.gait import _pulling_note
+
+    weight = 800.0
+    footholds = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]])
+    steps = [SimpleNamespace(index=1, reaction=np.array([[0.0, 800.0], [0.0, -160.0]])),
+             SimpleNamespace(index=2, reaction=np.array([[-400.0, -100.0], [0.0, 800.0]]))]
+    note = _pulling_note(steps, footholds, weight)
+    assert note.startswith("Contact: the stance foot pulls on the ground at 1 of 4 nodes, down to 0.20 body weights "
+                           "(step 1)")
+    steps[0].reaction[1, 1] = 10.0
+    assert _pulling_note(steps, footholds, weight) is None

@@ -110,6 +110,9 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
     if model is not None:
         for gait_step in steps:
             gait_step.reaction = _reactions(model, footholds[gait_step.index - 1], gait_step)
+        pulling = _pulling_note(steps, footholds, experiment.robot.total_mass * experiment.robot.g)
+        if pulling:
+            notes.append(pulling)
     if case["is_dc"] and trajectory == POLISHED:
         worst = max((step.max_defect for step in overlay if step.max_defect is not None), default=None)
         notes.append("Decrease & Conquer: the gait shown is the verified trajectory, the motion each step reports: "
@@ -178,6 +181,25 @@ def _reactions(model, foot: np.ndarray, step: GaitStep) -> np.ndarray:
         _, reaction = model.forward_dynamics(np.r_[step.q[k], foot], np.r_[step.dq[k], 0.0, 0.0], torque, step.stance)
         reactions.append(np.asarray(reaction, dtype=float).reshape(-1)[:2])
     return np.array(reactions)
+
+
+def _pulling_note(steps: list[GaitStep], footholds: np.ndarray, weight: float) -> str | None:
+    """Where the stance foot's reaction, normal to the step's chord, pulls on the ground: a motion a foot resting on
+    the ground cannot make, which only ``unilateral_contact`` rules out (docs/model.md §2)."""
+    normals = []
+    for step in steps:
+        dx, dy = footholds[step.index] - footholds[step.index - 1]
+        theta = np.arctan2(dy, dx)
+        normals.append((step.index, (-np.sin(theta) * step.reaction[:, 0] + np.cos(theta) * step.reaction[:, 1])))
+    pulled = sum(int((normal < 0).sum()) for _, normal in normals)
+    if not pulled:
+        return None
+    index, worst = min(((i, float(normal.min())) for i, normal in normals), key=lambda pair: pair[1])
+    total = sum(len(normal) for _, normal in normals)
+    return (f"Contact: the stance foot pulls on the ground at {pulled} of {total} nodes, down to "
+            f"{-worst / weight:.2f} body weights (step {index}): no foot resting on the ground can. The walk was "
+            "solved without the unilateral-contact constraint (`unilateral_contact`, off in the thesis suites, as "
+            "the thesis has none; docs/model.md §2); verification does not check it.")
 
 
 def _float(value: Any) -> float | None:
