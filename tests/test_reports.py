@@ -721,15 +721,21 @@ def test_acot_is_over_complete_walks_and_partial_walks_are_labelled(tmp_path):
     assert list(written.columns) == tables.STOP_CAUSE_COLUMNS and len(written) == 5
 
 
+def _with_op_dc_at_8(store: Path, copy: Path, assignments: str) -> str:
+    """A copy of ``store`` whose N = 8 OP-DC case has the columns ``assignments`` sets; that case's key."""
+    shutil.copytree(store, copy)
+    with sqlite3.connect(copy / "results.sqlite") as db:
+        (key,) = db.execute("SELECT case_key FROM cases WHERE method = 'OP-DC' AND N = 8").fetchone()
+        db.execute(f"UPDATE cases SET {assignments} WHERE case_key = ?", (key,))
+    return key
+
+
 def test_a_partial_gait_chosen_by_hand_is_labelled_partial(store, tmp_path):
     """The real store's failed reference case has no walk; a copy with one N = 8 OP-DC case marked as stopped shows
     its gait labelled partial and without an ACOT."""
     copy = tmp_path / "partial"
-    shutil.copytree(store, copy)
-    with sqlite3.connect(copy / "results.sqlite") as db:
-        (key,) = db.execute("SELECT case_key FROM cases WHERE method = 'OP-DC' AND N = 8").fetchone()
-        db.execute("UPDATE cases SET status = 'incomplete', stop_cause = 'solver', stop_step = 2, "
-                   "stop_status = 'infeasible', message = 'step 2: infeasible' WHERE case_key = ?", (key,))
+    key = _with_op_dc_at_8(store, copy, "status = 'incomplete', stop_cause = 'solver', stop_step = 2, "
+                                        "stop_status = 'infeasible', message = 'step 2: infeasible'")
     report = build_report(copy, gait=key)
     (section,) = report.gaits
     assert section.gait.partial and "partial walk" in section.gait.label and section.gait.acot is None
@@ -743,11 +749,8 @@ def test_an_unverified_gait_chosen_by_hand_is_labelled_and_never_called_verified
     """A complete walk that failed verification, shown with ``--gait``: its label, its first note and its page say
     so, with the reason, and its ACOT is shown as unranked, not as a verified figure."""
     copy = tmp_path / "unverified"
-    shutil.copytree(store, copy)
-    with sqlite3.connect(copy / "results.sqlite") as db:
-        (key,) = db.execute("SELECT case_key FROM cases WHERE method = 'OP-DC' AND N = 8").fetchone()
-        db.execute("UPDATE cases SET verified = 0, verification_failure = 'step 2: re-simulation error 0.9 > 0.5' "
-                   "WHERE case_key = ?", (key,))
+    key = _with_op_dc_at_8(store, copy, "verified = 0, "
+                                        "verification_failure = 'step 2: re-simulation error 0.9 > 0.5'")
     report = build_report(copy, gait=key)
     (section,) = report.gaits
     assert "unverified walk" in section.gait.label and section.gait.acot is None
