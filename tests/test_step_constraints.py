@@ -313,6 +313,24 @@ def test_small_mu_init_solves_the_stairs_first_step_that_diverges_at_n_140():
         "adaptive-mu", "first-phase-seed", "small-mu-init"]
 
 
+def test_a_look_ahead_walks_last_step_starts_from_the_last_windows_solution_of_it(monkeypatch):
+    """With H = 2 the window of steps 1–2 commits step 1 and keeps its step 2; the walk's last step, solved alone,
+    starts from that, as a window would, not from the blended guess."""
+    import gaitbench.solve.walk_chain as walk_chain
+
+    seeds = []
+    solve = walk_chain.solve_with_retries
+
+    def recorded(problem, index, built, data, seed=None, **kwargs):
+        seeds.append((index, seed))
+        return solve(problem, index, built, data, seed=seed, **kwargs)
+
+    monkeypatch.setattr(walk_chain, "solve_with_retries", recorded)
+    problem = WalkProblem(REGISTRY.create("experiment", "forward"), HermiteSimpson(), Ipopt(), 10, steps=2)
+    walk = OnePhase(look_ahead=2).solve(problem)
+    assert walk.complete and [index for index, _ in seeds] == [2] and seeds[0][1] is not None
+
+
 def test_a_look_ahead_window_tries_the_solver_s_last_resorts_after_its_remedies():
     from gaitbench.solve.walk_chain import LookAhead
 

@@ -126,8 +126,8 @@ class LookAhead:
         """Step ``index`` from ``state``; ``seed`` starts it where the last window did not reach it (a back-up)."""
         count = min(self.horizon, problem.n_steps - index + 1)
         data = problem.step_data(index, state)
-        if count == 1:
-            return solve_with_retries(problem, index, self.built, data)
+        if count == 1:  # the walk's last step: from the last window's solution of it, as a window would start
+            return solve_with_retries(problem, index, self.built, data, seed=self.seed_for(state) or seed)
         chain = self._chain(data.stance, count)
         p = chain.parameters(problem, index, state)
         known = self._known(state)
