@@ -517,10 +517,28 @@ def test_the_solve_summary_ends_on_its_verdict_and_counts_one_step_in_the_singul
     def summary(verification) -> str:
         console = Console(width=200, record=True)
         _print_walk(console, walk(verification))
-        return next(line for line in console.export_text().splitlines() if line.startswith("verified ACOT"))
+        return next(line for line in console.export_text().splitlines() if "ACOT =" in line)
 
-    assert summary(None) == "verified ACOT = 0.2500 over 1 step (2.0 s)"
     passed = types.SimpleNamespace(verified=True, reason="", steps=())
-    assert summary(passed) == "verified ACOT = 0.2500 over 1 step (2.0 s); verified"
+    assert summary(passed) == "verified ACOT = 0.2500 over 1 step (2.0 s)"
     failed = types.SimpleNamespace(verified=False, reason="step 1: defect 1e-2 above 1e-6", steps=())
-    assert summary(failed).endswith("; NOT verified: step 1: defect 1e-2 above 1e-6")
+    assert summary(failed) == "ACOT = 0.2500 over 1 step (2.0 s); NOT verified: step 1: defect 1e-2 above 1e-6"
+    assert summary(None) == "ACOT = 0.2500 over 1 step (2.0 s)"  # never called verified unchecked
+
+
+@pytest.mark.parametrize("command", ["solve", "track"])
+def test_an_out_that_would_overwrite_its_own_arrays_or_the_input_is_refused_before_any_work(invoke, tmp_path,
+                                                                                            command):
+    """The arrays go beside the JSON as .npz: ``--out x.npz`` wrote them and then the JSON over them; ``track
+    walk.json --out walk.json`` replaced the walk with its tracking. Both said "wrote" and exited 0."""
+    walk = tmp_path / "walk.json"
+    walk.write_text("{}")
+    head = ["solve", "-e", "forward", "--N", "8", "--steps", "1"] if command == "solve" else ["track", str(walk)]
+    outs = [tmp_path / "x.npz", tmp_path, tmp_path / "missing" / "x.json"]
+    if command == "track":
+        outs += [walk, tmp_path / "walk.npz"]
+    for out in outs:
+        result = invoke(*head, "--out", str(out))
+        assert result.exit_code == 2 and "--out" in result.stderr, (out, result.output)
+    assert walk.read_text() == "{}"
+

@@ -3,6 +3,8 @@ failure is a usage error naming the option to fix."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 from rich.console import Console
 from rich.table import Table
@@ -87,3 +89,22 @@ def print_table(console: Console, table: Table, wide: bool = False) -> None:
         natural = console.measure(table, options=console.options.update(max_width=100_000)).maximum
         console = Console(file=console.file, width=max(console.width, natural))
     console.print(table)
+
+
+def check_out(out: Path | None, *keep: Path) -> None:
+    """Refuse, before any work, an ``--out`` the result cannot be written to: a directory, a path ending in .npz
+    (the trajectories go beside the JSON as .npz, and would be overwritten by it), one of the files ``keep`` (the
+    input), or one in a directory that does not exist."""
+    if out is None:
+        return
+    problem = None
+    if out.is_dir():
+        problem = "is a directory; name a .json file in it"
+    elif out.suffix == ".npz":
+        problem = "ends in .npz, the name of the arrays written beside the JSON; name the .json file"
+    elif any(out.resolve() in {path.resolve(), path.with_suffix(".npz").resolve()} for path in keep):
+        problem = "would overwrite the input; name another file"
+    elif not out.resolve().parent.is_dir():
+        problem = f"is in {out.parent}, which does not exist"
+    if problem:
+        raise click.BadParameter(f"{out} {problem}", param_hint="--out")

@@ -10,7 +10,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from gaitbench.cli.common import count, create, fmt, parse_options, print_plain
+from gaitbench.cli.common import check_out, count, create, fmt, parse_options, print_plain
 
 
 def _check_memory(transcription: str, strategy: str, n_nodes: int, steps: int) -> None:
@@ -185,8 +185,8 @@ def solve(
 
     Step-by-step strategies solve each step from the heel-strike state of the previous one. Every reported step is
     checked: its largest dynamic defect, its re-simulation error, and its COT recomputed from the trajectory
-    itself. The walk stops at the first step that fails, keeping what was solved. Exit status 1 if the walk is
-    incomplete.
+    itself. The walk stops at the first step the solver fails, keeping what was solved; the thresholds are judged on
+    the whole walk at the end (joins included). Exit status 1 if the walk is incomplete or not verified.
     """
     from gaitbench.contracts import StepsOutOfRange
     from gaitbench.cores import IdleCores
@@ -195,6 +195,7 @@ def solve(
     from gaitbench.solve.walk_file import write_walk
     from gaitbench.solve.walk_verification import solve_verified
 
+    check_out(out)
     overrides = _problem_options(problem_options, absolute_value=absolute_value,
                                  torque_regularization=torque_regularization)
     cores = IdleCores.machine()
@@ -217,7 +218,7 @@ def solve(
     _print_walk(console, walk)
     if out is not None:
         console.print(f"wrote {write_walk(walk, out)}")
-    if not walk.complete:
+    if not (walk.complete and walk.verified):
         ctx.exit(1)
 
 
@@ -251,9 +252,10 @@ def _print_walk(console: Console, walk) -> None:
     console.print(table)
     verification = walk.verification
     if walk.complete:
-        summary = f"verified ACOT = {walk.acot:.4f} over {count(len(walk.steps), 'step')} ({walk.wall_time_s:.1f} s)"
-        if verification is not None:
-            summary += "; verified" if walk.verified else f"; NOT verified: {verification.reason}"
+        figure = "verified ACOT" if walk.verified else "ACOT"
+        summary = f"{figure} = {walk.acot:.4f} over {count(len(walk.steps), 'step')} ({walk.wall_time_s:.1f} s)"
+        if verification is not None and not walk.verified:
+            summary += f"; NOT verified: {verification.reason}"
         console.print(summary)
     else:
         print_plain(console, f"incomplete walk: {walk.failure}", "red")

@@ -9,7 +9,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from gaitbench.cli.common import create, fmt, parse_options, print_plain
+from gaitbench.cli.common import check_out, create, fmt, parse_options, print_plain
 from gaitbench.plugins import PluginConflictError, UnknownPluginError
 
 
@@ -47,6 +47,7 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
     from gaitbench.control.reference import TrackingInputError, load_reference
     from gaitbench.solve.walk_file import WalkFileError
 
+    check_out(out, result)
     try:
         reference = load_reference(result, ctx.obj.registry)
     except (WalkFileError, TrackingInputError, UnknownPluginError, PluginConflictError) as exc:
