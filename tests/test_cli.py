@@ -297,6 +297,28 @@ def long_labelled_store(tmp_path):
     return tmp_path / "store"
 
 
+def test_runs_show_marks_an_unverified_walks_acot_and_refuses_a_filter_that_names_nothing(invoke, tmp_path):
+    """An unverified walk's ACOT looked like a verified one's; a misspelt --method gave an empty table, read as "no
+    such cases"."""
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.create(tmp_path / "store") as store:
+        store.start_run({"run_id": "r1", "suite": "s", "started_at": "2026-01-01T00:00:00+00:00"})
+        for key, verified in (("a" * 16, True), ("b" * 16, False)):
+            store.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 10, "method": "OP-DC",
+                               "status": "solved", "acot": 0.25, "verified": verified,
+                               "verification_failure": None if verified else "step 2: re-simulation error 0.9 > 0.5"})
+    shown = invoke("runs", "show", str(tmp_path / "store"))
+    assert shown.exit_code == 0 and "0.2500" in shown.stdout and "(0.2500)" in shown.stdout
+    assert "failed verification" in shown.stdout
+    wide = invoke("runs", "show", str(tmp_path / "store"), "--wide")
+    assert "not verified: step 2: re-simulation error 0.9 > 0.5" in " ".join(wide.stdout.split())
+    for option, value in (("--method", "OP-DM"), ("--experiment", "fwd"), ("--status", "solvd")):
+        refused = invoke("runs", "show", str(tmp_path / "store"), option, value)
+        assert refused.exit_code == 2 and option in refused.stderr, refused.output
+    assert "'OP-DC'" in invoke("runs", "show", str(tmp_path / "store"), "--method", "OP-DM").stderr
+
+
 def test_runs_show_fits_80_columns_with_the_stop_cause(invoke, long_labelled_store, monkeypatch):
     monkeypatch.setenv("COLUMNS", "80")
     result = invoke("runs", "show", str(long_labelled_store))

@@ -177,21 +177,30 @@ SHOW_COLUMNS = ("experiment", "N", "method", "status", "stop cause", "ACOT")
 """What `runs show` prints by default: readable at 80 columns. `--wide` adds :data:`WIDE_COLUMNS`."""
 
 WIDE_COLUMNS = ("case", "experiment", "N", "method", "status", "stop cause", "stop step", "stop status", "ACOT",
-                "claimed", "COT min", "COT max", "retries", "time (s)", "iterations", "message")
-TEXT_COLUMNS = ("case", "experiment", "method", "status", "stop cause", "stop status", "message")
+                "verified", "claimed", "COT min", "COT max", "retries", "time (s)", "iterations", "message")
+TEXT_COLUMNS = ("case", "experiment", "method", "status", "stop cause", "stop status", "verified", "message")
 
 
 def _show_cells(row: dict) -> dict[str, str]:
-    """One store row as the cells of every `runs show` column."""
+    """One store row as the cells of every `runs show` column; ``verified`` is empty where the walk was never
+    checked (not complete, or stored before verification)."""
     cells = {"case": row["case_key"], "experiment": row["experiment"], "N": str(row["N"]),
              "method": row["method"] or row["strategy"], "status": row["status"],
              "stop cause": row["stop_cause"] or "—", "stop step": fmt(row["stop_step"], "d", ""),
              "stop status": row["stop_status"] or "", "retries": fmt(row["retries"], "d", ""),
              "time (s)": fmt(row["wall_time_s"], ".1f", ""), "iterations": fmt(row["iterations"], "d", ""),
-             "message": row["message"] or ""}
+             "message": _message(row), "verified": {1: "yes", 0: "no"}.get(row["verified"], "")}
     for column, key in (("ACOT", "acot"), ("claimed", "claimed_acot"), ("COT min", "cot_min"), ("COT max", "cot_max")):
         cells[column] = fmt(row[key], ".4f", "")
+    if row["verified"] == 0 and cells["ACOT"]:
+        cells["ACOT"] = f"({cells['ACOT']})"
     return cells
+
+
+def _message(row: dict) -> str:
+    """The case's message, and why a complete walk failed verification."""
+    failure = row.get("verification_failure") if row.get("verified") == 0 else None
+    return "; ".join(part for part in (row["message"], failure and f"not verified: {failure}") if part)
 
 
 @runs.command("show")
@@ -203,8 +212,9 @@ def _show_cells(row: dict) -> dict[str, str]:
               help="Only this experiment's cases (repeatable).")
 @click.option("--method", "methods", multiple=True, metavar="LABEL",
               help="Only this method's cases: its suite label, or its strategy where it has none (repeatable).")
-@click.option("--status", "statuses", multiple=True, metavar="STATUS",
-              help="Only cases with this status: solved, incomplete, error, timeout, crashed (repeatable).")
+@click.option("--status", "statuses", multiple=True,
+              type=click.Choice(["solved", "incomplete", "error", "timeout", "crashed"]),
+              help="Only cases with this status (repeatable).")
 @click.option("--inconsistent", is_flag=True,
               help="Only the complete walks that fail the report's consistency check (consistency.csv): a finer N "
                    "whose ACOT lies more than --tolerance from the method's median over --band. `gaitbench run "
@@ -217,8 +227,9 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
     by --experiment, --method and --status.
 
     By default the table fits 80 columns: experiment, N, method, status, why the walk stopped (stop cause:
-    complete, geometry, solver, verification, time_limit, error, crashed) and the verified ACOT. --wide shows
-    everything else.
+    complete, geometry, solver, verification, time_limit, error, crashed) and the ACOT, in parentheses where the
+    walk failed the whole-walk verification (reports rank verified walks only). --wide shows everything else, with
+    a verified column and why a walk failed verification in its message.
     """
     from gaitbench.run.store import ResultStore
     from gaitbench.run.store_schema import StoreError
@@ -229,6 +240,12 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
         flagged = inconsistent_keys(store_dir, band, tolerance) if inconsistent else None
     except StoreError as error:
         raise click.ClickException(str(error)) from None
+    for option, wanted, held in (("--experiment", experiments, {row["experiment"] for row in rows}),
+                                 ("--method", methods, {row["method"] or row["strategy"] for row in rows})):
+        unknown = sorted(set(wanted) - held)
+        if unknown:  # an empty table would read as "no such cases", not as a name that is not there
+            raise click.BadParameter(f"{', '.join(map(repr, unknown))} is not in this store; it has "
+                                     f"{', '.join(map(repr, sorted(held))) or 'no cases'}", param_hint=option)
     rows = [row for row in rows if (flagged is None or row["case_key"] in flagged)
             and (not experiments or row["experiment"] in experiments)
             and (not methods or (row["method"] or row["strategy"]) in methods)
@@ -243,6 +260,8 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
     for row in rows:
         cells = _show_cells(row)
         table.add_row(*(cells[column] for column in columns))
+    if any(row["verified"] == 0 for row in rows):
+        table.caption = "(ACOT): the walk failed verification" + ("" if wide else "; --wide says why")
     print_table(Console(), table, wide)
 
 
