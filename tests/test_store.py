@@ -753,3 +753,19 @@ def test_a_merge_holds_the_write_lock_from_its_check_to_its_row(tmp_path: Path, 
     with other, ResultStore.create(tmp_path / "a") as into, ResultStore.open(tmp_path / "b") as source:
         summary = merge.merge_store(into, source)
     assert attempts == ["refused"] and summary.copied == [case.key]
+
+
+@pytest.mark.parametrize("where", ["file", "database"])
+def test_an_empty_file_is_no_store_and_reading_it_leaves_it_empty(tmp_path: Path, where: str) -> None:
+    """`runs show` on an empty file (or a store whose results.sqlite a failed copy left empty) turned it into a new,
+    empty store and showed "0 cases"."""
+    if where == "file":
+        path = empty = tmp_path / "empty"
+    else:
+        path, empty = tmp_path / "store", tmp_path / "store" / DATABASE
+        path.mkdir()
+    empty.write_bytes(b"")
+    result = CliRunner().invoke(main, ["runs", "show", str(path)])
+    assert result.exit_code == 1 and "an empty file, not a results store" in result.output
+    assert empty.stat().st_size == 0
+

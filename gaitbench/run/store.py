@@ -169,6 +169,9 @@ class ResultStore:
         if not database.is_file():
             raise StoreError(f"{directory}: no results store here (expected {DATABASE}); "
                              "pass the directory given to `gaitbench run --store`, or the suite's output directory")
+        if database.stat().st_size == 0:  # SQLite would take it for a new database, and migrating would fill it
+            raise StoreError(f"{database}: an empty file, not a results store (a copy that failed, or a full disk?); "
+                             "nothing was changed")
         check_file(database)
         writable = not packed and os.access(database.parent, os.W_OK) and os.access(database, os.W_OK)
         if writable:
