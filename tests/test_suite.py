@@ -287,6 +287,13 @@ def _solver(entry: str) -> str:
          ["[tracking].options.fall: hip_fraction = 2: expected a fraction in [0, 1)"]),
         (BASE + "[tracking]\noptions = { sample_rate = 0 }\n",
          ["[tracking].options.sample_rate: expected a number > 0, found an integer (0)"]),
+        # a disturbance that cannot act on an experiment would fail every case after its walk was solved
+        (BASE.replace('["forward"]', '[{ name = "energetics" }]') + "[tracking]\ncontroller = 'thesis'\n",
+         ["[tracking].disturbance: 'friction' on experiment 'energetics': experiment 'energetics' has no friction "
+          "parameters"]),
+        (BASE.replace('name = "t"', 'name = "t"\nsteps = 2') + "[tracking]\ndisturbance = 'push'\n"
+         "options = { disturbance = { step = 5 } }\n",
+         ["[tracking].options.disturbance.step: step = 5: the suite walks 2 steps"]),
     ],
 )
 def test_options_are_checked_when_the_suite_loads(tmp_path, text, expected):

@@ -140,6 +140,8 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
                                                         f"steps of experiment {variant.label!r}")
     methods = _methods(path, spec, builder)
     _check_tracking(path, spec, registry)
+    _check_disturbance(path, spec, registry,
+                       {variant.label: builder.built[_identity("experiment", variant)] for variant in experiments})
 
     planned: list[tuple[Case, dict[str, set]]] = []
     for experiment, n_nodes, method in itertools.product(experiments, spec.n_nodes, methods):
@@ -301,6 +303,24 @@ def _check_tracking(path: Path, spec: SuiteSpec, registry: PluginRegistry) -> No
                                spec.tracking.disturbance)
     except OptionError as exc:
         raise SuiteError(path, f"[tracking].options.{exc.option}", exc.message) from None
+
+
+def _check_disturbance(path: Path, spec: SuiteSpec, registry: PluginRegistry, experiments: dict) -> None:
+    """The tracking stage's disturbance, built for each experiment: one that cannot act on an experiment (friction on
+    one without friction parameters, a push in a step it does not walk) would fail every case after its walk."""
+    if spec.tracking is None or not registry.names("disturbance"):
+        return
+    options = dict(spec.tracking.options.get("disturbance") or {})
+    for label, experiment in experiments.items():
+        try:
+            registry.create("disturbance", spec.tracking.disturbance, experiment, **options)
+        except (TypeError, ValueError) as exc:
+            raise SuiteError(path, "[tracking].disturbance", f"{spec.tracking.disturbance!r} on experiment "
+                                                             f"{label!r}: {exc}") from None
+        step = options.get("step")
+        if spec.steps is not None and isinstance(step, int) and step > spec.steps:
+            raise SuiteError(path, "[tracking].options.disturbance.step", f"step = {step}: the suite walks "
+                                                                          f"{spec.steps} steps ([suite].steps)")
 
 
 def _plugin_dirs(path: Path, spec: SuiteSpec) -> tuple[str, ...]:
