@@ -335,3 +335,17 @@ def test_gaitbench_verify_store_leaves_a_walk_whose_plugin_is_not_installed_unju
     assert row["verified"] == 1 and row["verification_failure"] is None
     alone = CliRunner().invoke(main, ["verify", str(store / case_file(key, "walk.json"))])
     assert alone.exit_code == 1 and "cannot be verified here" in alone.output
+
+
+@pytest.mark.parametrize(("field", "value"), [
+    ("N", "eight"), ("N", 8.5), ("phase", "third"), ("experiment_options", {"bogus": 1}),
+    ("problem_options", {"clearance": "of"}),
+])
+def test_a_walk_file_with_a_bad_header_value_is_refused_naming_the_field(tmp_path, forward, field, value):
+    """Each gave a traceback (or, for N = 8.5, was read as 8): a walk file from another install whose experiment
+    plugin changed its options is the realistic case."""
+    _, path = _solved_walk(tmp_path, forward)
+    header = json.loads(path.read_text())
+    path.write_text(json.dumps(header | {field: value}))
+    result = CliRunner().invoke(main, ["verify", str(path)])
+    assert result.exit_code == 2 and f"{field}:" in result.output and "Traceback" not in result.output, result.output

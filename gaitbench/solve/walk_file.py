@@ -26,6 +26,8 @@ import math
 import re
 import zipfile
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
@@ -191,11 +193,21 @@ class WalkFile:
                                 f"{rerun}")
         registry = registry or load_registry()
         data = self.header
-        experiment = self.experiment(registry)
-        options = self.problem_options(experiment)
-        transcription = registry.create("transcription", data["transcription"], **self.transcription_options)
-        n_nodes, phase = int(data["N"]), data["phase"]
-        built = transcription.build(StepStructure(phase, n_nodes, options))
+        with _field(self.path, "experiment_options"):
+            experiment = self.experiment(registry)
+        with _field(self.path, "problem_options"):
+            options = self.problem_options(experiment)
+        with _field(self.path, "transcription_options"):
+            transcription = registry.create("transcription", data["transcription"], **self.transcription_options)
+        with _field(self.path, "N"):
+            n_nodes = data["N"]
+            if not (isinstance(n_nodes, int) and not isinstance(n_nodes, bool) and n_nodes >= 3):
+                raise ValueError(f"expected a whole number of nodes ≥ 3, found {n_nodes!r}")
+        phase = data["phase"]
+        if phase not in ("first", "second"):
+            raise WalkFileError(f"{self.path}: phase: expected 'first' or 'second', found {phase!r}")
+        with _field(self.path, "problem_options"):  # the options are checked as the step's structure is made
+            built = transcription.build(StepStructure(phase, n_nodes, options))
         model = BipedModel(experiment.robot, 4 if phase == "second" else 2)
         walk = WalkResult(experiment=data["experiment"], transcription=data["transcription"], solver=data["solver"],
                           strategy=data["strategy"], N=n_nodes, phase=phase,
@@ -355,6 +367,18 @@ def _literal(text: str) -> Any:
         return ast.literal_eval(text)
     except (ValueError, SyntaxError):
         return text
+
+
+@contextmanager
+def _field(path: Path, name: str) -> Iterator[None]:
+    """A header field the walk cannot be rebuilt from, as a :class:`WalkFileError` naming it (a plugin this
+    environment lacks is not the file's fault, and passes)."""
+    try:
+        yield
+    except UnknownPluginError:
+        raise
+    except (TypeError, ValueError, KeyError) as exc:
+        raise WalkFileError(f"{path}: {name}: {exc}") from None
 
 
 def _rerun(path: Path) -> str:
