@@ -462,6 +462,8 @@ def test_the_run_summary_fits_80_columns(long_labelled_store):
         (["solve", "-e", "forward", "-t", "hermite"], 2, "unknown transcription 'hermite'"),
         (["solve", "-e", "forward", "--steps", "99"], 2, "forward experiment has 11 steps"),
         (["solve", "-e", "forward", "-S", "decrease-and-conquer", "-x", "workers=0"], 2, "workers = 0"),
+        # a value the plugin refuses is the options' flag's fault, not the plugin name's
+        (["solve", "-e", "energetics", "--experiment-option", "step_length=2.5"], 2, "'--experiment-option'"),
         (["track", "{tmp}/missing.json"], 2, "no such result file"),
         (["track", "{tmp}/walk.json", "--observer", "nope"], 2, None),  # the file is checked first
         (["run", "{tmp}/bad.toml"], 2, "[sweep]: missing required key"),

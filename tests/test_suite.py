@@ -612,3 +612,9 @@ def test_thesis_forward_work_is_thesis_forward_under_actuator_work():
     strip = [dataclasses.replace(case, objective=thesis.cases[0].objective) for case in work.cases]
     assert {case.key for case in strip} == {case.key for case in thesis.cases}
     assert not {case.key for case in work.cases} & {case.key for case in thesis.cases}
+
+
+def test_a_home_relative_output_is_the_home_directory_not_a_directory_named_tilde(tmp_path):
+    suite = _load(tmp_path, BASE.replace('name = "t"', 'name = "t"\noutput = "~/gb-results/t"'))
+    assert suite.output == Path.home() / "gb-results" / "t"
+

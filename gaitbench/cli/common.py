@@ -67,9 +67,9 @@ def create(ctx: click.Context, kind: str, name: str, *args, **options):
     except OptionError as exc:
         raise click.BadParameter(f"{kind} {name!r}, option {exc.option}: {exc.message}",
                                  param_hint=OPTIONS_OF_KIND.get(kind)) from None
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError) as exc:  # a value the plugin refuses: the options' flag, when there were any
         raise click.BadParameter(f"cannot build {kind} {name!r} with options {options}: {exc}",
-                                 param_hint=OPTION_OF_KIND.get(kind)) from None
+                                 param_hint=(OPTIONS_OF_KIND if options else OPTION_OF_KIND).get(kind)) from None
 
 
 def count(n: int, noun: str, plural: str | None = None) -> str:

@@ -308,8 +308,9 @@ def write_report(store_dir: str | Path, out_dir: str | Path, gait: str | None = 
             reporter.write(report, out_dir)
     except OSError as error:  # a full disk, a place that cannot be written
         where = f": {error.filename}" if error.filename else ""
-        raise ReportError(f"{out_dir}: cannot write the report ({error.strerror or error}{where}); "
-                          "free some space or choose another directory with --out") from None
+        advice = ("choose a directory with --out" if isinstance(error, FileExistsError | NotADirectoryError)
+                  else "free some space or choose another directory with --out")
+        raise ReportError(f"{out_dir}: cannot write the report ({error.strerror or error}{where}); {advice}") from None
     steps.finish()
     index = out_dir / "index.html"
     return index if "html" in reporters else out_dir

@@ -104,9 +104,12 @@ class _Parser:
         )
 
     def output(self, suite: dict) -> str | None:
-        """``[suite].output``: absolute as written, or relative to the current directory and inside it (``..`` that
-        climbs out is refused), so that a suite file from elsewhere cannot point a run at any directory."""
+        """``[suite].output``: absolute as written (``~`` for the home directory), or relative to the current
+        directory and inside it (``..`` that climbs out is refused), so that a suite file from elsewhere cannot point
+        a run at any directory."""
         output = self.string(suite, "output", "[suite]")
+        if output and output.startswith("~"):  # as the plugins' directories are, not a directory named "~"
+            output = os.path.expanduser(output)
         if output and not Path(output).is_absolute() and Path(os.path.normpath(output)).parts[:1] == ("..",):
             raise self.error("[suite].output", f"{output!r} leads out of the current directory, which a relative "
                                                "output is inside; write an absolute path to keep the results there")

@@ -189,8 +189,11 @@ class WalkFile:
         interpolant from the stored nodal values, and the experiment it was solved for."""
         rerun = _rerun(self.path)
         if "trajectories" not in self.header:
-            raise WalkFileError(f"{self.path}: holds no trajectories (no solved step, or saved without its NPZ); "
-                                f"{rerun}")
+            if not any(step.get("cot") is not None for step in self.header.get("steps") or []):
+                failure = self.header.get("failure")
+                raise WalkFileError(f"{self.path}: the walk has no solved step, nothing to rebuild"
+                                    + (f" ({failure})" if failure else ""))
+            raise WalkFileError(f"{self.path}: holds no trajectories (saved without its NPZ); {rerun}")
         registry = registry or load_registry()
         data = self.header
         with _field(self.path, "experiment_options"):
