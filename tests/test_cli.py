@@ -470,6 +470,11 @@ def test_the_run_summary_fits_80_columns(long_labelled_store):
         (["run", "{tmp}/bad.toml", "--retry-unverified"], 2, "--retry-unverified runs stored cases again, so it "
                                                              "needs --resume"),
         (["report", "{tmp}/nowhere", "--reporter", "nope"], 2, "unknown reporter 'nope'"),
+        # flags that would be silently ignored
+        (["run", "{tmp}/bad.toml", "--band", "40-90"], 2, "--band sets the consistency check"),
+        (["run", "{tmp}/bad.toml", "--scheduler", "tcp://127.0.0.1:1", "--executor", "local"], 2,
+         "cannot go with --executor local"),
+        (["runs", "show", "{tmp}/nowhere", "--tolerance", "0.2"], 2, "only --inconsistent uses"),
         (["nocommand"], 2, "No such command"),
         (["runs", "show", "{tmp}/nowhere"], 1, "no results store here"),
         (["report", "{tmp}/nowhere"], 1, "no results store here"),

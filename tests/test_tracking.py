@@ -249,6 +249,8 @@ def test_track_command(saved, tmp_path):
     assert missing.exit_code == 2 and "no such result file" in missing.output
     unknown = runner.invoke(main, ["track", str(saved), "--observer", "nope"])
     assert unknown.exit_code == 2 and "unknown observer 'nope'" in unknown.output
+    beyond = runner.invoke(main, ["track", str(saved), "--steps", "5"])  # it tracked the walk's 2 without a word
+    assert beyond.exit_code == 2 and "has 2 steps" in beyond.output
     typo = runner.invoke(main, ["track", str(saved), "-c", "kpp=400"])
     assert typo.exit_code == 2 and "Traceback" not in typo.output
     assert ("'-c' / '--controller-option': controller 'thesis', option kpp: unknown option 'kpp' (did you mean "

@@ -9,6 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 from rich import box
 from rich.console import Console
 from rich.table import Table
@@ -95,6 +96,13 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
     if retries and not resume:
         raise click.UsageError(f"{retries[0]} runs stored cases again, so it needs --resume (the store holding "
                                "them); add --resume")
+    ignored = [flag for flag, given in (("--band", band is not None), ("--tolerance", tolerance is not None)) if given]
+    if ignored and not retry_inconsistent:
+        raise click.UsageError(f"{ignored[0]} sets the consistency check, which only --retry-inconsistent uses here")
+    executor_given = click.get_current_context().get_parameter_source("executor") is ParameterSource.COMMANDLINE
+    if scheduler and executor_given and executor != "dask":
+        raise click.UsageError(f"--scheduler runs the cases on a Dask cluster; it cannot go with --executor "
+                               f"{executor}")
     try:
         suite = load_suite(suite_file)
     except SuiteError as error:  # the file names itself, the key and what was expected

@@ -234,6 +234,8 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
     from gaitbench.run.store import ResultStore
     from gaitbench.run.store_schema import StoreError
 
+    if not inconsistent and (band is not None or tolerance is not None):
+        raise click.UsageError("--band and --tolerance set the consistency check, which only --inconsistent uses")
     try:
         with ResultStore.open(store_dir) as store:
             rows = store.cases(store.resolve_run(run_id) if run_id else None)

@@ -52,6 +52,9 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
         reference = load_reference(result, ctx.obj.registry)
     except (WalkFileError, TrackingInputError, UnknownPluginError, PluginConflictError) as exc:
         raise click.BadParameter(str(exc), param_hint="RESULT") from None
+    if steps is not None and steps > len(reference.steps):
+        raise click.BadParameter(f"{steps}: the walk in {result} has {len(reference.steps)} steps",
+                                 param_hint="--steps")
     options = {"controller": parse_options(controller_options, "--controller-option"),
                "observer": parse_options(observer_options, "--observer-option"),
                "disturbance": parse_options(disturbance_options, "--disturbance-option")}
