@@ -563,7 +563,8 @@ def test_an_out_that_would_overwrite_its_own_arrays_or_the_input_is_refused_befo
     walk = tmp_path / "walk.json"
     walk.write_text("{}")
     head = ["solve", "-e", "forward", "--N", "8", "--steps", "1"] if command == "solve" else ["track", str(walk)]
-    outs = [tmp_path / "x.npz", tmp_path, tmp_path / "missing" / "x.json"]
+    (tmp_path / "file").write_text("")
+    outs = [tmp_path / "x.npz", tmp_path, tmp_path / "file" / "x.json"]
     if command == "track":
         outs += [walk, tmp_path / "walk.npz"]
     for out in outs:

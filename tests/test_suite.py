@@ -618,3 +618,13 @@ def test_a_home_relative_output_is_the_home_directory_not_a_directory_named_tild
     suite = _load(tmp_path, BASE.replace('name = "t"', 'name = "t"\noutput = "~/gb-results/t"'))
     assert suite.output == Path.home() / "gb-results" / "t"
 
+
+def test_steps_equal_to_the_whole_walk_are_the_whole_walk(tmp_path):
+    """`steps = 11` on an 11-step experiment is the experiment's walk: the same cases, keys and report rows as no
+    `steps` (a shortened walk is labelled and kept from the thesis's figures; the whole one must not be)."""
+    whole = _load(tmp_path, BASE.replace('name = "t"', 'name = "t"\nsteps = 11'))
+    default = load_suite(_write(tmp_path, BASE, "default.toml"), REGISTRY)
+    assert [case.key for case in whole.cases] == [case.key for case in default.cases]
+    assert {case.steps for case in whole.cases} == {None}
+    assert {case.steps for case in _load(tmp_path, BASE.replace('name = "t"', 'name = "t"\nsteps = 2')).cases} == {2}
+

@@ -213,6 +213,8 @@ def test_gaitbench_verify_rechecks_a_walk_file_and_fails_one_whose_join_was_brok
     result = CliRunner().invoke(main, ["verify", str(path), "--json"])
     assert result.exit_code == 1
     assert any(reason.startswith("step 2: join mismatch 1.0e-02") for reason in json.loads(result.output)["reasons"])
+    text = CliRunner().invoke(main, ["verify", str(path)]).output
+    assert "  ACOT " in text and "verified ACOT" not in text and "NOT verified" in text
 
 
 def test_a_claimed_acot_that_a_walk_file_before_format_2_stores_as_its_acot_is_a_note_not_a_failure(forward,

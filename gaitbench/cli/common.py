@@ -94,7 +94,7 @@ def print_table(console: Console, table: Table, wide: bool = False) -> None:
 def check_out(out: Path | None, *keep: Path) -> None:
     """Refuse, before any work, an ``--out`` the result cannot be written to: a directory, a path ending in .npz
     (the trajectories go beside the JSON as .npz, and would be overwritten by it), one of the files ``keep`` (the
-    input), or one in a directory that does not exist."""
+    input), or one below a file. Missing directories are made when the result is written."""
     if out is None:
         return
     problem = None
@@ -104,7 +104,7 @@ def check_out(out: Path | None, *keep: Path) -> None:
         problem = "ends in .npz, the name of the arrays written beside the JSON; name the .json file"
     elif any(out.resolve() in {path.resolve(), path.with_suffix(".npz").resolve()} for path in keep):
         problem = "would overwrite the input; name another file"
-    elif not out.resolve().parent.is_dir():
-        problem = f"is in {out.parent}, which does not exist"
+    elif (existing := next(parent for parent in out.resolve().parents if parent.exists())).is_file():
+        problem = f"is below {existing}, a file"
     if problem:
         raise click.BadParameter(f"{out} {problem}", param_hint="--out")

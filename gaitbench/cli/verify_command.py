@@ -181,7 +181,8 @@ def _print(console: Console, report: dict[str, Any]) -> None:
     verdict = "verified" if report["verified"] else "NOT verified: " + "; ".join(report["reasons"])
     console.print(f"{report['walk']}: {report['experiment']}, {report['strategy']}, {report['transcription']}, "
                   f"N = {report['N']}")
-    console.print(f"  verified ACOT {figure(report['acot'], '.4f')} (stored {figure(report['stored_acot'], '.4f')}"
+    label = "verified ACOT" if report["verified"] else "ACOT"  # never "verified" for a walk the verdict fails
+    console.print(f"  {label} {figure(report['acot'], '.4f')} (stored {figure(report['stored_acot'], '.4f')}"
                   + (f", claimed {report['claimed_acot']:.4f}" if report["claimed_acot"] is not None else "") + ")")
     console.print(f"  largest join mismatch {figure(report['max_join_mismatch'], '.1e')}, energy appearing at the "
                   f"joins {report['join_energy']:.1f} J, largest re-simulation error "

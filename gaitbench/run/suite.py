@@ -147,11 +147,14 @@ def _expand(path: Path, spec: SuiteSpec, registry: PluginRegistry,
     for experiment, n_nodes, method in itertools.product(experiments, spec.n_nodes, methods):
         tags = {"experiment": experiment.names, "N": {n_nodes}, "method": {method.label}}
         tags.update({part: method.parts[part].names for part in METHOD_PARTS})
+        # `steps` equal to the experiment's whole walk is the whole walk: the same case (and key, and report rows)
+        whole = builder.built[_identity("experiment", experiment)].n_steps
+        steps = None if spec.steps == whole else spec.steps
         for repetition in range(spec.repetitions):
             case = Case(
                 experiment=experiment.choice, n_nodes=n_nodes,
                 transcription=method.parts["transcription"].choice, solver=method.parts["solver"].choice,
-                strategy=method.parts["strategy"].choice, steps=spec.steps,
+                strategy=method.parts["strategy"].choice, steps=steps,
                 objective=method.parts["objective"].choice if "objective" in method.parts else DEFAULT_OBJECTIVE,
                 problem_options=dict(spec.problem_options), repetition=repetition, tracking=spec.tracking,
                 method=method.label, time_limit_s=method.time_limit_s or spec.time_limit_s, plugin_dirs=plugin_dirs,
