@@ -41,6 +41,7 @@ def minimize_qp(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.n
     if not (np.isfinite(f) and np.all(np.isfinite(c))):
         return Outcome(SolverStatus.ERROR, "NaN or infinite f or g at the starting point", x, iteration, None)
     weights, damping, d_norm, u, streak = np.zeros(equal.size), 0.0, np.nan, np.zeros(m), 0
+    scored = None  # the multipliers the KKT error was last scored with, when the refined test gave it
     working = equal  # the rows whose normals may convexify H: the equalities and the last QP's active rows
 
     def merit(f_value: float, c_value: np.ndarray) -> float:
@@ -48,7 +49,7 @@ def minimize_qp(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.n
         return f_value + weights @ np.abs(c_value[equal])
 
     def outcome(status: SolverStatus, message: str) -> Outcome:
-        return Outcome(status, message, x, iteration, u)
+        return Outcome(status, message, x, iteration, u if scored is None else scored)
 
     def record(step: float, direction: str) -> None:
         progress.record("main", iteration, merit(f, c), d_norm, step, np.max(weights, initial=0.0), working.size,
@@ -121,11 +122,11 @@ def minimize_qp(options: FSQPOptions, progress: Progress, form: NLPForm, x: np.n
                                   _bound_complementarity(form, x, bound_multipliers))
             scale = max(1.0, (np.sum(np.abs(u)) + np.sum(np.abs(bound_multipliers))) / (100 * (m + n)))
             violation = max(np.max(c[general], initial=0.0), np.max(np.abs(c[equal]), initial=0.0))
-            error = max(stationarity / scale, complementarity / scale, violation)
+            error, scored = max(stationarity / scale, complementarity / scale, violation), None
             if error > options.tolerance:  # the same test with least-squares multipliers at x (see _refined_error)
                 refined, corrected = _refined_error(form, x, c, jacobian, linear, u, bound_multipliers, -curvature)
-                if max(refined / scale, violation) < error:
-                    error, u = max(refined / scale, violation), corrected  # the multipliers that error is of
+                if max(refined / scale, violation) < error:  # returned if it converges; the iteration keeps the QP's
+                    error, scored = max(refined / scale, violation), corrected
             streak = streak + 1 if error <= _ACCEPTABLE_TOLERANCE else 0
             if options.print_level >= 2:
                 print(f"      KKT {error:.2e}: stationarity {stationarity / scale:.2e}, complementarity "
