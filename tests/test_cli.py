@@ -308,9 +308,16 @@ def test_runs_show_marks_an_unverified_walks_acot_and_refuses_a_filter_that_name
             store.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 10, "method": "OP-DC",
                                "status": "solved", "acot": 0.25, "verified": verified,
                                "verification_failure": None if verified else "step 2: re-simulation error 0.9 > 0.5"})
+        store.start_run({"run_id": "r2", "suite": "s", "started_at": "2026-01-02T00:00:00+00:00"})
+        store.record_case({"case_key": "c" * 16, "run_id": "r2", "experiment": "stairs", "N": 10, "method": "OP-DC",
+                           "status": "incomplete", "message": "step 3: infeasible", "verified": False,
+                           "verification_failure": "incomplete walk (step 3: infeasible)"})
     shown = invoke("runs", "show", str(tmp_path / "store"))
     assert shown.exit_code == 0 and "0.2500" in shown.stdout and "(0.2500)" in shown.stdout
     assert "failed verification" in shown.stdout
+    incomplete = invoke("runs", "show", str(tmp_path / "store"), "r2", "--wide")  # stored unverified for its stop
+    assert "failed verification" not in incomplete.stdout and "not verified" not in incomplete.stdout
+    assert invoke("runs", "show", str(tmp_path / "store"), "r2", "--experiment", "forward").exit_code == 0
     wide = invoke("runs", "show", str(tmp_path / "store"), "--wide")
     assert "not verified: step 2: re-simulation error 0.9 > 0.5" in " ".join(wide.stdout.split())
     for option, value in (("--method", "OP-DM"), ("--experiment", "fwd"), ("--status", "solvd")):
@@ -566,7 +573,7 @@ def test_an_out_that_would_overwrite_its_own_arrays_or_the_input_is_refused_befo
     (tmp_path / "file").write_text("")
     outs = [tmp_path / "x.npz", tmp_path, tmp_path / "file" / "x.json"]
     if command == "track":
-        outs += [walk, tmp_path / "walk.npz"]
+        outs += [walk, tmp_path / "walk.npz", tmp_path / "walk.tracking", tmp_path / "walk"]  # the last two: its .npz
     for out in outs:
         result = invoke(*head, "--out", str(out))
         assert result.exit_code == 2 and "--out" in result.stderr, (out, result.output)

@@ -839,5 +839,16 @@ def test_a_gait_whose_stance_foot_pulls_on_the_ground_says_so():
     note = _pulling_note(steps, footholds, weight)
     assert note.startswith("Contact: the stance foot pulls on the ground at 1 of 4 nodes, down to 0.20 body weights "
                            "(step 1)")
-    steps[0].reaction[1, 1] = 10.0
+    assert "solved with `unilateral_contact`" in _pulling_note(steps, footholds, weight, held=True)
+    steps[0].reaction[1, 1] = -1e-4  # a constraint held to a solver's tolerance is no pull
     assert _pulling_note(steps, footholds, weight) is None
+
+
+def test_the_ground_under_a_step_is_found_for_a_labelled_experiment():
+    """The consistency table names how the ground bends under the dearest step; a shortened walk's label
+    (``stairs [4 steps]``) is not a plugin name, and left the column empty."""
+    from gaitbench.reports import _stance_ground
+
+    df = pd.DataFrame({"experiment": ["stairs [4 steps]"], "experiment_name": ["stairs"], "experiment_options": [{}]})
+    ground = _stance_ground(None, df)
+    assert ground("stairs [4 steps]", 3) == ground("stairs", 3) == "dips"

@@ -102,8 +102,9 @@ def check_out(out: Path | None, *keep: Path) -> None:
         problem = "is a directory; name a .json file in it"
     elif out.suffix == ".npz":
         problem = "ends in .npz, the name of the arrays written beside the JSON; name the .json file"
-    elif any(out.resolve() in {path.resolve(), path.with_suffix(".npz").resolve()} for path in keep):
-        problem = "would overwrite the input; name another file"
+    elif any({out.resolve(), out.with_suffix(".npz").resolve()} & {path.resolve(), path.with_suffix(".npz").resolve()}
+             for path in keep):  # the result's JSON or its arrays over the input's
+        problem = "would overwrite the input or its arrays; name another file"
     elif (existing := next(parent for parent in out.resolve().parents if parent.exists())).is_file():
         problem = f"is below {existing}, a file"
     if problem:

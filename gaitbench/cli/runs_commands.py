@@ -189,17 +189,27 @@ def _show_cells(row: dict) -> dict[str, str]:
              "stop cause": row["stop_cause"] or "—", "stop step": fmt(row["stop_step"], "d", ""),
              "stop status": row["stop_status"] or "", "retries": fmt(row["retries"], "d", ""),
              "time (s)": fmt(row["wall_time_s"], ".1f", ""), "iterations": fmt(row["iterations"], "d", ""),
-             "message": _message(row), "verified": {1: "yes", 0: "no"}.get(row["verified"], "")}
+             "message": _message(row),
+             "verified": {1: "yes", 0: "no"}.get(row["verified"], "") if _complete(row) else ""}
     for column, key in (("ACOT", "acot"), ("claimed", "claimed_acot"), ("COT min", "cot_min"), ("COT max", "cot_max")):
         cells[column] = fmt(row[key], ".4f", "")
-    if row["verified"] == 0 and cells["ACOT"]:
+    if _unverified(row) and cells["ACOT"]:
         cells["ACOT"] = f"({cells['ACOT']})"
     return cells
 
 
+def _complete(row: dict) -> bool:
+    return row["status"] == "solved"
+
+
+def _unverified(row: dict) -> bool:
+    """A complete walk that failed verification (an incomplete one is stored unverified too, for its stop)."""
+    return _complete(row) and row.get("verified") == 0
+
+
 def _message(row: dict) -> str:
     """The case's message, and why a complete walk failed verification."""
-    failure = row.get("verification_failure") if row.get("verified") == 0 else None
+    failure = row.get("verification_failure") if _unverified(row) else None
     return "; ".join(part for part in (row["message"], failure and f"not verified: {failure}") if part)
 
 
@@ -238,12 +248,13 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
         raise click.UsageError("--band and --tolerance set the consistency check, which only --inconsistent uses")
     try:
         with ResultStore.open(store_dir) as store:
-            rows = store.cases(store.resolve_run(run_id) if run_id else None)
+            stored = store.cases()
+            rows = store.cases(store.resolve_run(run_id)) if run_id else stored
         flagged = inconsistent_keys(store_dir, band, tolerance) if inconsistent else None
     except StoreError as error:
         raise click.ClickException(str(error)) from None
-    for option, wanted, held in (("--experiment", experiments, {row["experiment"] for row in rows}),
-                                 ("--method", methods, {row["method"] or row["strategy"] for row in rows})):
+    for option, wanted, held in (("--experiment", experiments, {row["experiment"] for row in stored}),
+                                 ("--method", methods, {row["method"] or row["strategy"] for row in stored})):
         unknown = sorted(set(wanted) - held)
         if unknown:  # an empty table would read as "no such cases", not as a name that is not there
             raise click.BadParameter(f"{', '.join(map(repr, unknown))} is not in this store; it has "
@@ -262,7 +273,7 @@ def runs_show(store_dir: Path, run_id: str | None, wide: bool, experiments: tupl
     for row in rows:
         cells = _show_cells(row)
         table.add_row(*(cells[column] for column in columns))
-    if any(row["verified"] == 0 for row in rows):
+    if any(_unverified(row) for row in rows):
         table.caption = "(ACOT): the walk failed verification" + ("" if wide else "; --wide says why")
     print_table(Console(), table, wide)
 

@@ -105,7 +105,7 @@ def build_report(store_dir: str | Path, gait: str | None = None, registry: Plugi
     tables = {
         "acot": acot, "acot_minima": minima, "cot_bounds": tb.cot_bounds(acot), "acot_spread": spread,
         "savings": savings, "savings_paired": paired,
-        "consistency": st.consistency_exceptions(acot, df, ground=_stance_ground(registry)),
+        "consistency": st.consistency_exceptions(acot, df, ground=_stance_ground(registry, df)),
         "published_acot": tb.published_comparison(minima, _thesis_bounds(minima, registry)),
         "published_savings": st.with_paired_savings(tb.published_savings(savings, info), paired, info),
         "dc_claims": tb.dc_claims(df), "energetics": energetics, "tracking": tb.tracking_table(df, summaries),
@@ -232,18 +232,23 @@ def _thesis_bounds(minima, registry: PluginRegistry | None) -> dict:
     return experiment_bounds(names, registry) if names else {}
 
 
-def _stance_ground(registry: PluginRegistry | None):
+def _stance_ground(registry: PluginRegistry | None, df):
     """``ground(experiment, step)``: how the ground bends under that step's stance foot (``Terrain.bend``), or None
-    for an experiment the registry cannot build."""
+    for an experiment the registry cannot build; ``experiment`` is a report label (``forward [2 steps]``), built from
+    the plugin name and options of the cases ``df`` that carry it."""
     from functools import cache
 
     from gaitbench.plugins import PluginConflictError, UnknownPluginError, load_registry
 
+    built = {label: (name, options) for label, name, options in
+             zip(df["experiment"], df["experiment_name"], df["experiment_options"], strict=True)} if len(df) else {}
+
     @cache
-    def terrain(name: str):
+    def terrain(label: str):
+        name, options = built.get(label, (label, None))
         try:
-            return (registry or load_registry()).create("experiment", name).terrain
-        except (UnknownPluginError, PluginConflictError, ValueError):
+            return (registry or load_registry()).create("experiment", name, **dict(options or {})).terrain
+        except (UnknownPluginError, PluginConflictError, TypeError, ValueError):
             return None
 
     def ground(experiment: str, step: int) -> str | None:

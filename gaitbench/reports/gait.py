@@ -110,7 +110,8 @@ def load_gait(store_dir: str | Path, case: Any, registry=None) -> Gait:
     if model is not None:
         for gait_step in steps:
             gait_step.reaction = _reactions(model, footholds[gait_step.index - 1], gait_step)
-        pulling = _pulling_note(steps, footholds, experiment.robot.total_mass * experiment.robot.g)
+        held = bool((walk.header.get("problem_options") or {}).get("unilateral_contact"))
+        pulling = _pulling_note(steps, footholds, experiment.robot.total_mass * experiment.robot.g, held)
         if pulling:
             notes.append(pulling)
     if case["is_dc"] and trajectory == POLISHED:
@@ -183,23 +184,30 @@ def _reactions(model, foot: np.ndarray, step: GaitStep) -> np.ndarray:
     return np.array(reactions)
 
 
-def _pulling_note(steps: list[GaitStep], footholds: np.ndarray, weight: float) -> str | None:
+PULL_TOLERANCE = 1e-6
+"""A normal force above −this × the robot's weight is no pull: a solver holds f_n ≥ 0 only to its tolerance."""
+
+
+def _pulling_note(steps: list[GaitStep], footholds: np.ndarray, weight: float, held: bool = False) -> str | None:
     """Where the stance foot's reaction, normal to the step's chord, pulls on the ground: a motion a foot resting on
-    the ground cannot make, which only ``unilateral_contact`` rules out (docs/model.md §2)."""
+    the ground cannot make, which only ``unilateral_contact`` rules out (docs/model.md §2); ``held``: the walk was
+    solved with it, so a pull here means the constraint held only at the nodes it covers."""
     normals = []
     for step in steps:
         dx, dy = footholds[step.index] - footholds[step.index - 1]
         theta = np.arctan2(dy, dx)
         normals.append((step.index, (-np.sin(theta) * step.reaction[:, 0] + np.cos(theta) * step.reaction[:, 1])))
-    pulled = sum(int((normal < 0).sum()) for _, normal in normals)
+    pulled = sum(int((normal < -PULL_TOLERANCE * weight).sum()) for _, normal in normals)
     if not pulled:
         return None
     index, worst = min(((i, float(normal.min())) for i, normal in normals), key=lambda pair: pair[1])
     total = sum(len(normal) for _, normal in normals)
+    why = ("The walk was solved with `unilateral_contact`, which holds at the nodes it covers (DMOC: not its two "
+           "end nodes; docs/model.md §2)." if held else
+           "The walk was solved without the unilateral-contact constraint (`unilateral_contact`, off in the thesis "
+           "suites, as the thesis has none; docs/model.md §2); verification does not check it.")
     return (f"Contact: the stance foot pulls on the ground at {pulled} of {total} nodes, down to "
-            f"{-worst / weight:.2f} body weights (step {index}): no foot resting on the ground can. The walk was "
-            "solved without the unilateral-contact constraint (`unilateral_contact`, off in the thesis suites, as "
-            "the thesis has none; docs/model.md §2); verification does not check it.")
+            f"{-worst / weight:.2f} body weights (step {index}): no foot resting on the ground can. {why}")
 
 
 def _float(value: Any) -> float | None:
