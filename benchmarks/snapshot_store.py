@@ -1,70 +1,120 @@
-"""Copy a results store that runs are still writing into one that can be carried to the next session, walks in flight
-included.
+"""Carry a results store that runs are still writing to the next session's machine as one file: its finished
+cases, its walks in flight and the package versions they were solved with.
 
 The long sweeps (`thesis-all`'s decrease-and-conquer walks at N >= 150 take hours each) outlive a session, and a
-session's machine does not outlive it. So the snapshot carries, beside every finished case, the step checkpoints of
-the walks in flight. A later run of the same suite on that store with ``--resume``, under the same commit (a
-checkpoint resumes only under the code that saved it, :mod:`gaitbench.checkpoint`), goes on from the last saved step
-instead of step 1. What is committed is a pack (`gaitbench runs pack`, docs/results.md "Packed stores"), which reads
-like a store but leaves the checkpoints out.
+session's machine may not outlive it: only what is committed reaches the next one. ``save`` writes one
+``.tar.xz`` holding
 
-The database is copied with SQLite's online backup (consistent while runs write to it, WAL included); the copy
-drops the claims, whose runs do not travel with it. Case directories no row names and checkpoints of cases that
-have a row are left out, as the runner would remove them.
+- ``store.tar.xz``: a pack of the store (`gaitbench runs pack`, docs/results.md "Packed stores"): every row and
+  walk header, and the trajectories ``--trajectories`` names (``report``, the default: those the store's report
+  draws, small enough to commit; a store restored from a ``report`` carry can only be carried that way again);
+- ``checkpoints/``: the step checkpoints of the walks in flight, which a pack leaves out, so that ``gaitbench run
+  --resume`` on the restored store goes on from their last saved step instead of step 1;
+- ``constraints.txt``: the versions of the packages installed beside the gaitbench that runs this script (``pip
+  freeze``). A checkpoint resumes only under the same code and solver versions (docs/results.md), and a sweep
+  meant to share one problem definition keeps its solvers too: install the next machine's environment with
+  ``pip install -c constraints.txt -e .``.
 
-    python benchmarks/snapshot_store.py ~/stores/thesis-all ~/carry/thesis-all
+``restore`` makes a store that runs can write from such a file, and writes the constraints beside it
+(``STORE.constraints.txt``); to install them first, ``tar -xJf CARRY.tar.xz constraints.txt`` needs no gaitbench.
+
+Stop the runs on the store first (SIGTERM: they record what they finished and keep their checkpoints); a copy of a
+store still being written holds the cases finished at one moment, and a walk that finishes during the copy is lost
+to it.
+
+    python benchmarks/snapshot_store.py save ~/stores/thesis-all carry/thesis-all.tar.xz
+    python benchmarks/snapshot_store.py restore carry/thesis-all.tar.xz ~/stores/thesis-all
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import shutil
-import sqlite3
+import subprocess
+import sys
+import tarfile
 import tempfile
 from pathlib import Path
 
-from gaitbench.run.store import CASES_DIR, CHECKPOINTS_DIR
+from gaitbench.run.store import CHECKPOINTS_DIR, ResultStore
+from gaitbench.run.store_pack import pack_store, unpack_store
+
+PACK, CONSTRAINTS = "store.tar.xz", "constraints.txt"
 
 
-def snapshot(source: Path, destination: Path) -> dict[str, int]:
-    """Replace ``destination`` by a consistent copy of the store at ``source``; how many cases and checkpoints."""
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{destination.name}-", dir=destination.parent))
-    try:
-        database = staging / "results.sqlite"
-        with sqlite3.connect(f"file:{source / 'results.sqlite'}?mode=ro", uri=True) as live, \
-                sqlite3.connect(database) as copy:
-            live.backup(copy)
-            copy.execute("DELETE FROM claims")
-            copy.commit()
-            copy.execute("PRAGMA journal_mode = DELETE")  # one file to commit, no -wal beside it
-            keys = {row[0] for row in copy.execute("SELECT case_key FROM cases")}
-        with_files = sorted(key for key in keys if (source / CASES_DIR / key).is_dir())
-        for key in with_files:
-            shutil.copytree(source / CASES_DIR / key, staging / CASES_DIR / key)
+def installed_versions() -> str:
+    """``pip freeze`` of this interpreter's environment, gaitbench itself (an editable install) left out."""
+    return subprocess.run([sys.executable, "-m", "pip", "freeze", "--exclude-editable"], check=True,
+                          capture_output=True, text=True).stdout
+
+
+def save(store_dir: Path, carry: Path, trajectories: str = "report") -> dict[str, int]:
+    """Write the carry file of ``store_dir`` to ``carry`` (replaced); how many cases and walks in flight it holds."""
+    from gaitbench.reports import report_trajectories
+
+    with ResultStore.open(store_dir) as store:
+        finished = store.finished_keys()
+    with tempfile.TemporaryDirectory(prefix="gaitbench-carry-") as scratch:
+        keep = report_trajectories(store_dir) if trajectories == "report" else set()
+        summary = pack_store(store_dir, Path(scratch) / PACK, trajectories, keep)
+        carry.parent.mkdir(parents=True, exist_ok=True)
+        staging = carry.with_name(f".{carry.name}.partial")
         in_flight = 0
-        for checkpoint in sorted((source / CHECKPOINTS_DIR).glob("*")):
-            if checkpoint.name.split(".")[0] in keys:
-                continue
-            (staging / CHECKPOINTS_DIR).mkdir(exist_ok=True)
-            shutil.copy2(checkpoint, staging / CHECKPOINTS_DIR / checkpoint.name)
-            in_flight += checkpoint.suffix != ".json"
-        if destination.exists():
-            shutil.rmtree(destination)
-        staging.rename(destination)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    return {"cases": len(keys), "case_dirs": len(with_files), "checkpoints": in_flight}
+        with tarfile.open(staging, mode="w:xz") as tar:
+            tar.add(Path(scratch) / PACK, arcname=PACK)
+            for checkpoint in sorted((store_dir / CHECKPOINTS_DIR).glob("*")):
+                # a finished case's checkpoint is a leftover the runner removes; files being written start with "."
+                if checkpoint.name.startswith(".") or checkpoint.name.split(".")[0] in finished:
+                    continue
+                tar.add(checkpoint, arcname=f"{CHECKPOINTS_DIR}/{checkpoint.name}")
+                in_flight += checkpoint.suffix != ".json"
+            pins = installed_versions().encode()
+            member = tarfile.TarInfo(CONSTRAINTS)
+            member.size = len(pins)
+            tar.addfile(member, io.BytesIO(pins))
+        staging.replace(carry)
+    return {"cases": summary.cases, "checkpoints": in_flight}
+
+
+def restore(carry: Path, store_dir: Path) -> dict[str, int]:
+    """Make the store ``store_dir`` (new or empty) from ``carry``, its walks in flight included, and write the
+    constraints to ``STORE.constraints.txt``; how many cases and walks in flight it holds."""
+    with tempfile.TemporaryDirectory(prefix="gaitbench-carry-") as scratch, \
+            tarfile.open(carry, mode="r:xz") as tar:
+        tar.extractall(scratch, filter="data")
+        unpack_store(Path(scratch) / PACK, store_dir)
+        checkpoints = sorted((Path(scratch) / CHECKPOINTS_DIR).glob("*"))
+        if checkpoints:
+            (store_dir / CHECKPOINTS_DIR).mkdir(exist_ok=True)
+        for checkpoint in checkpoints:
+            shutil.copy2(checkpoint, store_dir / CHECKPOINTS_DIR / checkpoint.name)
+        shutil.copy2(Path(scratch) / CONSTRAINTS, store_dir.with_name(f"{store_dir.name}.constraints.txt"))
+    with ResultStore.open(store_dir) as store:
+        cases = len(store.finished_keys())
+    return {"cases": cases, "checkpoints": sum(path.suffix != ".json" for path in checkpoints)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("source", type=Path, help="the live store (a run's --store or suite output)")
-    parser.add_argument("destination", type=Path, help="where the copy goes (replaced)")
+    commands = parser.add_subparsers(dest="command", required=True)
+    saving = commands.add_parser("save", help="write the carry file of a store")
+    saving.add_argument("store", type=Path, help="the store (a run's --store or suite output)")
+    saving.add_argument("carry", type=Path, help="the carry file to write (.tar.xz, replaced)")
+    saving.add_argument("--trajectories", choices=["report", "all"], default="report",
+                        help="the trajectories to keep, as `gaitbench runs pack --trajectories` (default: report)")
+    restoring = commands.add_parser("restore", help="make a store from a carry file")
+    restoring.add_argument("carry", type=Path, help="the carry file")
+    restoring.add_argument("store", type=Path, help="the store to make (a new or empty directory)")
     args = parser.parse_args()
-    counts = snapshot(args.source, args.destination)
-    print(f"{args.destination}: {counts['cases']} cases ({counts['case_dirs']} with files), "
-          f"{counts['checkpoints']} walks in flight")
+    if args.command == "save":
+        counts = save(args.store, args.carry, args.trajectories)
+        print(f"{args.carry}: {counts['cases']} cases, {counts['checkpoints']} walks in flight "
+              f"({args.carry.stat().st_size / 1e6:.2f} MB)")
+    else:
+        counts = restore(args.carry, args.store)
+        print(f"{args.store}: {counts['cases']} cases, {counts['checkpoints']} walks in flight; the package "
+              f"versions they ran with: {args.store.with_name(args.store.name + '.constraints.txt')}")
 
 
 if __name__ == "__main__":

@@ -212,7 +212,7 @@ def test_costly_steps_and_the_complete_candidate_are_counted_from_the_step_cots(
         "polish in 1 walk.")
 
 
-def test_a_store_snapshot_keeps_finished_cases_and_the_walks_in_flight(tmp_path):
+def test_a_carried_store_keeps_its_finished_cases_its_walks_in_flight_and_its_package_versions(tmp_path):
     from gaitbench.run.case import Case, PluginChoice
     from gaitbench.run.runner import CaseOutcome, case_row
     from gaitbench.run.store import ResultStore
@@ -225,28 +225,28 @@ def test_a_store_snapshot_keeps_finished_cases_and_the_walks_in_flight(tmp_path)
 
     finished, in_flight = case(150), case(200)
     live = tmp_path / "live"
-    with ResultStore.create(live) as store:  # left open: the run is still writing when the snapshot is taken
+    with ResultStore.create(live) as store:  # left open: a run that has not yet let go of it
         store.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
         store.record_case(case_row(CaseOutcome(finished, "solved", "", 1.0, {"acot": 0.3}), "s", "r1"),
-                          {"walk.json": b"{}"})
+                          {"walk.json": b"{}", "walk.npz": b"not drawn by the report"})
         assert store.claim(in_flight.key, "r1", None) == "claimed"
         (live / "checkpoints").mkdir()
         for key in (finished.key, in_flight.key):  # the finished case's is a leftover the runner would remove
             (live / "checkpoints" / key).write_bytes(b"steps")
             (live / "checkpoints" / f"{key}.json").write_text("{}")
-        (live / "cases" / "0123456789abcdef").mkdir()  # a case directory no row names
-        committed = tmp_path / "committed"
-        committed.mkdir()
-        (committed / "stale").write_text("an older snapshot")
-        assert module.snapshot(live, committed) == {"cases": 1, "case_dirs": 1, "checkpoints": 1}
-    assert sorted(path.name for path in committed.iterdir()) == ["cases", "checkpoints", "results.sqlite"]
-    assert [path.name for path in (committed / "cases").iterdir()] == [finished.key]
-    checkpoints = sorted(path.name for path in (committed / "checkpoints").iterdir())
-    assert checkpoints == [in_flight.key, f"{in_flight.key}.json"]
-    with ResultStore.create(committed) as copy:  # a resumed run opens it for writing
+        (live / "checkpoints" / f".{in_flight.key}.123").write_bytes(b"half written")
+        carry = tmp_path / "carry" / "live.tar.xz"
+        assert module.save(live, carry) == {"cases": 1, "checkpoints": 1}
+    restored = tmp_path / "restored"
+    assert module.restore(carry, restored) == {"cases": 1, "checkpoints": 1}
+    assert sorted(path.name for path in (restored / "checkpoints").iterdir()) == [in_flight.key,
+                                                                                  f"{in_flight.key}.json"]
+    assert (restored / "checkpoints" / in_flight.key).read_bytes() == b"steps"
+    assert not list(restored.rglob("walk.npz"))  # a report-only carry: no trajectory the report does not draw
+    assert (tmp_path / "restored.constraints.txt").read_text() == module.installed_versions()
+    with ResultStore.create(restored) as copy:  # a resumed run opens it for writing
         assert copy.finished_keys() == {finished.key}
         assert copy.claim(in_flight.key, "r2", None) == "claimed"  # the claim stayed with the live store
-
 
 def test_savings_are_summarized_verified_and_claimed_beside_the_published_range():
     import pandas as pd
