@@ -179,6 +179,47 @@ def test_the_consistency_check_lists_every_finer_n_outside_the_tolerance():
     assert set(moved["N"]) == {130, 140, 300} and moved["reference_median"].iloc[0] == pytest.approx(1.10)
 
 
+def test_a_cell_exactly_at_the_tolerance_is_inside_it_above_the_median_as_below():
+    rows = [{"method": "OP-DC", "N": n, "acot": 0.40} for n in (40, 50, 60)]
+    rows += [{"method": "OP-DC", "N": 100, "acot": 0.46}, {"method": "OP-DC", "N": 110, "acot": 0.34},
+             {"method": "OP-DC", "N": 120, "acot": 0.47}]  # +15 %, −15 % (both inside), +17.5 % (outside)
+    df = _cases(rows)
+    assert list(statistics.consistency_exceptions(tables.acot_table(df), df)["N"]) == [120]
+
+
+def test_a_baseline_without_a_positive_acot_gives_no_saving_and_leaves_the_statistics_finite():
+    rows = [{"method": "OP-DC", "N": n, "acot": 0.0 if n == 10 else 0.5} for n in range(10, 80, 10)]
+    rows += [_dc(n, 0.4) for n in range(10, 80, 10)]
+    df = _cases(rows)
+    info, acot = case_frame.method_info(df), tables.acot_table(df)
+    minima = tables.method_minima(acot, info)
+    savings = tables.savings_table(acot, info)
+    assert savings.set_index("N").loc[10, "savings_percent"] != savings.set_index("N").loc[10, "savings_percent"]
+    row = statistics.paired_savings(savings, minima).set_index("baseline").loc["OP-DC"]
+    assert row["pairs"] == 6 and row["mean_percent"] == pytest.approx(20.0)
+    assert (row["mean_ci_low"], row["mean_ci_high"]) == (pytest.approx(20.0), pytest.approx(20.0))
+    assert math.isnan(row["min_vs_min_percent"])  # OP-DC's minimum is the 0.0 at N = 10
+
+
+def test_a_walk_flagged_verified_without_a_verified_acot_is_listed_not_ranked():
+    df = _cases([_dc(10, None), _dc(20, 0.4)])
+    assert df.set_index("N")["ranked"].to_dict() == {10: False, 20: True}
+    assert df.set_index("N").loc[10, "verification_failure"] == case_frame.NO_VERIFIED_ACOT
+    assert tables.acot_table(df).set_index("N")["verified"].to_dict() == {10: 0, 20: 1}
+
+
+def test_a_method_labelled_as_a_thesis_method_keeps_it_beside_another_that_runs_the_same():
+    rows = [{"method": "OP-DC", "N": 10, "acot": 0.4}, {"method": "blended start", "N": 10, "acot": 0.3},
+            {"method": "OP-DM", "N": 10, "acot": 0.4, "transcription": "dmoc"},
+            {"method": "dmoc too", "N": 10, "acot": 0.4, "transcription": "dmoc"},
+            {"method": "trapezoidal", "N": 10, "acot": 0.4, "transcription": "dmoc"}]
+    info = case_frame.method_info(_cases(rows)).set_index("method")["thesis_method"]
+    assert info["OP-DC"] == "OP-DC" and info["OP-DM"] == "OP-DM"
+    assert info[["blended start", "dmoc too", "trapezoidal"]].isna().all()  # their guesses are taken by name
+    alone = case_frame.method_info(_cases(rows[1:2])).set_index("method")["thesis_method"]
+    assert alone["blended start"] == "OP-DC"  # unlabelled and alone: what it runs names it
+
+
 # --- selecting the inconsistent walks for solving again ------------------------------------------------------------
 
 SUITE = """\

@@ -782,8 +782,8 @@ def test_provenance_shows_the_cpu_and_its_vector_extensions_as_one_row_each():
 
 
 def test_each_thesis_cell_gets_a_verdict():
-    base = {"published_acot": 0.20, "bound_acot": 0.10, "published_below_bound": False, "claimed_acot": math.nan,
-            "thesis_reading_acot": math.nan}
+    base = {"method": "OP-DC", "published_acot": 0.20, "bound_acot": 0.10, "published_below_bound": False,
+            "claimed_acot": math.nan, "thesis_reading_acot": math.nan}
     assert tables.verdict(base | {"acot": 0.21, "difference_percent": 5.0}) == "reproduced"
     below = tables.verdict(base | {"published_below_bound": True, "bound_acot": 0.5, "acot": 0.6})
     assert below == "published figure below the physical bound 0.5000: no walk can cost that little"
@@ -798,6 +798,7 @@ def test_each_thesis_cell_gets_a_verdict():
     assert missed == ("not reproduced: our verified minimum 0.3000 (+50.0 %), claimed 0.2500, read the thesis's way "
                       "0.2200")
     assert tables.verdict(base | {"acot": math.nan}) == "not reproduced: no verified walk of this method"
+    assert tables.verdict(base | {"method": None, "acot": math.nan}) == "not run in this store"
 
 
 def test_the_report_says_how_many_versions_of_the_code_solved_its_cases():

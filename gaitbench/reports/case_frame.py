@@ -38,6 +38,8 @@ ENERGETICS = "energetics"
 THESIS_TRANSCRIPTION = {"hermite-simpson": "DC", "dmoc": "DM"}
 NOT_CHECKED = "not checked: stored before walks were verified as one motion; run `gaitbench verify --store STORE`"
 """The reason a complete walk whose row has no verified flag is not ranked."""
+NO_VERIFIED_ACOT = "no verified ACOT recorded: run `gaitbench verify --store STORE`"
+"""The reason a walk flagged verified is not ranked when its row holds no verified ACOT to rank it by."""
 STATUS_CAUSES = {"solved": "complete", "timeout": "time_limit", "crashed": "crashed", "error": "error"}
 """Stop causes of stores that predate the ``stop_cause`` column, from the case's status."""
 
@@ -85,11 +87,13 @@ def prepare(cases: pd.DataFrame) -> pd.DataFrame:
     complete = df["status"] == "solved"
     df["complete"] = complete
     flags = pd.to_numeric(df["verified"], errors="coerce")
-    ranked = complete & (flags == 1)
+    figure = df["verified_acot"].notna()
+    ranked = complete & (flags == 1) & figure
     df["ranked"] = ranked
     df["verification_failure"] = [
-        None if not done or flag == 1 else reason if isinstance(reason, str) and reason else NOT_CHECKED
-        for done, flag, reason in zip(complete, flags, df["verification_failure"], strict=True)]
+        None if not done or (flag == 1 and has_figure) else NO_VERIFIED_ACOT if flag == 1
+        else reason if isinstance(reason, str) and reason else NOT_CHECKED
+        for done, flag, has_figure, reason in zip(complete, flags, figure, df["verification_failure"], strict=True)]
     df["acot"] = df["verified_acot"].where(ranked)
     df["claimed_acot"] = df["claimed_acot"].where(ranked & df["is_dc"])
     df["thesis_reading_acot"] = pd.to_numeric(df["thesis_reading_acot"], errors="coerce").where(ranked)
@@ -167,25 +171,30 @@ def method_info(df: pd.DataFrame) -> pd.DataFrame:
     info["label"] = [method.removesuffix(f" [{objective}]")
                      for method, objective in zip(info["method"], info["objective"], strict=True)]
     info["thesis_method"] = None
-    for _, group in info.groupby("experiment", sort=False):
-        taken: set[str] = set()
-        guesses = {}
-        for index, row in group.iterrows():
-            guesses[index] = _thesis_method(row["label"], row["strategy"], row["transcription"]) \
-                if row["objective"] == NET_POWER.name else None
-        counts = pd.Series([g for g in guesses.values() if g]).value_counts()
-        for index, guess in guesses.items():
-            if guess and counts[guess] == 1 and guess not in taken:
-                info.loc[index, "thesis_method"] = guess
-                taken.add(guess)
+    for _, group in info[info["objective"] == NET_POWER.name].groupby("experiment", sort=False):
+        # a method labelled with a thesis method's name stands for it; the others by what they run, where that
+        # names one thesis method left untaken, and only one of them
+        named = {index: _named_thesis_method(label) for index, label in group["label"].items()}
+        guessed = {index: _guessed_thesis_method(row["strategy"], row["transcription"])
+                   for index, row in group.iterrows() if named[index] is None}
+        for choices in (named, guessed):
+            taken = set(info.loc[group.index, "thesis_method"].dropna())
+            counts = pd.Series([choice for choice in choices.values() if choice]).value_counts()
+            for index, choice in choices.items():
+                if choice and counts[choice] == 1 and choice not in taken:
+                    info.loc[index, "thesis_method"] = choice
     return info[columns]
 
 
-def _thesis_method(label: str, strategy: str, transcription: str) -> str | None:
+def _named_thesis_method(label: str) -> str | None:
     if label in thesis_values.METHODS:
         return label
     if label.lower() == REFERENCE_LABEL:
         return thesis_values.REFERENCE_METHOD
+    return None
+
+
+def _guessed_thesis_method(strategy: str, transcription: str) -> str | None:
     suffix = THESIS_TRANSCRIPTION.get(transcription)
     if suffix is None:
         return None

@@ -104,7 +104,8 @@ def paired_savings(savings: pd.DataFrame, minima: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (experiment, method, baseline, kind), group in savings.groupby(
             ["experiment", "method", "baseline", "baseline_kind"], sort=False):
-        paired = group["savings_percent"].dropna().to_numpy(float)
+        paired = group["savings_percent"].to_numpy(float)
+        paired = paired[np.isfinite(paired)]
         row = {"experiment": experiment, "method": method, "baseline": baseline, "baseline_kind": kind,
                "pairs": len(paired), "median_percent": math.nan, "median_ci_low": math.nan,
                "median_ci_high": math.nan, "mean_percent": math.nan, "mean_ci_low": math.nan,
@@ -123,8 +124,9 @@ def paired_savings(savings: pd.DataFrame, minima: pd.DataFrame) -> pd.DataFrame:
 
 
 def _saving(baseline: float | None, candidate: float | None) -> float:
-    """100 (baseline − candidate) / baseline, NaN where either is missing."""
-    if baseline is None or candidate is None or not (math.isfinite(baseline) and math.isfinite(candidate)):
+    """100 (baseline − candidate) / baseline, NaN where either is missing or the baseline is not positive."""
+    if baseline is None or candidate is None or not (math.isfinite(baseline) and math.isfinite(candidate)) \
+            or baseline <= 0:
         return math.nan
     return 100 * (baseline - candidate) / baseline
 
@@ -166,7 +168,7 @@ def consistency_exceptions(acot: pd.DataFrame, df: pd.DataFrame | None = None,
             continue
         median = float(reference.median())
         ratios = (group["acot"] / median).to_numpy(float)
-        outside = np.abs(ratios - 1) > tolerance
+        outside = np.round(np.abs(ratios - 1), 12) > tolerance  # rounded: as far above the median as below
         n_values = group["N"].to_numpy(int)
         for i in np.flatnonzero(outside & (n_values > high)):
             near = (np.abs(n_values - n_values[i]) <= half_width) & (np.arange(len(n_values)) != i)

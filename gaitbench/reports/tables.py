@@ -139,8 +139,11 @@ def cot_bounds(acot: pd.DataFrame) -> pd.DataFrame:
 # --- energy savings ----------------------------------------------------------------------------------------------
 
 def savings_percent(reference: Any, candidate: Any) -> Any:
-    """S = 100 (ACOT_ref − ACOT_D&C) / ACOT_ref, element-wise; NaN where either is missing."""
+    """S = 100 (ACOT_ref − ACOT_D&C) / ACOT_ref, element-wise; NaN where either is missing or the reference is not
+    positive (no share of it can be saved)."""
     reference = pd.to_numeric(reference, errors="coerce") if isinstance(reference, pd.Series) else reference
+    reference = reference.where(reference > 0) if isinstance(reference, pd.Series) else \
+        reference if reference > 0 else math.nan
     return 100.0 * (reference - candidate) / reference
 
 
@@ -229,6 +232,8 @@ def verdict(row: Mapping[str, Any]) -> str:
             return (f"{below} with its push-off charged at the energy the push-off gives the robot; the thesis's "
                     f"push-off term (3.77) would allow down to {row['thesis_push_off_bound_acot']:.4f}")
         return below
+    if row.get("method") is None:
+        return "not run in this store"
     ours = row.get("acot")
     if ours is None or not math.isfinite(ours):
         return "not reproduced: no verified walk of this method"
