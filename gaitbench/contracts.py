@@ -111,13 +111,17 @@ class Solver(Protocol):
 VARIANT_KINDS = ("continuations", "remedies", "seed_remedies", "last_resorts")
 """The optional solver members that return named variants of the solver for the retry ladder."""
 
+SECTION_VARIANT = "for_sections"
+"""The optional solver member that returns the variant a strategy solves its sectional NLPs with
+(:func:`gaitbench.solve.solver.section_solver`): checked like the solver, as every solve of a walk is."""
+
 
 class CheckedSolver:
     """A solver plugin behind the boundary every solve of a walk passes (:class:`WalkProblem` holds its solver so):
     a result that claims convergence at a non-finite ``x`` or objective becomes
     :attr:`gaitbench.solver_result.SolverStatus.NON_FINITE`, with a message that says so, instead of a point the
-    verification would fail on for another reason. The solver's variants are checked alike; everything else is the
-    plugin's own."""
+    verification would fail on for another reason. The solver's variants, its sectional one among them, are checked
+    alike; everything else is the plugin's own."""
 
     def __init__(self, solver: Solver) -> None:
         self.plugin = solver
@@ -131,6 +135,8 @@ class CheckedSolver:
         member = getattr(self.plugin, name)
         if name in VARIANT_KINDS:
             return lambda: [(label, checked(variant)) for label, variant in member()]
+        if name == SECTION_VARIANT:
+            return lambda: checked(member())
         return member
 
 

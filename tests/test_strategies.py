@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from gaitbench.acceptance import MAX_DEFECT
 from gaitbench.cli.main import main
 from gaitbench.contracts import WalkProblem
 from gaitbench.cores import IdleCores
@@ -26,7 +27,6 @@ from gaitbench.solve.verify import verify_step
 from gaitbench.solve.walk import next_step_state
 from gaitbench.solver_result import SolverResult, SolverStatus
 from gaitbench_plugins.strategies.decrease_and_conquer import (
-    DYNAMICS_TOLERANCE,
     DecreaseAndConquer,
     NodeValues,
     PointCosts,
@@ -290,7 +290,7 @@ def test_decrease_and_conquer_walks_and_records_everything(forward, transcriptio
         assert len(details["selection"]) == n and details["selection"][0] == "complete"
         assert set(details["candidate_cots"]) >= {"synthesized", "complete"}
         assert details["chosen"] == min(details["candidate_cots"], key=details["candidate_cots"].get)
-        assert details["verified"] == (step.verification.max_defect <= DYNAMICS_TOLERANCE)
+        assert details["verified"] == (step.verification.max_defect <= MAX_DEFECT)
         assert details["claimed_cot"] == step.verification.cot
         assert details["polished"]["status"] == "converged"
         assert details["first_phase"]["status"] == "converged"
@@ -339,7 +339,7 @@ def _the_polished_trajectory_is_kept_and_stored(walk, tmp_path):
     for step in walk.steps:
         assert step.polished is not None and step.polished.solved and step.verified is step.polished
         assert step.polished.verification.cot == step.details["polished"]["cot"]
-        assert step.polished.verification.max_defect <= DYNAMICS_TOLERANCE
+        assert step.polished.verification.max_defect <= MAX_DEFECT
         assert step.details["polished"]["max_defect"] == step.polished.verification.max_defect
     path = write_walk(walk, tmp_path / "walk.json")
     with np.load(path.with_suffix(".npz")) as arrays:

@@ -242,6 +242,18 @@ class NaNClaimsConvergence:
     def remedies(self):
         return [("inf-objective", NaNClaimsConvergence(objective=float("inf")))]
 
+    def for_sections(self):
+        return NaNClaimsConvergence(objective=1.0)
+
+
+def test_the_sectional_variant_of_a_solver_is_behind_the_same_boundary():
+    from gaitbench.contracts import checked
+    from gaitbench.solve.solver import section_solver
+    from gaitbench.solver_result import SolverStatus
+
+    sections = section_solver(checked(NaNClaimsConvergence()))  # what decrease and conquer solves its sections with
+    assert sections.solve(None, np.zeros(3), np.zeros(14)).status == SolverStatus.NON_FINITE
+
 
 def test_non_finite_output_claiming_convergence_is_its_own_status_at_the_solver_boundary():
     """Not SciPy's "y0 must be finite" from the verification after it: the step ends ``non_finite``, naming the

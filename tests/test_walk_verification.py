@@ -78,6 +78,16 @@ def test_a_walk_with_a_broken_join_fails_and_the_energy_that_appears_is_counted(
     assert verification.max_join_mismatch == pytest.approx(0.05)
 
 
+def test_the_join_is_checked_against_the_impact_of_the_step_s_own_end_not_what_the_strategy_handed_on(forward):
+    start = forward.start_state("on-ground")
+    first = _step(1, 1, start, _check())
+    handed_on = first.next_state + np.array([0.3, -0.2, 1.0, 2.0])  # a strategy's wrong post-impact state
+    second = _step(2, 2, handed_on, _check())
+    first.next_state = handed_on  # and the step it started from says so
+    verification = verify_walk(_walk([first, second]), start, forward.robot)
+    assert not verification.verified and verification.max_join_mismatch == pytest.approx(2.0)
+
+
 def test_step_one_must_start_from_the_walks_start_state(forward):
     start = forward.start_state("on-ground")
     moved = _step(1, 1, start + np.array([0.01, 0.0, 0.0, 0.0]), _check())

@@ -28,6 +28,7 @@ from gaitbench.problem.gait_problem import StepData, StepStructure
 from gaitbench.problem.trajectory import StepTrajectory
 from gaitbench.solve.thesis_reading import thesis_reading_acot
 from gaitbench.solve.verify import verify_step
+from gaitbench.solve.walk import next_step_state
 from gaitbench.solve.walk_file import WalkFile
 from gaitbench.walk_types import StepCheck, StepOutcome, WalkResult, WalkVerification
 
@@ -36,9 +37,11 @@ def verify_walk(walk: WalkResult, start_state: np.ndarray, robot: RobotParameter
     """Check the steps ``walk`` reports (:attr:`StepOutcome.verified`: decrease and conquer's polished or complete
     motion, not its patchwork) against :class:`Thresholds` for its N, each step's objective gap against the larger
     of its COT and the walk's mean step COT, and each step's start against the post-impact state of the one before
-    (``start_state``, leg order (q1, q2, q̇1, q̇2), for step 1)."""
+    (``start_state``, leg order (q1, q2, q̇1, q̇2), for step 1), applied here to the step's own trajectory: what a
+    strategy says it handed on is not trusted."""
     limits = Thresholds.for_nodes(walk.N)
     energy = BipedModel(robot, 2)  # both feet on the ground at a join: the 2-DOF model's energies
+    impact = BipedModel(robot, 4) if walk.phase == "second" else energy  # push-off is the 4-DOF model's
     expected = np.asarray(start_state, dtype=float)
     motions = list(takewhile(lambda motion: motion.solved, (step.verified for step in walk.steps)))
     walk_cot = average_cot([motion.verification.cot for motion in motions]) if motions else None
@@ -55,7 +58,7 @@ def verify_walk(walk: WalkResult, start_state: np.ndarray, robot: RobotParameter
         checks.append(StepCheck(step.index, check.cot, check.max_defect, check.resim_error,
                                 judged_gap(check, walk_cot), mismatch, float(appeared), tuple(failures)))
         reasons += [f"step {step.index}: {failure}" for failure in failures]
-        expected = motion.next_state
+        expected = next_step_state(impact, trajectory)
     if not walk.complete:
         reasons.insert(0, f"incomplete walk ({walk.failure or 'fewer steps than requested'})")
     acot = average_cot([check.cot for check in checks]) if walk.complete else None

@@ -39,7 +39,7 @@ from typing import Literal
 import numpy as np
 
 from gaitbench import Registration, hookimpl
-from gaitbench.acceptance import Thresholds, step_failures
+from gaitbench.acceptance import MAX_DEFECT, Thresholds, step_failures
 from gaitbench.contracts import WalkProblem
 from gaitbench.model.energetics import candidate_cot
 from gaitbench.problem.gait_problem import StepData, role_robot_vector, sectional_structure
@@ -57,9 +57,6 @@ from gaitbench.walk_types import StepOutcome, WalkResult
 
 FIRST_PHASE = "first phase"
 """``details["failed_in"]`` of a step whose First Phase failed: what the rescue acts on."""
-
-DYNAMICS_TOLERANCE = 1e-6
-"""A chosen trajectory whose dynamics residual exceeds this is reported as failing verification."""
 
 
 class DecreaseAndConquer:
@@ -170,7 +167,7 @@ class DecreaseAndConquer:
             "backtracks": synthesis.backtracks, "relation_checks": synthesis.checks,
             "synthesis_exhausted": synthesis.exhausted, "candidate_cots": cots, "chosen": chosen_label,
             "claimed_cot": verification.cot,
-            "verified": verification.max_defect <= DYNAMICS_TOLERANCE,
+            "verified": verification.max_defect <= MAX_DEFECT,  # the patchwork satisfies the dynamics
         }
         polished = None
         if self.polish and problem.out_of_time:
