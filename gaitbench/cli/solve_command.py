@@ -185,8 +185,10 @@ def solve(
 
     Step-by-step strategies solve each step from the heel-strike state of the previous one. Every reported step is
     checked: its largest dynamic defect, its re-simulation error, and its COT recomputed from the trajectory
-    itself. The walk stops at the first step the solver fails, keeping what was solved; the thresholds are judged on
-    the whole walk at the end (joins included). Exit status 1 if the walk is incomplete or not verified.
+    itself. A step the solver fails goes through the retry ladder, a coarse-grid rescue and, under One Phase, a
+    back-up onto the step before; the walk stops at the first step none of them solves, keeping what was
+    solved. The thresholds are judged on the whole walk at the end (joins included). Exit status 1 if the walk is
+    incomplete or not verified.
     """
     from gaitbench.contracts import StepsOutOfRange
     from gaitbench.cores import IdleCores
