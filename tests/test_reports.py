@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gaitbench.reports import build_report, case_frame, statistics, tables, write_report
+from gaitbench.reports import build_report, case_frame, csv_files, statistics, tables, write_report
 
 CHROMIUM_MISSING = "chromium is not installed (Debian package chromium; .ci/run installs it)"
 
@@ -128,7 +128,7 @@ def test_csv_cells_a_spreadsheet_would_run_are_escaped_and_numbers_stay_numbers(
                  {"method": "@SUM(1+1)", "strategy": "one-phase", "N": 10, "acot": None, "status": "incomplete",
                   "message": "-1+cmd|' /C calc'!A0"}])
     numbers = pd.DataFrame({"label": ["-0.5", "+x"], "value": [-0.125, 2.0]})
-    written = tables.write_csv({"acot": tables.acot_table(df), "failed_cases": tables.failed_cases(df),
+    written = csv_files.write_csv({"acot": tables.acot_table(df), "failed_cases": tables.failed_cases(df),
                                 "numbers": numbers}, tmp_path)
 
     with open(written[0], newline="") as file:

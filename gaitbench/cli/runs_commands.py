@@ -300,7 +300,7 @@ def runs_export(store_dir: Path, fmt: str, out: Path | None) -> None:
     out = out or Path(store_dir) / f"cases.{fmt}"
     try:
         if fmt == "csv":
-            from gaitbench.reports.tables import spreadsheet_safe
+            from gaitbench.reports.csv_files import spreadsheet_safe
 
             spreadsheet_safe(frame).to_csv(out, index=False)
         else:

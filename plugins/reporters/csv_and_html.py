@@ -17,7 +17,7 @@ class CsvReporter:
     name = "csv"
 
     def write(self, report, out_dir: Path) -> list[Path]:
-        from gaitbench.reports.tables import write_csv
+        from gaitbench.reports.csv_files import write_csv
 
         return write_csv(report.tables, out_dir)
 
