@@ -37,6 +37,7 @@ import tarfile
 import tempfile
 from pathlib import Path
 
+from gaitbench.cli.common import count
 from gaitbench.run.store import CHECKPOINTS_DIR, ResultStore
 from gaitbench.run.store_pack import pack_store, unpack_store
 
@@ -109,12 +110,12 @@ def main() -> None:
     args = parser.parse_args()
     if args.command == "save":
         counts = save(args.store, args.carry, args.trajectories)
-        print(f"{args.carry}: {counts['cases']} cases, {counts['checkpoints']} walks in flight "
+        print(f"{args.carry}: {count(counts['cases'], 'case')}, {count(counts['checkpoints'], 'walk')} in flight "
               f"({args.carry.stat().st_size / 1e6:.2f} MB)")
     else:
         counts = restore(args.carry, args.store)
-        print(f"{args.store}: {counts['cases']} cases, {counts['checkpoints']} walks in flight; the package "
-              f"versions they ran with: {args.store.with_name(args.store.name + '.constraints.txt')}")
+        print(f"{args.store}: {count(counts['cases'], 'case')}, {count(counts['checkpoints'], 'walk')} in flight; "
+              f"the package versions they ran with: {args.store.with_name(args.store.name + '.constraints.txt')}")
 
 
 if __name__ == "__main__":
