@@ -70,6 +70,8 @@ MUTANTS = (
            "max(abs(cot), walk_cot, OBJECTIVE_ATOL / OBJECTIVE_RTOL)", "max(abs(cot), walk_cot, OBJECTIVE_ATOL)"),
     Mutant("walk verification: gap against the step's COT alone", "gaitbench/solve/walk_verification.py",
            "step_failures(check, limits, walk_cot)", "step_failures(check, limits)"),
+    Mutant("walk verification: join against the state the strategy handed on", "gaitbench/solve/walk_verification.py",
+           "expected = next_step_state(impact, trajectory)", "expected = motion.next_state"),
     Mutant("verify: fine grid reads controls at the nodes", "gaitbench/solve/verify.py",
            "np.clip(np.linspace(0.0, 1.0, samples_per_interval + 1), INSIDE, 1.0 - INSIDE)",
            "np.linspace(0.0, 1.0, samples_per_interval + 1)"),
