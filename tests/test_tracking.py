@@ -88,6 +88,25 @@ def test_exact_model_with_ideal_observer_tracks_to_integrator_tolerance(referenc
         assert step["cot_tracked"] == pytest.approx(step["cot_ideal"], rel=1e-2)
 
 
+def test_an_integration_segment_reads_the_reference_on_its_own_interval_up_to_and_at_its_end(reference):
+    """At a node the C¹ reference's acceleration jumps: a segment ending there sees its own interval's, the
+    left-hand limit, so that its right-hand side is smooth up to its end."""
+    step = reference.steps[0]
+    node = step.times[3]
+    later = step.desired(node)
+    step.piece = 2
+    try:
+        own = step.desired(node)
+    finally:
+        step.piece = None
+    np.testing.assert_allclose(own[0], later[0], atol=1e-12)
+    np.testing.assert_allclose(own[1], later[1], atol=1e-9)
+    assert np.max(np.abs(own[2] - later[2])) > 1e-3
+    np.testing.assert_allclose(own[2], step.desired(node - 1e-9)[2], rtol=1e-5)
+    run(reference, "thesis", "ideal", "none", steps=1)
+    assert step.piece is None  # the loop leaves the reference as it found it
+
+
 def test_a_downhill_walk_tracked_exactly_does_not_fall():
     """The downward slope's first step takes the stance leg to −1.9 rad, beyond the thesis's printed box and with
     the hip below the stance foot's level: tracked exactly, the robot must not count as fallen (the walk was solved

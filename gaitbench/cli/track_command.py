@@ -74,7 +74,7 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
     _print_tracking(console, tracked)
     if out is not None:
         console.print(f"wrote {tracked.save(out)}")
-    if tracked.fell:
+    if tracked.fell or tracked.failure:
         ctx.exit(1)
 
 
@@ -99,9 +99,10 @@ def _print_tracking(console: Console, tracked) -> None:
     if data["walk"].get("trajectory") == "polished":
         console.print("reference: the verified trajectory, each step polished from the chosen patchwork")
     if data["acot_tracked"] is not None:
+        increase = fmt(data["acot_increase_percent"], "+.2f", "n/a")  # n/a: a free reference
         console.print(f"ACOT tracked {data['acot_tracked']:.4f} against the reference's {data['acot_reference']:.4f} "
-                      f"({data['acot_increase_percent']:+.2f} %) over {data['steps_tracked']} step(s); perfect "
-                      f"tracking of the exact model would cost {data['acot_ideal']:.4f}")
+                      f"({increase} %) over {data['steps_tracked']} step(s); perfect tracking of the exact model "
+                      f"would cost {data['acot_ideal']:.4f}")
     if data["torque_limit_exceeded"]:
         print_plain(console, f"torques reached {data['max_torque']:.0f} N·m, above the limit "
                         f"{data['torque_limit']:.0f} N·m (not enforced)", "yellow")

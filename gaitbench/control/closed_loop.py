@@ -109,8 +109,10 @@ class _ClosedLoop:
         events = fall_events(self.reference, info, self.criteria)
         functions = [event for event, _ in events]
         # Segments end at every node, where the reference's acceleration may jump (C¹ interpolants), and at every
-        # sampling instant; each is then smooth for the integrator.
-        breaks = np.asarray(self.reference.step(info).times, dtype=float)
+        # sampling instant; each is then smooth for the integrator, the reference read on its interval up to and at
+        # its end (ReferenceStep.piece).
+        reference = self.reference.step(info)
+        breaks = np.asarray(reference.times, dtype=float)
         samples = np.zeros(0)
         if self.sample_rate is not None:
             samples = np.arange(0.0, info.duration, 1.0 / self.sample_rate)
@@ -119,31 +121,35 @@ class _ClosedLoop:
         breaks = breaks[np.r_[True, np.diff(breaks) > 1e-12]]
         held = None
         times, states, torques = [0.0], [x], [self._control(0.0, x, info)]
-        for a, b in zip(breaks[:-1], breaks[1:], strict=True):
-            if samples.size and np.min(np.abs(samples - a)) <= 1e-12:
-                held = self._control(a, x, info)
-            inside = grid[(grid > a + 1e-12) & (grid < b - 1e-12)]
-            solution = solve_ivp(self._rhs(info, held), (a, b), x, method="DOP853", t_eval=np.r_[inside, b],
-                                 rtol=self.rtol, atol=self.atol, events=functions)
-            recorded = [(t, state) for t, state in zip(solution.t, solution.y.T, strict=True)
-                        if np.min(np.abs(grid - t)) <= 1e-12]
-            for t, state in recorded:
-                times.append(float(t))
-                states.append(state)
-                torques.append(held if held is not None else self._control(t, state, info))
-            if solution.status == -1:
-                self.failure = f"step {info.index}: integration failed at t = {solution.t[-1]:.4f} s " \
-                               f"({solution.message})"
-                break
-            if solution.status == 1:
-                which = next(i for i, hits in enumerate(solution.t_events) if len(hits))
-                t, state = float(solution.t_events[which][0]), solution.y_events[which][0]
-                times.append(t)
-                states.append(state)
-                torques.append(held if held is not None else self._control(t, state, info))
-                self.fall = Fall(info.index, info.start_time + t, events[which][1])
-                break
-            x = solution.y[:, -1]
+        try:
+            for a, b in zip(breaks[:-1], breaks[1:], strict=True):
+                reference.piece = reference.interval(a)
+                if samples.size and np.min(np.abs(samples - a)) <= 1e-12:
+                    held = self._control(a, x, info)
+                inside = grid[(grid > a + 1e-12) & (grid < b - 1e-12)]
+                solution = solve_ivp(self._rhs(info, held), (a, b), x, method="DOP853", t_eval=np.r_[inside, b],
+                                     rtol=self.rtol, atol=self.atol, events=functions)
+                recorded = [(t, state) for t, state in zip(solution.t, solution.y.T, strict=True)
+                            if np.min(np.abs(grid - t)) <= 1e-12]
+                for t, state in recorded:
+                    times.append(float(t))
+                    states.append(state)
+                    torques.append(held if held is not None else self._control(t, state, info))
+                if solution.status == -1:
+                    self.failure = f"step {info.index}: integration failed at t = {solution.t[-1]:.4f} s " \
+                                   f"({solution.message})"
+                    break
+                if solution.status == 1:
+                    which = next(i for i, hits in enumerate(solution.t_events) if len(hits))
+                    t, state = float(solution.t_events[which][0]), solution.y_events[which][0]
+                    times.append(t)
+                    states.append(state)
+                    torques.append(held if held is not None else self._control(t, state, info))
+                    self.fall = Fall(info.index, info.start_time + t, events[which][1])
+                    break
+                x = solution.y[:, -1]
+        finally:
+            reference.piece = None
         return np.array(times), np.array(states), np.array(torques)
 
     def _step(self, info: StepInfo, x0: np.ndarray) -> np.ndarray | None:

@@ -46,19 +46,28 @@ class ReferenceStep:
     push_off: float
     cot: float
     velocity_mismatch: float  # max |interpolant's own q̇ − d/dt of its q| over the step (0 for DMOC, O(h³) for HS)
-    _last_time: float | None = field(default=None, repr=False)
+    piece: int | None = field(default=None, repr=False)
+    """The interval an integration segment lies in, while it runs: read from that interval's polynomial up to and at
+    its end node (the left-hand limit), since a C¹ interpolant's acceleration jumps at the nodes and a segment that
+    saw the next interval's at its end would not be smooth. None: the interval that ``t`` lies in (the later one at
+    a node)."""
+    _last_key: tuple[float, int | None] | None = field(default=None, repr=False)
     _last_value: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     def desired(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q_d, q̇_d, q̈_d) in leg order at local time ``t`` ∈ [0, T] (memoized: one loop evaluation asks for
         the same time several times)."""
-        if t != self._last_time:
-            self._last_time, self._last_value = t, self._evaluate(t)
+        if (t, self.piece) != self._last_key:
+            self._last_key, self._last_value = (t, self.piece), self._evaluate(t)
         return self._last_value
+
+    def interval(self, t: float) -> int:
+        """The interval that local time ``t`` lies in (the later one at a node)."""
+        return int(np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2))
 
     def _evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         h = self.info.time_step
-        k = int(np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2))
+        k = self.interval(t) if self.piece is None else self.piece
         s = (t - self.times[k]) / h
         c = self.coefficients[k]
         degree = c.shape[0] - 1
@@ -83,16 +92,17 @@ class Reference:
     model: BipedModel
     steps: list[ReferenceStep]
     trajectory: str = "walk"
-    """Which trajectories are tracked: ``walk`` (each step's own) or ``polished`` (the verified ones, re-solved from
-    decrease and conquer's chosen patchworks)."""
+    """Which trajectories are tracked: ``walk`` (each step's own) or ``polished`` (the motions decrease and conquer's
+    steps report: each its polish or its complete solution, never its patchwork)."""
 
     @classmethod
     def from_walk(cls, walk: WalkResult, experiment: Experiment) -> Reference:
         """The solved prefix of ``walk``, each step through its trajectory's own interpolant.
 
-        A walk whose steps were polished (decrease and conquer) is tracked along its verified trajectories, the
-        polished ones, and compared with their COT, the verified one; a step's own (chosen, patchwork) trajectory
-        is tracked only when the walk has no polished trajectory for every solved step (``polish = false``).
+        A walk whose steps report motions of their own (decrease and conquer: each step's polish or complete
+        solution, :attr:`StepOutcome.verified`) is tracked along those and compared with their COT, the verified
+        one; a step's own trajectory (for decrease and conquer, the patchwork) only when not every solved step
+        has one.
 
         The tracked robot's cost is measured as net hip power plus the push-off's energy (the thesis's COT), so each
         step's reference COT is too: the verified COT of a walk solved under that measure, else the same measure
@@ -136,14 +146,17 @@ class Reference:
     def ideal_cot(self, info: StepInfo) -> float:
         """COT of the step driven by the exact model's inverse dynamics: what perfect tracking costs."""
         ref = self.step(info)
-        grid = np.linspace(0.0, info.duration, 16 * (len(ref.times) - 1) + 1)
-        power = []
-        for t in grid:
-            q, dq, ddq = ref.desired(t)
-            tau = inverse_dynamics(self.model, self.full(info, q), self.full(info, dq), self.full(info, ddq),
-                                   info.stance)
-            power.append(hip_power(dq[0], dq[1], tau[0], tau[1]))
-        energy = hip_energy(grid, np.array(power))
+        energy = 0.0
+        for k, (start, end) in enumerate(zip(ref.times[:-1], ref.times[1:], strict=True)):
+            ref.piece = k  # each interval on its own: the torques jump with the acceleration at the nodes
+            grid, power = np.linspace(start, end, 17), []
+            for t in grid:
+                q, dq, ddq = ref.desired(t)
+                tau = inverse_dynamics(self.model, self.full(info, q), self.full(info, dq), self.full(info, ddq),
+                                       info.stance)
+                power.append(hip_power(dq[0], dq[1], tau[0], tau[1]))
+            energy += hip_energy(grid, np.array(power))
+        ref.piece = None
         if self.model.dof == 4:
             q, dq, _ = ref.desired(info.duration)
             energy += self.model.push_off(self.full(info, q), self.full(info, dq), ref.push_off, info.stance)[1]
