@@ -326,6 +326,34 @@ def test_gaitbench_verify_store_writes_each_walks_verdict_into_its_row(tmp_path,
     assert bad["verified"] == 0 and bad["verification_failure"].startswith("walk file unreadable")
 
 
+def test_a_walk_that_breaks_the_verifier_costs_the_other_walks_of_a_store_nothing(tmp_path, forward, monkeypatch):
+    from gaitbench.run.store import ResultStore, case_file
+    from gaitbench.solve import walk_verification
+
+    walk, path = _solved_walk(tmp_path / "walk", forward)
+    files = {name: (path.parent / name).read_bytes() for name in ("walk.json", "walk.npz")}
+    store = tmp_path / "store"
+    with ResultStore.create(store) as results:
+        results.start_run({"run_id": "r1", "suite": "s", "started_at": "2026-01-01T00:00:00+00:00"})
+        for key in ("a" * 16, "b" * 16):
+            results.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 10,
+                                 "status": "solved", "acot": walk.acot, "walk_path": case_file(key, "walk.json")},
+                                files)
+    reverify = walk_verification.reverify
+
+    def breaks_on_b(walk_file, registry=None):
+        if "b" * 16 in str(walk_file.path):
+            raise RuntimeError("a bug")
+        return reverify(walk_file, registry)
+
+    monkeypatch.setattr(walk_verification, "reverify", breaks_on_b)
+    result = CliRunner().invoke(main, ["verify", "--store", str(store)])
+    assert result.exit_code == 1 and "RuntimeError: a bug" in result.output, result.output
+    with ResultStore.open(store) as results:
+        rows = {row["case_key"]: row for row in results.cases()}
+    assert rows["a" * 16]["verified"] == 1 and rows["b" * 16]["verified"] is None
+
+
 def test_gaitbench_verify_store_leaves_a_walk_whose_plugin_is_not_installed_unjudged(tmp_path, forward):
     """A walk solved with a plugin this environment lacks is not a broken file: its row keeps the verdict it had,
     and the command says which plugin is missing and how to go on."""
@@ -351,13 +379,20 @@ def test_gaitbench_verify_store_leaves_a_walk_whose_plugin_is_not_installed_unju
 
 @pytest.mark.parametrize(("field", "value"), [
     ("N", "eight"), ("N", 8.5), ("phase", "third"), ("experiment_options", {"bogus": 1}),
-    ("problem_options", {"clearance": "of"}),
+    ("problem_options", {"clearance": "of"}), ("steps", None), ("steps", "abc"), ("steps[0]", [{}]),
+    ("steps[0].stance", "x"), ("steps[0]", "N = 9"),
 ])
 def test_a_walk_file_with_a_bad_header_value_is_refused_naming_the_field(tmp_path, forward, field, value):
     """Each gave a traceback (or, for N = 8.5, was read as 8): a walk file from another install whose experiment
     plugin changed its options is the realistic case."""
     _, path = _solved_walk(tmp_path, forward)
     header = json.loads(path.read_text())
-    path.write_text(json.dumps(header | {field: value}))
+    if field == "steps[0].stance":
+        header["steps"][0]["stance"] = value
+    elif value == "N = 9":  # a header whose N is not its trajectories' (8 nodes)
+        header["N"] = 9
+    else:
+        header[field.partition("[")[0]] = value
+    path.write_text(json.dumps(header))
     result = CliRunner().invoke(main, ["verify", str(path)])
-    assert result.exit_code == 2 and f"{field}:" in result.output and "Traceback" not in result.output, result.output
+    assert result.exit_code == 2 and f"{field}" in result.output and "Traceback" not in result.output, result.output

@@ -45,7 +45,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     if not walks and store is None:
         raise click.UsageError("name walk files, or a store with --store")
     targets: list[tuple[Path, str | None, float | None, dict]] = [(path, None, None, {}) for path in walks]
-    console, failed, updates, missing = Console(), 0, {}, []
+    console, failed, updates, missing, broke = Console(), 0, {}, [], []
     packed = store is not None and is_pack(store)
     if store is not None:
         stored, absent, recorded = _stored_walks(store)
@@ -70,6 +70,14 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             if case_key is None:
                 raise click.BadParameter(str(exc), param_hint="WALKS") from None
             report = _unreadable(path, exc)  # one broken file of a store is that walk's verdict, not the end
+            report["notes"].append("a stored walk: restore its files, or solve it again with `gaitbench run SUITE "
+                                   "--resume --retry-unverified`, which this verdict makes it eligible for")
+        except Exception as exc:  # a walk that breaks the verifier must not cost the others their verdicts
+            if case_key is None:
+                raise
+            broke.append(f"{path}: {type(exc).__name__}: {exc}")
+            failed += 1
+            continue
         else:
             stored_acot = walk_file.header.get("acot") if stored_acot is None else stored_acot
             report = _report(path, walk, stored_acot, walk_file.acot_is_claimed)
@@ -84,6 +92,11 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
         note = (f"{count(len(missing), 'stored walk')} not verified, verdicts not recorded: a plugin they were solved "
                 f"with is not installed here; install it and run again. {missing[0]}"
                 + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""))
+        click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
+    if broke:  # a fault of gaitbench's, not of the walk: no verdict either way
+        note = (f"{count(len(broke), 'stored walk')} not verified, verdicts not recorded: the verification failed "
+                f"with an error, please report it. {broke[0]}" + (f" (and {len(broke) - 1} more)" if len(broke) > 1
+                                                                  else ""))
         click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
     if packed and not as_json:
         console.print(f"verdicts not recorded: {store} is a pack, which is read-only; `gaitbench runs unpack` "

@@ -209,12 +209,13 @@ class WalkFile:
         phase = data["phase"]
         if phase not in ("first", "second"):
             raise WalkFileError(f"{self.path}: phase: expected 'first' or 'second', found {phase!r}")
+        records = _step_records(self.path, data.get("steps"))
         with _field(self.path, "problem_options"):  # the options are checked as the step's structure is made
             built = transcription.build(StepStructure(phase, n_nodes, options))
         model = BipedModel(experiment.robot, 4 if phase == "second" else 2)
         walk = WalkResult(experiment=data["experiment"], transcription=data["transcription"], solver=data["solver"],
                           strategy=data["strategy"], N=n_nodes, phase=phase,
-                          requested_steps=int(data.get("requested_steps", len(data["steps"]))),
+                          requested_steps=int(data.get("requested_steps", len(records))),
                           wall_time_s=float(data.get("wall_time_s", 0.0)),
                           strategy_details=data.get("strategy_details", {}),
                           problem_options=asdict(options),
@@ -223,34 +224,37 @@ class WalkFile:
                           experiment_options=self.experiment_options, strategy_options=self.strategy_options,
                           transcription_options=self.transcription_options)
         npz = self.path.parent / data["trajectories"]
-        for step in data["steps"]:
-            arrays = self.step_arrays(int(step["index"]))
-            if "q" not in arrays or step.get("cot") is None:
-                break
-            try:
-                if _patchwork(step) and (self.version or 0) < 2:  # stored as nodes
-                    nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
-                    trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
-                                                  int(step["stance"]))
-                else:
-                    trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, arrays)
-            except KeyError as exc:
-                raise WalkFileError(f"{npz}: step {step['index']} lacks {exc.args[0]!r}; {rerun}") from None
-            outcome = StepOutcome(int(step["index"]), int(step["stance"]), step["status"], step["message"], None,
-                                  trajectory, _verification(step), next_state=next_step_state(model, trajectory),
-                                  details=step.get("details") or {})
-            polished = outcome.details.get(POLISHED)
-            own = self.step_arrays(outcome.index, POLISHED)
-            if "q" in own and isinstance(polished, dict) and polished.get("cot") is not None:
+        with _field(self.path, "steps"):  # what the records checked above leave: figures that are no numbers
+            for i, step in enumerate(records):
+                arrays = self.step_arrays(step["index"])
+                if "q" not in arrays or step.get("cot") is None:
+                    break
+                _check_nodes(npz, step, arrays, n_nodes, f"steps[{i}]")
                 try:
-                    polished_trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, own)
+                    if _patchwork(step) and (self.version or 0) < 2:  # stored as nodes
+                        nodes = (np.asarray(arrays[key], dtype=float) for key in ("t", "q", "dq", "tau"))
+                        trajectory = nodal_trajectory(*nodes, float(np.asarray(arrays["push_off"]).ravel()[0]),
+                                                      int(step["stance"]))
+                    else:
+                        trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, arrays)
                 except KeyError as exc:
-                    raise WalkFileError(f"{npz}: step {step['index']} lacks {POLISHED}_{exc.args[0]}; "
-                                        f"{rerun}") from None
-                outcome.polished = StepOutcome(outcome.index, outcome.stance, polished["status"], "polished", None,
-                                               polished_trajectory, _verification(polished),
-                                               next_state=next_step_state(model, polished_trajectory))
-            walk.steps.append(outcome)
+                    raise WalkFileError(f"{npz}: step {step['index']} lacks {exc.args[0]!r}; {rerun}") from None
+                outcome = StepOutcome(int(step["index"]), int(step["stance"]), step["status"], step["message"], None,
+                                      trajectory, _verification(step), next_state=next_step_state(model, trajectory),
+                                      details=step.get("details") or {})
+                polished = outcome.details.get(POLISHED)
+                own = self.step_arrays(outcome.index, POLISHED)
+                if "q" in own and isinstance(polished, dict) and polished.get("cot") is not None:
+                    _check_nodes(npz, step, own, n_nodes, f"steps[{i}].details.polished")
+                    try:
+                        polished_trajectory = _rebuild_trajectory(built, data["transcription"], experiment, step, own)
+                    except KeyError as exc:
+                        raise WalkFileError(f"{npz}: step {step['index']} lacks {POLISHED}_{exc.args[0]}; "
+                                            f"{rerun}") from None
+                    outcome.polished = StepOutcome(outcome.index, outcome.stance, polished["status"], "polished", None,
+                                                   polished_trajectory, _verification(polished),
+                                                   next_state=next_step_state(model, polished_trajectory))
+                walk.steps.append(outcome)
         if not walk.steps:
             raise WalkFileError(f"{self.path}: no solved step ({data.get('failure')}); solve the walk again")
         return walk, experiment
@@ -378,10 +382,40 @@ def _field(path: Path, name: str) -> Iterator[None]:
     environment lacks is not the file's fault, and passes)."""
     try:
         yield
-    except UnknownPluginError:
+    except (UnknownPluginError, WalkFileError):
         raise
     except (TypeError, ValueError, KeyError) as exc:
         raise WalkFileError(f"{path}: {name}: {exc}") from None
+
+
+def _step_records(path: Path, steps: Any) -> list[dict]:
+    """The header's step records, each checked for the fields the walk is rebuilt from."""
+    if not isinstance(steps, list):
+        raise WalkFileError(f"{path}: steps: expected an array of step records, found {_json_kind(steps)}")
+    for i, step in enumerate(steps):
+        if not isinstance(step, dict):
+            raise WalkFileError(f"{path}: steps[{i}]: expected a step record (an object), found {_json_kind(step)}")
+        for key, kind, allowed in (("index", int, None), ("stance", int, (1, 2)), ("status", str, None),
+                                   ("message", str, None)):
+            value = step.get(key)
+            if not isinstance(value, kind) or isinstance(value, bool) or (allowed and value not in allowed):
+                expected = "text" if kind is str else "1 or 2" if allowed else "a whole number"
+                raise WalkFileError(f"{path}: steps[{i}].{key}: expected {expected}, found {value!r}")
+    return steps
+
+
+def _check_nodes(npz: Path, step: dict, arrays: dict[str, np.ndarray], n_nodes: int, where: str) -> None:
+    """A step's stored trajectory has the walk's N nodes: a file whose header and NPZ disagree is refused, not read as
+    a motion that fails its dynamics."""
+    nodes = len(np.asarray(arrays["q"]))
+    if nodes != n_nodes:
+        raise WalkFileError(f"{npz}: {where} (step {step['index']}): its trajectory has {nodes} nodes, the walk's "
+                            f"N is {n_nodes}; the walk file and its NPZ are of different walks")
+
+
+def _json_kind(value: Any) -> str:
+    return {type(None): "null", bool: "true/false", str: "text", list: "an array", dict: "an object"}.get(
+        type(value), type(value).__name__)
 
 
 def _rerun(path: Path) -> str:
