@@ -214,6 +214,16 @@ def test_a_push_on_an_open_loop_robot_is_detected_as_a_fall(reference):
         FallCriteria(hip_fraction=1.5)
 
 
+def test_a_fall_before_a_segment_s_first_recorded_time_is_recorded_as_a_fall(reference):
+    """A 10 MN push just after a node topples the open-loop robot before the segment's first recorded sample:
+    the integrator then returns its states as an empty list, which once raised instead of recording the fall."""
+    node = reference.steps[0].times[3]
+    push = REGISTRY.create("disturbance", "push", reference.experiment, force=1e7, angle=np.pi, time=node + 1e-5,
+                           duration=1e-3)
+    result = run(reference, "pd", "ideal", controller_options={"kp": 1e-3, "kd": 1e-3}, disturbance_object=push)
+    assert result.fell and node < result.as_dict()["fall"]["time"] < node + reference.steps[0].info.time_step
+
+
 def test_stored_walk_gives_the_same_reference_and_a_complete_record(walk, reference, saved, tmp_path):
     """The NPZ rebuilt through the transcription's interpolant is the in-memory reference; the result saves JSON and
     the time series a report plots."""

@@ -129,7 +129,9 @@ class _ClosedLoop:
                 inside = grid[(grid > a + 1e-12) & (grid < b - 1e-12)]
                 solution = solve_ivp(self._rhs(info, held), (a, b), x, method="DOP853", t_eval=np.r_[inside, b],
                                      rtol=self.rtol, atol=self.atol, events=functions)
-                recorded = [(t, state) for t, state in zip(solution.t, solution.y.T, strict=True)
+                # an integration stopped (a fall, a failure) before its first output time returns its states as []
+                reached = np.asarray(solution.y, dtype=float).reshape(len(x), -1).T
+                recorded = [(t, state) for t, state in zip(solution.t, reached, strict=True)
                             if np.min(np.abs(grid - t)) <= 1e-12]
                 for t, state in recorded:
                     times.append(float(t))
