@@ -79,6 +79,11 @@ class PluginConflictError(LookupError):
     """A name registered more than once within a kind; it is unusable until one plugin renames it."""
 
 
+class PluginBuildError(ValueError):
+    """A plugin's factory failed with something other than the errors it refuses options with (a fault of the plugin,
+    or of the environment it needs): named with the plugin and the module it comes from."""
+
+
 class PluginDirectoryError(Exception):
     """A missing plugin directory: a usage mistake, so it is raised rather than recorded as a problem."""
 
@@ -186,7 +191,13 @@ class PluginRegistry:
         Typed by the kind's contract (:mod:`gaitbench.contracts`) when ``kind`` is a literal: a type checker takes
         ``create("solver", ...)`` for a :class:`~gaitbench.contracts.Solver`.
         """
-        return self.get(kind, name).factory(*args, **kwargs)
+        plugin = self.get(kind, name)
+        try:
+            return plugin.factory(*args, **kwargs)
+        except (TypeError, ValueError, LookupError):
+            raise  # how a factory refuses its options: the caller names the options
+        except Exception as exc:
+            raise PluginBuildError(f"cannot build {kind} {name!r} (from {plugin.module}): {_describe(exc)}") from exc
 
 
 def load_registry(plugin_dirs: Sequence[str | Path] = (), *, use_entry_points: bool = True) -> PluginRegistry:

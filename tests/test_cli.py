@@ -102,6 +102,26 @@ def test_unknown_experiment_exits_2_listing_the_available_ones(
     assert isinstance(result.exception, SystemExit)
 
 
+def test_a_solver_that_raises_stops_solve_with_one_line_naming_where(invoke, plugin_file):
+    path = plugin_file("raiser", """
+        from gaitbench import Registration, hookimpl
+
+        class Raiser:
+            name = "raiser"
+
+            def solve(self, nlp, parameters, initial_guess):
+                raise RuntimeError("solver plugin exploded")
+
+        @hookimpl
+        def register_solvers():
+            return [Registration("raiser", "raises in solve", Raiser)]
+    """)
+    result = invoke("--plugins-dir", str(path.parent), "solve", "-e", "forward", "-s", "raiser", "--N", "5",
+                    "--steps", "1")
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert "RuntimeError: solver plugin exploded (at raiser.py:" in result.output
+
+
 def test_show_renders_the_experiment_built_by_the_plugin(
     invoke, fake_entry_points, plugin_file, experiment_plugin, monkeypatch
 ):

@@ -12,6 +12,7 @@ import pytest
 from gaitbench.plugins import (
     KINDS,
     LoadedPlugin,
+    PluginBuildError,
     PluginConflictError,
     PluginDirectoryError,
     PluginProblem,
@@ -67,6 +68,27 @@ def test_plugin_dir_file_registers_an_experiment(plugin_file, experiment_plugin)
     assert plugin.module == str(path.resolve())
     assert plugin.kind == "experiment"
     assert registry.create("experiment", "my-walk") == "my-walk"
+
+
+def test_a_factory_that_fails_is_named_with_its_plugin_and_a_refused_option_is_left_to_the_caller(plugin_file):
+    path = plugin_file("fragile", """
+        from gaitbench import Registration, hookimpl
+
+        def broken(**options):
+            if options:
+                raise TypeError(f"unexpected options {sorted(options)}")
+            raise RuntimeError("no licence for the solver it needs")
+
+        @hookimpl
+        def register_experiments():
+            return [Registration("fragile", "fails to build", broken)]
+    """)
+    registry = load_registry([path.parent], use_entry_points=False)
+    with pytest.raises(PluginBuildError, match=r"cannot build experiment 'fragile' \(from .*fragile\.py\): "
+                                                r"RuntimeError: no licence"):
+        registry.create("experiment", "fragile")
+    with pytest.raises(TypeError, match="unexpected options"):
+        registry.create("experiment", "fragile", bogus=1)
 
 
 def test_plugin_dirs_from_environment_variable(plugin_file, experiment_plugin, monkeypatch):

@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from gaitbench.plugins import PluginConflictError, UnknownPluginError
+from gaitbench.plugins import PluginBuildError, PluginConflictError, UnknownPluginError
 
 
 def print_plain(console: Console, message: str, style: str) -> None:
@@ -67,6 +67,8 @@ def create(ctx: click.Context, kind: str, name: str, *args, **options):
     except OptionError as exc:
         raise click.BadParameter(f"{kind} {name!r}, option {exc.option}: {exc.message}",
                                  param_hint=OPTIONS_OF_KIND.get(kind)) from None
+    except PluginBuildError as exc:  # the plugin's own fault, whatever the options
+        raise click.BadParameter(str(exc), param_hint=OPTION_OF_KIND.get(kind)) from None
     except (TypeError, ValueError) as exc:  # a value the plugin refuses: the options' flag, when there were any
         raise click.BadParameter(f"cannot build {kind} {name!r} with options {options}: {exc}",
                                  param_hint=(OPTIONS_OF_KIND if options else OPTION_OF_KIND).get(kind)) from None

@@ -149,11 +149,11 @@ def experiments_show(ctx: click.Context, name: str) -> None:
     """Build experiment NAME and print its parameters, footholds and per-step feasibility."""
     state: _State = ctx.obj
     try:
-        plugin = state.registry.get("experiment", name)
+        state.registry.get("experiment", name)
     except (UnknownPluginError, PluginConflictError) as exc:
         raise click.BadParameter(str(exc), param_hint="NAME") from None
     try:
-        experiment = plugin.factory()
+        experiment = state.registry.create("experiment", name)
     except ValueError as exc:  # includes InvalidParameterError: a bad experiment definition, not a crash
         raise click.ClickException(f"experiment {name!r} is invalid: {exc}") from None
     from gaitbench.model.experiment import render_experiment  # pulls in the numerics; only this command needs it

@@ -215,8 +215,15 @@ def solve(
     _check_memory(transcription, strategy_name, n_nodes, problem.n_steps)
     console = Console()
     total = problem.n_steps
-    with console.status(f"solving step 1 of {total}") as status, cores.occupy():
-        walk = solve_verified(strategy, problem, on_step=lambda outcome: status.update(step_status(outcome, total)))
+    try:
+        with console.status(f"solving step 1 of {total}") as status, cores.occupy():
+            walk = solve_verified(strategy, problem,
+                                  on_step=lambda outcome: status.update(step_status(outcome, total)))
+    except Exception as exc:  # a plugin's fault, or gaitbench's: said in one line, as `gaitbench run` records it
+        from gaitbench.run.runner import describe_error
+
+        raise click.ClickException(f"the walk stopped on an error, not a failed step: {describe_error(exc)}") \
+            from None
     _print_walk(console, walk)
     if out is not None:
         console.print(f"wrote {write_walk(walk, out)}")

@@ -82,7 +82,7 @@ def run_case(case: Case, builds: BuildCache | None = None, fan_out: FanOut | Non
     except CheckpointError as error:  # the store failing, not the case: the run stops on it
         return CaseOutcome(case, "error", str(error), time.perf_counter() - started, store_error=str(error))
     except Exception as error:  # a failing plugin is this case's result, not the run's end
-        status, message = "error", _describe(error)
+        status, message = "error", describe_error(error)
     earlier = walk.resumed.get("elapsed_s", 0.0) if walk is not None else 0.0  # before a stop, from its checkpoint
     return CaseOutcome(case, status, message, earlier + time.perf_counter() - started, metrics, files, provenance())
 
@@ -152,7 +152,7 @@ def _registry(case: Case) -> PluginRegistry:
     return load_registry(case.plugin_dirs)
 
 
-def _describe(error: Exception) -> str:
+def describe_error(error: Exception) -> str:
     """The exception and the innermost frame it came from: enough to find the failing plugin."""
     frame = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
     where = f" (at {Path(frame.filename).name}:{frame.lineno} in {frame.name})" if frame else ""

@@ -19,6 +19,7 @@ from typing import Any
 
 from gaitbench.options import OptionError, check_options
 from gaitbench.plugins import (
+    PluginBuildError,
     PluginConflictError,
     PluginDirectoryError,
     PluginProblem,
@@ -245,6 +246,8 @@ class _Builder:
                 raise SuiteError(self.path, where, f"{kind} {entry.name!r}: {exc.message}") from None
             try:
                 self.built[identity] = self.registry.create(kind, variant.choice.name, **variant.choice.options)
+            except PluginBuildError as exc:  # the plugin's own fault, whatever the options
+                raise SuiteError(self.path, entry.key, str(exc)) from None
             except (TypeError, ValueError) as exc:
                 options = ", ".join(f"{k}={v!r}" for k, v in variant.choice.options.items()) or "no options"
                 raise SuiteError(self.path, entry.key, f"cannot build {kind} {variant.choice.name!r} with "
