@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 import types
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -592,6 +593,7 @@ def test_an_out_that_would_overwrite_its_own_arrays_or_the_input_is_refused_befo
     head = ["solve", "-e", "forward", "--N", "8", "--steps", "1"] if command == "solve" else ["track", str(walk)]
     (tmp_path / "file").write_text("")
     outs = [tmp_path / "x.npz", tmp_path, tmp_path / "file" / "x.json"]
+    outs += [Path("/proc/gaitbench-walk.json")]  # a directory that takes no new file, whatever its permissions say
     if command == "track":
         outs += [walk, tmp_path / "walk.npz", tmp_path / "walk.tracking", tmp_path / "walk"]  # the last two: its .npz
     for out in outs:

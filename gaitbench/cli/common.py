@@ -93,10 +93,23 @@ def print_table(console: Console, table: Table, wide: bool = False) -> None:
     console.print(table)
 
 
+def _unwritable(directory: Path) -> str | None:
+    """Why no file can be made in ``directory``, found by making one (permissions alone miss read-only and special
+    file systems); None when one can."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            return None
+    except OSError as error:
+        return error.strerror or str(error)
+
+
 def check_out(out: Path | None, *keep: Path) -> None:
     """Refuse, before any work, an ``--out`` the result cannot be written to: a directory, a path ending in .npz
     (the trajectories go beside the JSON as .npz, and would be overwritten by it), one of the files ``keep`` (the
-    input), or one below a file. Missing directories are made when the result is written."""
+    input), one below a file, or one in a directory that takes no new file. Missing directories are made when the
+    result is written."""
     if out is None:
         return
     problem = None
@@ -109,5 +122,7 @@ def check_out(out: Path | None, *keep: Path) -> None:
         problem = "would overwrite the input or its arrays; name another file"
     elif (existing := next(parent for parent in out.resolve().parents if parent.exists())).is_file():
         problem = f"is below {existing}, a file"
+    elif (refusal := _unwritable(existing)) is not None:
+        problem = f"cannot be written: {existing} refuses new files ({refusal}); name a file elsewhere"
     if problem:
         raise click.BadParameter(f"{out} {problem}", param_hint="--out")
