@@ -50,8 +50,11 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
     check_out(out, result)
     try:
         reference = load_reference(result, ctx.obj.registry)
-    except (WalkFileError, TrackingInputError, UnknownPluginError, PluginConflictError) as exc:
+    except (WalkFileError, TrackingInputError) as exc:
         raise click.BadParameter(str(exc), param_hint="RESULT") from None
+    except (UnknownPluginError, PluginConflictError) as exc:  # named by the walk file, not by an option
+        raise click.BadParameter(f"{result}: was solved with a plugin not usable here: {exc}",
+                                 param_hint="RESULT") from None
     if steps is not None and steps > len(reference.steps):
         raise click.BadParameter(f"{steps}: the walk in {result} has {len(reference.steps)} steps",
                                  param_hint="--steps")
