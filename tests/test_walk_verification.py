@@ -301,7 +301,8 @@ def test_gaitbench_verify_refuses_what_is_not_a_walk_file(tmp_path):
     assert result.exit_code == 2 and "not a walk result" in result.output
 
 
-def test_gaitbench_verify_store_writes_each_walks_verdict_into_its_row(tmp_path, forward):
+def _store_of_two(tmp_path, forward):
+    """A store of the same solved walk twice, as cases aaaa… and bbbb…; the walk and the store's path."""
     from gaitbench.run.store import ResultStore, case_file
 
     walk, path = _solved_walk(tmp_path / "walk", forward)
@@ -313,6 +314,13 @@ def test_gaitbench_verify_store_writes_each_walks_verdict_into_its_row(tmp_path,
             results.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 10,
                                  "status": "solved", "acot": walk.acot, "walk_path": case_file(key, "walk.json")},
                                 files)
+    return walk, store
+
+
+def test_gaitbench_verify_store_writes_each_walks_verdict_into_its_row(tmp_path, forward):
+    from gaitbench.run.store import ResultStore, case_file
+
+    walk, store = _store_of_two(tmp_path, forward)
     broken = store / case_file("b" * 16, "walk.npz")
     broken.write_bytes(b"not a zip")
     result = CliRunner().invoke(main, ["verify", "--store", str(store)])
@@ -327,18 +335,10 @@ def test_gaitbench_verify_store_writes_each_walks_verdict_into_its_row(tmp_path,
 
 
 def test_a_walk_that_breaks_the_verifier_costs_the_other_walks_of_a_store_nothing(tmp_path, forward, monkeypatch):
-    from gaitbench.run.store import ResultStore, case_file
+    from gaitbench.run.store import ResultStore
     from gaitbench.solve import walk_verification
 
-    walk, path = _solved_walk(tmp_path / "walk", forward)
-    files = {name: (path.parent / name).read_bytes() for name in ("walk.json", "walk.npz")}
-    store = tmp_path / "store"
-    with ResultStore.create(store) as results:
-        results.start_run({"run_id": "r1", "suite": "s", "started_at": "2026-01-01T00:00:00+00:00"})
-        for key in ("a" * 16, "b" * 16):
-            results.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 10,
-                                 "status": "solved", "acot": walk.acot, "walk_path": case_file(key, "walk.json")},
-                                files)
+    walk, store = _store_of_two(tmp_path, forward)
     reverify = walk_verification.reverify
 
     def breaks_on_b(walk_file, registry=None):
