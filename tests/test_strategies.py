@@ -792,6 +792,27 @@ def test_the_coarse_grid_rescue_walks_past_the_greedy_dead_end():
     assert all(step.verification.max_defect < 1e-6 for step in walk.steps)
 
 
+def test_decrease_and_conquer_stops_solving_sections_once_the_deadline_has_passed(monkeypatch):
+    """Sections solved one by one are not started past the walk's deadline: a step's sections at large N run for
+    minutes, each up to a solve's share of the time limit."""
+    late, solved = {"now": False}, []
+    monkeypatch.setattr(WalkProblem, "out_of_time", property(lambda self: late["now"]))
+    solve_one = SectionalSolves.solve_one
+
+    def deadline_passes_in_the_second(self, task):
+        solved.append(task[0])
+        late["now"] = len(solved) == 2
+        return solve_one(self, task)
+
+    monkeypatch.setattr(SectionalSolves, "solve_one", deadline_passes_in_the_second)
+    problem = WalkProblem(REGISTRY.create("experiment", "forward"), REGISTRY.create("transcription", "hermite-simpson"),
+                          REGISTRY.create("solver", "ipopt"), 8, steps=2)
+    walk = DecreaseAndConquer(workers=1).solve(problem)
+    (step,) = walk.steps
+    assert step.status == SolverStatus.TIME_LIMIT.value and not walk.complete
+    assert "during its sections (2 of 5 solved)" in step.message and solved == [2, 3]
+
+
 def test_look_ahead_must_be_a_positive_whole_number_of_second_phase_steps():
     with pytest.raises(ValueError, match="look_ahead = 0"):
         REGISTRY.create("strategy", "one-phase", look_ahead=0)

@@ -137,7 +137,10 @@ class DecreaseAndConquer:
         tasks = [(k0, section_data[k0].parameter_vector(),
                   sections.built[k0].initial_guess(section_data[k0], seed_from.trajectory.seed((k0 - 1) * h)))
                  for k0 in sections.starts]
-        for (k0, _, _), result in zip(tasks, sections.solve(tasks), strict=True):
+        results = sections.solve(tasks, stop=lambda: problem.out_of_time)
+        if len(results) < len(tasks):
+            return _time_ran_out(index, data, f"during its sections ({len(results)} of {len(tasks)} solved)")
+        for (k0, _, _), result in zip(tasks, results, strict=True):
             if result.converged:
                 candidates.append(sections.built[k0].trajectory(result.x, section_data[k0]))
                 starts.append(k0 - 1)  # 0-based node
@@ -253,12 +256,15 @@ class SectionalSolves:
                 prepare(self.solver, built.nlp)
             self._pool = WorkerPool(size, state=lambda: self, start="fork")  # forks on the first solve
 
-    def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]]) -> list[SolverResult]:
-        """Solve (k0, parameters, initial guess) tasks; results in the tasks' order."""
+    def solve(self, tasks: list[tuple[int, np.ndarray, np.ndarray]],
+              stop: Callable[[], bool] = lambda: False) -> list[SolverResult]:
+        """Solve (k0, parameters, initial guess) tasks; results in the tasks' order. ``stop()`` is asked before each
+        section solved here, one by one: once true, the results so far (fewer than the tasks). Sections spread
+        over workers run to their end."""
         if self._fan_out is not None:
             return self._fan_out.map(_solve_section, tasks, SectionSolver)
         if self._pool is None:
-            return [self.solve_one(task) for task in tasks]
+            return self._one_by_one(tasks, stop, lambda done: True)
         if self._cores is None:
             return self._pool.map(_solve_section, tasks)
         most = self._pool.workers
@@ -267,10 +273,19 @@ class SectionalSolves:
             def width(unfinished: int) -> int:  # this walk's own core, and the borrowed ones the rest can use
                 return 1 + borrowed.hold(min(most, unfinished) - 1)
 
-            results = []  # solved here until a core is free, then spread with the rest
-            while len(results) < len(tasks) and width(len(tasks) - len(results)) == 1:
-                results.append(self.solve_one(tasks[len(results)]))
+            # solved here until a core is free, then spread with the rest
+            results = self._one_by_one(tasks, stop, lambda done: width(len(tasks) - done) == 1)
+            if len(results) == len(tasks) or stop():
+                return results
             return results + self._pool.map(_solve_section, tasks[len(results):], width)
+
+    def _one_by_one(self, tasks: list[tuple[int, np.ndarray, np.ndarray]], stop: Callable[[], bool],
+                    go_on: Callable[[int], bool]) -> list[SolverResult]:
+        """Sections solved here in order while ``go_on(solved so far)`` and not ``stop()``."""
+        results: list[SolverResult] = []
+        while len(results) < len(tasks) and go_on(len(results)) and not stop():
+            results.append(self.solve_one(tasks[len(results)]))
+        return results
 
     def solve_one(self, task: tuple[int, np.ndarray, np.ndarray]) -> SolverResult:
         k0, parameters, guess = task
