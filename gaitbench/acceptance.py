@@ -1,9 +1,10 @@
 """When a solved walk counts as verified: what a step's verification measures, and every threshold in one place.
 
 A walk is verified when each step it reports is a motion of the robot (its dynamics defect and re-simulation error
-are small), each step starts where the step before left the robot (the join), and each step's optimizer measured
-what the report quotes (the objective gap). Reports rank verified walks only; the others are listed with the
-reasons :func:`step_failures` and :func:`join_failure` give.
+are small) that keeps its step's constraints (it ends on the foothold, within the limits), each step starts where
+the step before left the robot (the join), and each step's optimizer measured what the report quotes (the
+objective gap). Reports rank verified walks only; the others are listed with the reasons :func:`step_failures` and
+:func:`join_failure` give.
 
 The re-simulation error and the objective gap are discretization errors, so their limits shrink with the grid:
 every built-in transcription is at least first-order accurate, so a step whose re-simulation error exceeds a limit
@@ -20,7 +21,8 @@ import math
 from dataclasses import asdict, dataclass
 
 MAX_DEFECT = 1e-6
-"""Largest violation of the transcription's dynamics constraints: the solvers' constraint tolerance."""
+"""Largest violation of the transcription's dynamics constraints, and of the step's others (its start state,
+heel-strike pose, angle limits, clearance, lift-off and contact): the solvers' constraint tolerance."""
 
 RESIM_ERROR_AT_N = 5.0
 """The re-simulation's end-state error (rad, rad/s) may be at most ``RESIM_ERROR_AT_N / N``: 0.5 at N = 10,
@@ -88,6 +90,8 @@ class StepVerification:
     objective_cot: float | None = None  # the NLP objective at the solution, without its torque regularization
     objective_gap: float | None = None  # objective_gap(cot, objective_cot): against the step's own COT
     objective_agrees: bool | None = None  # |objective_gap| ≤ OBJECTIVE_RTOL
+    max_violation: float | None = None  # largest violation of the step's other constraints (None: not measured)
+    violated: str | None = None  # the constraint block of that largest violation, where there is one
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -110,6 +114,9 @@ def step_failures(check: StepVerification, limits: Thresholds, walk_cot: float |
     reasons = []
     if not check.max_defect <= limits.max_defect:
         reasons.append(f"dynamics defect {check.max_defect:.1e} > {limits.max_defect:.0e}")
+    if check.max_violation is not None and not check.max_violation <= limits.max_defect:
+        reasons.append(f"constraint {check.violated} violated by {check.max_violation:.1e} > "
+                       f"{limits.max_defect:.0e}")
     if math.isinf(check.resim_error):
         reasons.append("re-simulation failed before the step's end")
     elif not check.resim_error <= limits.max_resim_error:

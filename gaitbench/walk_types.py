@@ -127,6 +127,8 @@ class StepOutcome:
             "iterations": result.iterations if result else None,
             "constraint_violation": result.constraint_violation if result else None,
             "max_defect": check.max_defect if check else None,
+            "max_violation": check.max_violation if check else None,
+            "violated": check.violated if check else None,
             "resim_error": check.resim_error if check else None,
             "resim_max_error": check.resim_max_error if check else None,
             "hip_energy": check.hip_energy if check else None,

@@ -227,6 +227,28 @@ def test_gaitbench_verify_rechecks_a_walk_file_and_fails_one_whose_join_was_brok
     assert "  ACOT " in text and "verified ACOT" not in text and "NOT verified" in text
 
 
+def test_a_step_that_ends_off_its_foothold_fails_its_constraints_not_only_its_dynamics(tmp_path, forward):
+    """Verification holds every constraint of the step, not its dynamics alone: a COT is divided by the step's
+    length, which a step that never reaches its foothold has not walked. The cost's |P| slacks, which a trajectory
+    read back does not carry, are no constraint of the motion."""
+    from gaitbench.solve.walk_file import read_walk
+    from gaitbench.solve.walk_verification import reverify
+
+    walk, path = _solved_walk(tmp_path, forward)
+    assert all(step.verification.max_violation < 1e-6 for step in walk.steps)
+    assert all(step.verification.max_violation < 1e-6 for step in reverify(read_walk(path)).steps)
+    npz = path.parent / json.loads(path.read_text())["trajectories"]
+    with np.load(npz) as stored:
+        arrays = {key: stored[key] for key in stored.files}
+    arrays["step01_q"] = arrays["step01_q"].copy()
+    arrays["step01_q"][-1] += 0.01  # the swing foot lands short of the foothold
+    np.savez(npz, **arrays)
+    check = reverify(read_walk(path)).steps[0].verification
+    assert check.violated == "heel_strike_configuration" and check.max_violation > 1e-3
+    failures = step_failures(check, Thresholds.for_nodes(10))
+    assert any(f.startswith("constraint heel_strike_configuration violated by") for f in failures), failures
+
+
 def test_a_claimed_acot_that_a_walk_file_before_format_2_stores_as_its_acot_is_a_note_not_a_failure(forward,
                                                                                                      tmp_path):
     from gaitbench.cli.verify_command import _report

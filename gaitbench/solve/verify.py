@@ -37,7 +37,11 @@ def verify_step(
 ) -> StepVerification:
     """``model`` is the 4-DOF model for second-phase steps (push-off acts) and the 2-DOF model otherwise."""
     p = data.parameter_vector()
-    max_defect = built.nlp.block_violations(x, p)["dynamics"]
+    # the |P| slacks settled, as the objective is valued: they stand for the cost, not for the motion
+    violations = built.nlp.block_violations(built.settle_slacks(x, p), p)
+    max_defect = violations.pop("dynamics")
+    violated = max(violations, key=violations.get, default=None)
+    max_violation = violations[violated] if violated is not None else 0.0
 
     energy, push_off_energy, cot = trajectory_cost(trajectory, built.structure.objective, data.robot, data.chord,
                                                    model, built.structure.options.push_off_cost)
@@ -51,6 +55,8 @@ def verify_step(
     gap = None if objective_cot is None else objective_gap(float(cot), objective_cot)
     return StepVerification(
         max_defect=float(max_defect),
+        max_violation=float(max_violation),
+        violated=violated if max_violation > 0 else None,
         resim_error=float(errors[-1]),
         resim_max_error=float(errors.max()),
         hip_energy=float(energy),

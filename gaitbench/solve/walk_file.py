@@ -429,11 +429,12 @@ def _rerun(path: Path) -> str:
 
 def _verification(step: dict) -> StepVerification:
     """A step's stored verification (a step record, or its ``details["polished"]``); figures a file written before
-    they were recorded lacks are NaN (None for the objective's comparison)."""
+    they were recorded lacks are NaN (None for the objective's comparison and the other constraints')."""
     figures = {key: float(step[key]) if step.get(key) is not None else math.nan for key in (
         "max_defect", "resim_error", "resim_max_error", "hip_energy", "push_off_energy", "cot")}
-    compared = {key: step.get(key) for key in ("objective_cot", "objective_gap", "objective_agrees")}
-    return StepVerification(**figures, **compared)
+    compared = {key: step.get(key) for key in ("objective_cot", "objective_gap", "objective_agrees", "violated")}
+    violation = step.get("max_violation")
+    return StepVerification(**figures, **compared, max_violation=None if violation is None else float(violation))
 
 
 def _rebuild_trajectory(built: TranscribedStep, transcription: str, experiment: Experiment, step: dict,
