@@ -8,15 +8,18 @@ session's machine may not outlive it: only what is committed reaches the next on
 - ``store.tar.xz``: a pack of the store (`gaitbench runs pack`, docs/results.md "Packed stores"): every row and
   walk header, and the trajectories ``--trajectories`` names (``report``, the default: those the store's report
   draws, small enough to commit; a store restored from a ``report`` carry can only be carried that way again);
-- ``checkpoints/``: the step checkpoints of the walks in flight, which a pack leaves out, so that ``gaitbench run
-  --resume`` on the restored store goes on from their last saved step instead of step 1;
+- ``checkpoints/``: the step checkpoints a pack leaves out, of the walks in flight and of those a time limit or a
+  crash stopped (kept for ``--retry-incomplete`` and ``--retry-failed``), so that ``gaitbench run --resume`` on the
+  restored store goes on from their last saved step instead of step 1;
 - ``constraints.txt``: the versions of the packages installed beside the gaitbench that runs this script (``pip
   freeze``). A checkpoint resumes only under the same code and solver versions (docs/results.md), and a sweep
   meant to share one problem definition keeps its solvers too: install the next machine's environment with
   ``pip install -c constraints.txt -e .``.
 
-``restore`` makes a store that runs can write from such a file, and writes the constraints beside it
-(``STORE.constraints.txt``); to install them first, ``tar -xJf CARRY.tar.xz constraints.txt`` needs no gaitbench.
+``restore`` makes a store that runs can write from such a file, writes the constraints beside it
+(``STORE.constraints.txt``), and warns of every package installed here at another version (a checkpoint resumes
+only under the versions that saved it); to install them first, ``tar -xJf CARRY.tar.xz constraints.txt`` needs no
+gaitbench.
 
 Stop the runs on the store first (SIGTERM: they record what they finished and keep their checkpoints); a copy of a
 store still being written holds the cases finished at one moment, and a walk that finishes during the copy is lost
@@ -40,6 +43,7 @@ from pathlib import Path
 from gaitbench.cli.common import count
 from gaitbench.run.store import CHECKPOINTS_DIR, ResultStore
 from gaitbench.run.store_pack import pack_store, unpack_store
+from gaitbench.run.store_schema import StoreError
 
 PACK, CONSTRAINTS = "store.tar.xz", "constraints.txt"
 
@@ -51,11 +55,9 @@ def installed_versions() -> str:
 
 
 def save(store_dir: Path, carry: Path, trajectories: str = "report") -> dict[str, int]:
-    """Write the carry file of ``store_dir`` to ``carry`` (replaced); how many cases and walks in flight it holds."""
+    """Write the carry file of ``store_dir`` to ``carry`` (replaced); how many cases and checkpoints it holds."""
     from gaitbench.reports import report_trajectories
 
-    with ResultStore.open(store_dir) as store:
-        finished = store.finished_keys()
     with tempfile.TemporaryDirectory(prefix="gaitbench-carry-") as scratch:
         keep = report_trajectories(store_dir) if trajectories == "report" else set()
         summary = pack_store(store_dir, Path(scratch) / PACK, trajectories, keep)
@@ -65,8 +67,9 @@ def save(store_dir: Path, carry: Path, trajectories: str = "report") -> dict[str
         with tarfile.open(staging, mode="w:xz") as tar:
             tar.add(Path(scratch) / PACK, arcname=PACK)
             for checkpoint in sorted((store_dir / CHECKPOINTS_DIR).glob("*")):
-                # a finished case's checkpoint is a leftover the runner removes; files being written start with "."
-                if checkpoint.name.startswith(".") or checkpoint.name.split(".")[0] in finished:
+                # every one: a walk's in flight, or one a time limit or a crash stopped, kept for the retry (what the
+                # runner no longer needs it removes itself); files being written start with "."
+                if checkpoint.name.startswith("."):
                     continue
                 tar.add(checkpoint, arcname=f"{CHECKPOINTS_DIR}/{checkpoint.name}")
                 in_flight += checkpoint.suffix != ".json"
@@ -79,8 +82,9 @@ def save(store_dir: Path, carry: Path, trajectories: str = "report") -> dict[str
 
 
 def restore(carry: Path, store_dir: Path) -> dict[str, int]:
-    """Make the store ``store_dir`` (new or empty) from ``carry``, its walks in flight included, and write the
-    constraints to ``STORE.constraints.txt``; how many cases and walks in flight it holds."""
+    """Make the store ``store_dir`` (new or empty) from ``carry``, its checkpoints included, and write the
+    constraints to ``STORE.constraints.txt``; how many cases and checkpoints it holds, and the packages installed
+    here at another version than the carried one."""
     with tempfile.TemporaryDirectory(prefix="gaitbench-carry-") as scratch, \
             tarfile.open(carry, mode="r:xz") as tar:
         tar.extractall(scratch, filter="data")
@@ -90,10 +94,23 @@ def restore(carry: Path, store_dir: Path) -> dict[str, int]:
             (store_dir / CHECKPOINTS_DIR).mkdir(exist_ok=True)
         for checkpoint in checkpoints:
             shutil.copy2(checkpoint, store_dir / CHECKPOINTS_DIR / checkpoint.name)
-        shutil.copy2(Path(scratch) / CONSTRAINTS, store_dir.with_name(f"{store_dir.name}.constraints.txt"))
+        pins = (Path(scratch) / CONSTRAINTS).read_text()
+        store_dir.with_name(f"{store_dir.name}.constraints.txt").write_text(pins)
     with ResultStore.open(store_dir) as store:
         cases = len(store.finished_keys())
-    return {"cases": cases, "checkpoints": sum(path.suffix != ".json" for path in checkpoints)}
+    return {"cases": cases, "checkpoints": sum(path.suffix != ".json" for path in checkpoints),
+            "differing": differing_versions(pins, installed_versions())}
+
+
+def differing_versions(carried: str, installed: str) -> list[str]:
+    """The packages whose version here is not the carried one (``name carried -> here``): under those the walks in
+    flight start again from step 1, and the sweep mixes solver versions."""
+    def pins(text: str) -> dict[str, str]:
+        return dict(line.split("==", 1) for line in text.splitlines() if "==" in line)
+
+    carried_pins, installed_pins = pins(carried), pins(installed)
+    return [f"{name} {version} -> {installed_pins.get(name, 'not installed')}"
+            for name, version in sorted(carried_pins.items()) if installed_pins.get(name) != version]
 
 
 def main() -> None:
@@ -108,14 +125,24 @@ def main() -> None:
     restoring.add_argument("carry", type=Path, help="the carry file")
     restoring.add_argument("store", type=Path, help="the store to make (a new or empty directory)")
     args = parser.parse_args()
-    if args.command == "save":
-        counts = save(args.store, args.carry, args.trajectories)
-        print(f"{args.carry}: {count(counts['cases'], 'case')}, {count(counts['checkpoints'], 'walk')} in flight "
-              f"({args.carry.stat().st_size / 1e6:.2f} MB)")
-    else:
+    try:
+        if args.command == "save":
+            counts = save(args.store, args.carry, args.trajectories)
+            print(f"{args.carry}: {count(counts['cases'], 'case')}, {count(counts['checkpoints'], 'walk')} to go "
+                  f"on with ({args.carry.stat().st_size / 1e6:.2f} MB)")
+            return
         counts = restore(args.carry, args.store)
-        print(f"{args.store}: {count(counts['cases'], 'case')}, {count(counts['checkpoints'], 'walk')} in flight; "
-              f"the package versions they ran with: {args.store.with_name(args.store.name + '.constraints.txt')}")
+    except tarfile.TarError as error:
+        sys.exit(f"error: {args.carry}: not a carry file of snapshot_store.py save ({error})")
+    except (StoreError, OSError) as error:
+        sys.exit(f"error: {error}")
+    pins = args.store.with_name(args.store.name + ".constraints.txt")
+    print(f"{args.store}: {count(counts['cases'], 'case')}, {count(counts['checkpoints'], 'walk')} to go on with; "
+          f"the package versions they ran with: {pins}")
+    if counts["differing"]:
+        print(f"warning: {count(len(counts['differing']), 'package')} here not at the carried version "
+              f"({', '.join(counts['differing'])}): the walks to go on with would start again from step 1; install "
+              f"with `pip install -c {pins} -e .`", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -231,22 +231,23 @@ def test_a_carried_store_keeps_its_finished_cases_its_walks_in_flight_and_its_pa
                           {"walk.json": b"{}", "walk.npz": b"not drawn by the report"})
         assert store.claim(in_flight.key, "r1", None) == "claimed"
         (live / "checkpoints").mkdir()
-        for key in (finished.key, in_flight.key):  # the finished case's is a leftover the runner would remove
+        for key in (finished.key, in_flight.key):  # the finished case's as a time limit leaves it, for the retry
             (live / "checkpoints" / key).write_bytes(b"steps")
             (live / "checkpoints" / f"{key}.json").write_text("{}")
         (live / "checkpoints" / f".{in_flight.key}.123").write_bytes(b"half written")
         carry = tmp_path / "carry" / "live.tar.xz"
-        assert module.save(live, carry) == {"cases": 1, "checkpoints": 1}
+        assert module.save(live, carry) == {"cases": 1, "checkpoints": 2}
     restored = tmp_path / "restored"
-    assert module.restore(carry, restored) == {"cases": 1, "checkpoints": 1}
-    assert sorted(path.name for path in (restored / "checkpoints").iterdir()) == [in_flight.key,
-                                                                                  f"{in_flight.key}.json"]
+    assert module.restore(carry, restored) == {"cases": 1, "checkpoints": 2, "differing": []}
+    assert sorted(path.name for path in (restored / "checkpoints").iterdir()) == sorted(
+        [in_flight.key, f"{in_flight.key}.json", finished.key, f"{finished.key}.json"])
     assert (restored / "checkpoints" / in_flight.key).read_bytes() == b"steps"
     assert not list(restored.rglob("walk.npz"))  # a report-only carry: no trajectory the report does not draw
     assert (tmp_path / "restored.constraints.txt").read_text() == module.installed_versions()
     with ResultStore.create(restored) as copy:  # a resumed run opens it for writing
         assert copy.finished_keys() == {finished.key}
         assert copy.claim(in_flight.key, "r2", None) == "claimed"  # the claim stayed with the live store
+    assert module.differing_versions("numpy==2.0\ncasadi==3.6\n", "numpy==2.0\n") == ["casadi 3.6 -> not installed"]
 
 def test_savings_are_summarized_verified_and_claimed_beside_the_published_range():
     import pandas as pd
