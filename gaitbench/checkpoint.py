@@ -78,8 +78,8 @@ class WalkCheckpoint:
                                      "backed_up": sorted(backed_up), "elapsed_s": elapsed_s})
         try:
             _write_whole(self.path, content)
-            _write_whole(progress_file(self.path), json.dumps({"saved": len(steps), "of": of,
-                                                               "elapsed_s": elapsed_s}).encode())
+            _write_whole(progress_file(self.path), json.dumps({"saved": len(steps), "of": of, "elapsed_s": elapsed_s,
+                                                               "code": self.fingerprint.get("code")}).encode())
         except OSError as error:
             raise CheckpointError(f"{self.path}: cannot save the walk's checkpoint ({_reason(error)})") from None
 
@@ -97,7 +97,7 @@ def remove_checkpoint(path: str | Path) -> None:
 
 def progress_file(path: Path) -> Path:
     """The JSON file beside the checkpoint at ``path``: ``{"saved": steps saved, "of": the walk's steps,
-    "elapsed_s": its time}``."""
+    "elapsed_s": its time, "code": the code fingerprint that saved it}``."""
     return path.with_name(f"{path.name}.json")
 
 

@@ -230,7 +230,7 @@ def test_a_run_shows_the_steps_its_walks_in_flight_have_saved(tmp_path: Path) ->
     WalkCheckpoint(tmp_path / "a1", FINGERPRINT).save([step, step], set(), 5.0, of=11)
     WalkCheckpoint(tmp_path / "b2", FINGERPRINT).save([step], set(), 1.0, of=11)  # another suite's walk
     progress = saved_progress(tmp_path)
-    assert progress["a1"] == {"saved": 2, "of": 11, "elapsed_s": 5.0}
+    assert progress["a1"] == {"saved": 2, "of": 11, "elapsed_s": 5.0, "code": FINGERPRINT["code"]}
     labels = {"a1": "forward N=140 D&C-DM"}
     assert steps_in_flight(progress, labels) == "in flight: 2 of 11 steps (forward N=140 D&C-DM)"
     remove_checkpoint(tmp_path / "a1")

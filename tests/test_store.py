@@ -234,13 +234,15 @@ def test_runs_list_shows_the_walks_in_flight_with_their_saved_steps(tmp_path: Pa
     (checkpoints / f"{solving.key}.json").write_text('{"saved": 3, "of": 11, "elapsed_s": 5400.0}')
     (checkpoints / f"{resumable.key}.json").write_text('{"saved": 1, "of": 11, "elapsed_s": 36.0}')
     (checkpoints / "0123456789abcdef.json").write_text('{"saved": 7, "of": 11, "elapsed_s": 720.0}')
+    (checkpoints / "fedcba9876543210.json").write_text('{"saved": 2, "of": 11, "elapsed_s": 72.0, "code": "older"}')
     saved_at = 4_102_444_800  # 2100-01-01 00:00 UTC
     for path in checkpoints.iterdir():
         os.utime(path, (saved_at, saved_at))
     at = "2100-01-01 00:00"
     expected = {solving.key: (solving.label, "3 of 11", "1.50", at, "solving"),
                 resumable.key: (resumable.label, "1 of 11", "0.01", at, "resumable"),
-                "0123456789abcdef": ("0123456789abcdef", "7 of 11", "0.20", at, "resumable")}
+                "0123456789abcdef": ("0123456789abcdef", "7 of 11", "0.20", at, "resumable"),
+                "fedcba9876543210": ("fedcba9876543210", "2 of 11", "0.02", at, "saved by other code: from step 1")}
     assert walks_in_flight(store_dir, rows, {solving.key}) == [expected[key] for key in sorted(expected)]
     monkeypatch.setenv("COLUMNS", "200")
     listed = run_cli("runs", "list", str(store_dir))

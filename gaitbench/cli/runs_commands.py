@@ -142,10 +142,18 @@ def walks_in_flight(store_dir: Path, runs_rows: list[dict], live: set[str]) -> l
     progress = saved_progress(directory)
     if not progress:
         return []
+    from gaitbench.run.provenance import code_fingerprint
+
     labels = _case_labels({(row["suite_path"], row.get("suite_text")) for row in runs_rows if row.get("suite_path")})
+
+    def state(key: str, saved: dict) -> str:  # a checkpoint resumes only under the code that saved it
+        if key in live:
+            return "solving"
+        return "resumable" if saved.get("code") in (None, code_fingerprint()) else "saved by other code: from step 1"
+
     return [(labels.get(key, key), f"{saved.get('saved', '?')} of {saved.get('of') or '?'}",
              fmt(saved.get("elapsed_s", 0.0) / 3600, ".2f", ""), _saved_at(progress_file(directory / key)),
-             "solving" if key in live else "resumable")
+             state(key, saved))
             for key, saved in sorted(progress.items())]
 
 
