@@ -504,6 +504,17 @@ def test_leftovers_are_kept_while_another_run_is_live(tmp_path: Path) -> None:
     assert staging.exists()  # it may be the other run's case being written
 
 
+def test_a_stopped_run_ends_its_span_when_it_stops_not_at_its_last_beat(tmp_path: Path) -> None:
+    """A sweep's wall time counts each stopped run to its last heartbeat: SIGTERM between two beats lost up to one."""
+    with ResultStore.create(tmp_path) as store:
+        store.start_run({"run_id": "r", "suite": "test", "started_at": "2026-01-01T00:00:00+00:00"})
+        with sqlite3.connect(tmp_path / "results.sqlite") as db:  # its last beat, long before it is stopped
+            db.execute("UPDATE runs SET heartbeat_at = '2026-01-01T00:00:30+00:00'")
+        store.finish_run("r", None)
+        (run,) = store.runs()
+    assert run["finished_at"] is None and run["heartbeat_at"] > "2026-01-02"
+
+
 @pytest.mark.parametrize("umask", [0o022, 0o002])
 def test_case_directories_follow_the_umask(tmp_path: Path, umask: int) -> None:
     old = os.umask(umask)

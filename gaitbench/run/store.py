@@ -252,12 +252,15 @@ class ResultStore:
         return run_id
 
     def finish_run(self, run_id: str, finished_at: str | None) -> None:
-        """End a run: its claims go, and ``finished_at`` is set (left null for a run that was stopped)."""
+        """End a run: its claims go, and ``finished_at`` is set; a run that was stopped keeps it null, and its last
+        heartbeat is now, when it stopped (what a sweep's wall time counts to)."""
         OPEN_RUNS.discard(run_id)
         with self._write(f"end run {run_id}"):
             self._db.execute("DELETE FROM claims WHERE run_id = ?", (run_id,))
             if finished_at is not None:
                 self._db.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (finished_at, run_id))
+            else:
+                self._db.execute("UPDATE runs SET heartbeat_at = ? WHERE run_id = ?", (_now(), run_id))
 
     def forget_run(self, run_id: str) -> None:
         """End ``run_id`` in this process without writing (the store failed): its row stays unfinished, and its
