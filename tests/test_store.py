@@ -335,6 +335,8 @@ def test_a_store_that_cannot_be_created_is_one_line(tmp_path: Path, suite_file: 
     (database / DATABASE).mkdir(parents=True)  # results.sqlite that SQLite cannot open
     result = run_cli("run", str(suite_file), "--store", str(database), "--executor", "inprocess", "--no-report")
     assert_one_line_error(result, str(database / DATABASE))
+    result = run_cli("run", str(suite_file), "--store", str(blocker), "--executor", "inprocess", "--no-report")
+    assert result.code == 2 and f"--store: {blocker} is a file, not a results store's directory" in result.output
 
 
 def test_a_file_that_is_not_sqlite_is_one_line_and_unchanged(tmp_path: Path, suite_file: Path) -> None:

@@ -119,7 +119,10 @@ def run(state, suite_file: Path, jobs: int, executor: str, scheduler: str | None
         executor = "dask"
     if executor != "inprocess" and not scheduler:  # the workers start on this machine
         jobs = _jobs_that_help(jobs, suite, console)
+    where = "--store" if store_dir else f"{suite_file}: [suite].output"
     store_dir = store_dir or suite.output
+    if Path(store_dir).exists() and not Path(store_dir).is_dir():
+        raise click.UsageError(f"{where}: {store_dir} is a file, not a results store's directory; name a directory")
     rerun: set[str] = set()
     if retry_inconsistent and Path(store_dir).exists():
         try:
