@@ -282,3 +282,8 @@ def test_a_suites_own_plugins_are_part_of_what_a_walk_resumes_under(tmp_path, mo
     assert plugins_fingerprint([tmp_path]) != before
     monkeypatch.setenv(PLUGINS_DIR_ENV, str(tmp_path))
     assert plugins_fingerprint([]) == plugins_fingerprint([tmp_path])
+    monkeypatch.delenv(PLUGINS_DIR_ENV)
+    moved = tmp_path / "elsewhere"  # a store copied to another machine, its suite's plugins beside it
+    moved.mkdir()
+    (moved / "mine.py").write_text("STEP = 2\n")
+    assert plugins_fingerprint([moved]) == plugins_fingerprint([tmp_path])

@@ -113,15 +113,16 @@ def code_fingerprint() -> str:
 
 def plugins_fingerprint(plugin_dirs: Sequence[str | Path]) -> str | None:
     """The plugins from outside gaitbench that a walk may be solved by, for its checkpoint beside
-    :func:`code_fingerprint`: a hash of the plugin files of ``plugin_dirs`` and ``$GAITBENCH_PLUGINS_DIR``
-    (:func:`gaitbench.plugins.plugin_files`, as they are on disk) and of the name and version of every distribution
+    :func:`code_fingerprint`: a hash of the plugin files (names and contents) of ``plugin_dirs`` and
+    ``$GAITBENCH_PLUGINS_DIR`` (:func:`gaitbench.plugins.plugin_files`, as they are on disk) and of the name and
+    version of every distribution
     other than gaitbench with entry points in its group; None when there are none, so a walk without such plugins
     keeps the fingerprint it had before they were counted."""
     from gaitbench.plugins import ENTRY_POINT_GROUP, plugin_files
 
     digest, counted = hashlib.sha256(), False
-    for path in plugin_files(plugin_dirs):
-        digest.update(path.as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    for path in plugin_files(plugin_dirs):  # by file name, not path: a store and its plugins may move together
+        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
         counted = True
     distributions = {(point.dist.name, point.dist.version) for point in entry_points(group=ENTRY_POINT_GROUP)
                      if point.dist is not None and point.dist.name != "gaitbench"}
