@@ -34,10 +34,10 @@ from __future__ import annotations
 import argparse
 import io
 import shutil
-import subprocess
 import sys
 import tarfile
 import tempfile
+from importlib.metadata import distributions
 from pathlib import Path
 
 from gaitbench.cli.common import count
@@ -46,12 +46,16 @@ from gaitbench.run.store_pack import pack_store, unpack_store
 from gaitbench.run.store_schema import StoreError
 
 PACK, CONSTRAINTS = "store.tar.xz", "constraints.txt"
+NOT_PINNED = {"gaitbench", "pip", "setuptools", "wheel", "distribute"}
+"""Packages no constraint is written for, as ``pip freeze`` leaves them out: the project, and what installs it."""
 
 
 def installed_versions() -> str:
-    """``pip freeze`` of this interpreter's environment, gaitbench itself (an editable install) left out."""
-    return subprocess.run([sys.executable, "-m", "pip", "freeze", "--exclude-editable"], check=True,
-                          capture_output=True, text=True).stdout
+    """The packages of this interpreter's environment as pip constraints (``name==version``, one a line, sorted),
+    gaitbench itself and the installer's own packages left out: what ``pip freeze`` lists, read without pip."""
+    pins = {f"{dist.metadata['Name']}=={dist.version}" for dist in distributions()
+            if dist.metadata["Name"] and dist.metadata["Name"].lower() not in NOT_PINNED}
+    return "".join(f"{pin}\n" for pin in sorted(pins, key=str.lower))
 
 
 def save(store_dir: Path, carry: Path, trajectories: str = "report") -> dict[str, int]:
@@ -87,7 +91,10 @@ def restore(carry: Path, store_dir: Path) -> dict[str, int]:
     here at another version than the carried one."""
     with tempfile.TemporaryDirectory(prefix="gaitbench-carry-") as scratch, \
             tarfile.open(carry, mode="r:xz") as tar:
-        tar.extractall(scratch, filter="data")
+        names = set(tar.getnames())
+        if not {PACK, CONSTRAINTS} <= names:
+            raise tarfile.TarError(f"it holds no {' and no '.join(sorted({PACK, CONSTRAINTS} - names))}")
+        tar.extractall(scratch, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
         unpack_store(Path(scratch) / PACK, store_dir)
         checkpoints = sorted((Path(scratch) / CHECKPOINTS_DIR).glob("*"))
         if checkpoints:

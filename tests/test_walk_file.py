@@ -77,6 +77,22 @@ def test_an_unknown_version_is_refused_naming_the_file_and_the_version(walk, tmp
     assert refused.exit_code == 2 and f"format version {version!r} is unknown" in refused.stderr
 
 
+def test_an_experiment_that_fails_to_build_here_is_the_environment_s_fault_not_the_file_s(walk, tmp_path,
+                                                                                           monkeypatch):
+    """A plugin that raises while building (compass-gait's shooting that does not converge, a licence missing) is
+    no broken walk file: ``verify --store`` must not record the walk as unreadable."""
+    from gaitbench.plugins import PluginBuildError, PluginRegistry
+
+    path = write_walk(walk, tmp_path / "walk.json")
+
+    def fails(self, kind, name, *args, **kwargs):
+        raise PluginBuildError(f"cannot build {kind} {name!r} (from here): RuntimeError: no licence")
+
+    monkeypatch.setattr(PluginRegistry, "create", fails)
+    with pytest.raises(PluginBuildError, match="no licence"):
+        read_walk(path).result(REGISTRY)
+
+
 def test_a_walk_solved_with_options_is_tracked_on_that_experiment(tmp_path):
     """`solve --experiment-option ... -p ...` writes the options into the file, and `track` rebuilds that
     experiment: the energetics biped with a heavier leg, not the default one."""

@@ -249,6 +249,23 @@ def test_a_step_that_ends_off_its_foothold_fails_its_constraints_not_only_its_dy
     assert any(f.startswith("constraint heel_strike_configuration violated by") for f in failures), failures
 
 
+def test_variable_bounds_count_relative_to_the_bound_and_a_value_that_is_no_number_counts_worst(forward):
+    from gaitbench.problem.gait_problem import StepStructure
+
+    built = REGISTRY.create("transcription", "hermite-simpson").build(StepStructure("second", 6))
+    nlp = built.nlp
+    torques = nlp.variable_blocks["torques"]
+    x = np.clip(np.zeros(nlp.n_variables), nlp.lbx, nlp.ubx)
+    assert max(nlp.bound_violations(x).values()) == 0.0
+    limit = nlp.ubx[torques][0]
+    x[torques.start] = limit * (1 + 1e-9)  # as a solver keeps a large bound: within it, relatively
+    assert nlp.bound_violations(x)["torques bounds"] == pytest.approx(1e-9, rel=1e-3)  # 1e-9 of it, not of 1
+    x[torques.start] = limit * 1.01
+    assert nlp.bound_violations(x)["torques bounds"] == pytest.approx(0.01)
+    x[torques.start] = np.nan
+    assert nlp.bound_violations(x)["torques bounds"] == np.inf
+
+
 def test_a_claimed_acot_that_a_walk_file_before_format_2_stores_as_its_acot_is_a_note_not_a_failure(forward,
                                                                                                      tmp_path):
     from gaitbench.cli.verify_command import _report

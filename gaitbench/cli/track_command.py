@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from gaitbench.cli.common import check_out, create, fmt, parse_options, print_plain
-from gaitbench.plugins import PluginConflictError, UnknownPluginError
+from gaitbench.plugins import PluginBuildError, PluginConflictError, UnknownPluginError
 
 
 @click.command("track")
@@ -52,7 +52,7 @@ def track(ctx: click.Context, result: Path, controller: str, observer: str, dist
         reference = load_reference(result, ctx.obj.registry)
     except (WalkFileError, TrackingInputError) as exc:
         raise click.BadParameter(str(exc), param_hint="RESULT") from None
-    except (UnknownPluginError, PluginConflictError) as exc:  # named by the walk file, not by an option
+    except (UnknownPluginError, PluginConflictError, PluginBuildError) as exc:  # named by the walk file
         raise click.BadParameter(f"{result}: was solved with a plugin not usable here: {exc}",
                                  param_hint="RESULT") from None
     if steps is not None and steps > len(reference.steps):

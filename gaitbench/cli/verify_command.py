@@ -37,7 +37,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
     Exit status 0 when every walk is verified, 1 when one is not (or its stored ACOT is off by more than 1 %),
     2 when a file cannot be read.
     """
-    from gaitbench.plugins import UnknownPluginError
+    from gaitbench.plugins import PluginBuildError, UnknownPluginError
     from gaitbench.run.pack_format import is_pack
     from gaitbench.solve.walk_file import WalkFileError, read_walk
     from gaitbench.solve.walk_verification import reverify
@@ -60,7 +60,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             # a walk file that predates its transcription's options: the store's row has them
             walk_file.header.setdefault("transcription_options", transcription_options)
             walk = reverify(walk_file, ctx.obj.registry)
-        except UnknownPluginError as exc:  # the walk is fine; this environment lacks a plugin it was solved with
+        except (UnknownPluginError, PluginBuildError) as exc:  # the walk is fine; a plugin it names is not, here
             if case_key is None:
                 raise click.ClickException(f"{path}: cannot be verified here: {exc}") from None
             missing.append(f"{path}: {exc}")
@@ -90,7 +90,7 @@ def verify(ctx: click.Context, walks: tuple[Path, ...], store: Path | None, as_j
             _print(console, report)
     if missing:  # no verdict: the walk was not checked, and its row keeps the one it had
         note = (f"{count(len(missing), 'stored walk')} not verified, verdicts not recorded: a plugin they were solved "
-                f"with is not installed here; install it and run again. {missing[0]}"
+                f"with is not installed here, or fails here; install it and run again. {missing[0]}"
                 + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""))
         click.echo(note, err=True) if as_json else print_plain(console, note, "yellow")
     if broke:  # a fault of gaitbench's, not of the walk: no verdict either way

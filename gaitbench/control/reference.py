@@ -147,16 +147,18 @@ class Reference:
         """COT of the step driven by the exact model's inverse dynamics: what perfect tracking costs."""
         ref = self.step(info)
         energy = 0.0
-        for k, (start, end) in enumerate(zip(ref.times[:-1], ref.times[1:], strict=True)):
-            ref.piece = k  # each interval on its own: the torques jump with the acceleration at the nodes
-            grid, power = np.linspace(start, end, 17), []
-            for t in grid:
-                q, dq, ddq = ref.desired(t)
-                tau = inverse_dynamics(self.model, self.full(info, q), self.full(info, dq), self.full(info, ddq),
-                                       info.stance)
-                power.append(hip_power(dq[0], dq[1], tau[0], tau[1]))
-            energy += hip_energy(grid, np.array(power))
-        ref.piece = None
+        try:
+            for k, (start, end) in enumerate(zip(ref.times[:-1], ref.times[1:], strict=True)):
+                ref.piece = k  # each interval on its own: the torques jump with the acceleration at the nodes
+                grid, power = np.linspace(start, end, 17), []
+                for t in grid:
+                    q, dq, ddq = ref.desired(t)
+                    tau = inverse_dynamics(self.model, self.full(info, q), self.full(info, dq),
+                                           self.full(info, ddq), info.stance)
+                    power.append(hip_power(dq[0], dq[1], tau[0], tau[1]))
+                energy += hip_energy(grid, np.array(power))
+        finally:
+            ref.piece = None
         if self.model.dof == 4:
             q, dq, _ = ref.desired(info.duration)
             energy += self.model.push_off(self.full(info, q), self.full(info, dq), ref.push_off, info.stance)[1]

@@ -271,6 +271,18 @@ class NLP:
         excess = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
         return {name: float(np.max(excess[block], initial=0.0)) for name, block in self.constraint_blocks.items()}
 
+    def bound_violations(self, x: np.ndarray) -> dict[str, float]:
+        """Largest violation per variable block of its bounds (``"<block> bounds"``), relative to the bound where that
+        is larger than 1, as solvers hold bounds (a torque limit of 3000 N·m is kept to 3000 (1 + ε))."""
+        x = np.asarray(x, dtype=float)
+        with np.errstate(invalid="ignore"):  # an infinite bound is never violated
+            below = np.where(np.isfinite(self.lbx), (self.lbx - x) / np.maximum(1.0, np.abs(self.lbx)), 0.0)
+            above = np.where(np.isfinite(self.ubx), (x - self.ubx) / np.maximum(1.0, np.abs(self.ubx)), 0.0)
+        excess = np.maximum(np.maximum(below, above), 0.0)
+        excess = np.where(np.isnan(x), np.inf, excess)
+        return {f"{name} bounds": float(np.max(excess[block], initial=0.0))
+                for name, block in self.variable_blocks.items()}
+
 
 class NLPBuilder:
     """Collects named variable and constraint blocks while a transcription assembles its NLP."""

@@ -14,6 +14,8 @@ says whether it is within :data:`~gaitbench.acceptance.OBJECTIVE_RTOL` (with the
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gaitbench.acceptance import OBJECTIVE_RTOL, StepVerification, objective_gap
@@ -38,8 +40,11 @@ def verify_step(
     """``model`` is the 4-DOF model for second-phase steps (push-off acts) and the 2-DOF model otherwise."""
     p = data.parameter_vector()
     # the |P| slacks settled, as the objective is valued: they stand for the cost, not for the motion
-    violations = built.nlp.block_violations(built.settle_slacks(x, p), p)
+    settled = built.settle_slacks(x, p)
+    violations = built.nlp.block_violations(settled, p) | built.nlp.bound_violations(settled)
     max_defect = violations.pop("dynamics")
+    # NaN, a constraint that cannot be evaluated at this point, counts as the worst violation
+    violations = {name: math.inf if math.isnan(value) else value for name, value in violations.items()}
     violated = max(violations, key=violations.get, default=None)
     max_violation = violations[violated] if violated is not None else 0.0
 

@@ -37,7 +37,7 @@ import numpy as np
 from gaitbench.acceptance import StepVerification
 from gaitbench.model.experiment import Experiment, Limits
 from gaitbench.model.mechanics import BipedModel
-from gaitbench.plugins import PluginRegistry, UnknownPluginError, load_registry
+from gaitbench.plugins import PluginBuildError, PluginRegistry, UnknownPluginError, load_registry
 from gaitbench.problem.gait_problem import ProblemOptions, StepData, StepStructure, legs_to_roles
 from gaitbench.problem.objective import NET_POWER, Objective
 from gaitbench.problem.trajectory import Seed, StepTrajectory, nodal_trajectory
@@ -164,8 +164,8 @@ class WalkFile:
                        (item.partition("=") for item in listed.rstrip(")").split(",") if item.strip())}
         try:
             return registry.create("objective", name, **options)
-        except UnknownPluginError:
-            raise  # the plugin is not installed here: the file is fine, the environment lacks it
+        except (UnknownPluginError, PluginBuildError):
+            raise  # the plugin is not installed here, or fails here: the file is fine, the environment is not
         except (LookupError, TypeError, ValueError) as exc:
             raise WalkFileError(f"{self.path}: objective {described!r} cannot be rebuilt ({exc})") from None
 
@@ -387,7 +387,7 @@ def _field(path: Path, name: str) -> Iterator[None]:
     environment lacks is not the file's fault, and passes)."""
     try:
         yield
-    except (UnknownPluginError, WalkFileError):
+    except (UnknownPluginError, PluginBuildError, WalkFileError):  # the first two: the environment's, not the file's
         raise
     except (TypeError, ValueError, KeyError) as exc:
         raise WalkFileError(f"{path}: {name}: {exc}") from None

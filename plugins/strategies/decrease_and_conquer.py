@@ -283,7 +283,7 @@ class SectionalSolves:
                     go_on: Callable[[int], bool]) -> list[SolverResult]:
         """Sections solved here in order while ``go_on(solved so far)`` and not ``stop()``."""
         results: list[SolverResult] = []
-        while len(results) < len(tasks) and go_on(len(results)) and not stop():
+        while len(results) < len(tasks) and not stop() and go_on(len(results)):
             results.append(self.solve_one(tasks[len(results)]))
         return results
 
