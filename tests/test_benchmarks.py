@@ -480,3 +480,33 @@ def test_a_solver_run_on_few_of_the_problems_is_left_out_of_the_profiles_not_the
     n_time, _, panels = solvers.profile_ratios(rows)
     assert n_time == 3 and set(next(iter(panels.values()))) == {"ipopt", "sqp"}
     assert "Left out, run on too few of the problems: `sqp dense`." in solvers.profile_section(rows)[0]
+
+
+def test_the_verification_record_keeps_each_walks_last_verdict_and_checks_joins_and_acot(tmp_path):
+    import io
+
+    module = _benchmark("verify_record")
+
+    def verdict(key, strategy="decrease-and-conquer", verified=True, mismatch=0.0, stored=0.30, acot=0.30):
+        return json.dumps({"walk": f"store/cases/{key}/walk.json", "experiment": "forward", "strategy": strategy,
+                           "transcription": "dmoc", "N": 20, "verified": verified,
+                           "reasons": [] if verified else ["step 2: join mismatch 1.0e-02 > 1e-06"],
+                           "acot": acot, "stored_acot": stored, "max_join_mismatch": mismatch, "join_energy": 0.0,
+                           "steps": [{"index": 1}]})
+
+    record = tmp_path / "verify.jsonl"
+    assert module.add(io.StringIO(verdict("a", verified=False, mismatch=1e-2) + "\n" + verdict("b") + "\n"),
+                      record) == 2
+    assert module.add(io.StringIO(verdict("a") + "\n" + verdict("c", "one-phase", stored=0.31)), record) == 2
+    lines = record.read_text().splitlines()
+    assert len(lines) == 4 and "steps" not in json.loads(lines[0]) and json.loads(lines[0])["case"] == "a"
+    latest = module.latest(record)
+    assert sorted(latest) == ["a", "b", "c"] and latest["a"]["verified"]  # its verdict of the later session
+    summed = module.summary(latest)
+    assert summed["all"]["walks"] == 3 and summed["all"]["verified"] == 3
+    assert summed["by_strategy"]["one-phase"]["largest_acot_difference"] == pytest.approx(0.01 / 0.30)
+    dc = {case: v for case, v in latest.items() if v["strategy"] == "decrease-and-conquer"}
+    assert module.acceptance_failures(dc, joins=True, acot=True) == []
+    failures = module.acceptance_failures(latest, joins=True, acot=True)
+    assert len(failures) == 1 and failures[0].startswith("c: stored ACOT 0.31")
+
