@@ -11,7 +11,8 @@ prints as JSON, per strategy: the walks, how many are verified, the largest join
 the joins, and the largest difference between a stored ACOT and the one recomputed from the trajectories; and every
 walk that is not verified, with its reasons. ``--require-joins`` and ``--require-acot`` make it exit 1 unless every
 walk's joins hold within :data:`~gaitbench.acceptance.MAX_JOIN_MISMATCH` and every stored ACOT is recomputed within
-:data:`~gaitbench.acceptance.ACOT_RTOL` (of decrease and conquer's walks, with ``--strategy``).
+:data:`~gaitbench.acceptance.ACOT_RTOL` (of decrease and conquer's walks, with ``--strategy``), and ``--store`` unless
+every complete walk of the sweep's store has a verdict in the record.
 """
 
 from __future__ import annotations
@@ -83,6 +84,16 @@ def summary(verdicts: dict[str, dict[str, Any]]) -> dict[str, Any]:
                              for case, v in sorted(verdicts.items()) if not v["verified"]}}
 
 
+def unrecorded(verdicts: dict[str, dict[str, Any]], store: Path, strategy: str | None) -> list[str]:
+    """The complete walks of ``store`` (of ``strategy``) that have no verdict in the record."""
+    from gaitbench.run.store import ResultStore
+
+    with ResultStore.open(store) as results:
+        keys = {row["case_key"] for row in results.cases() if row.get("status") == "solved" and row.get("walk_path")
+                and (strategy is None or row.get("strategy") == strategy)}
+    return sorted(keys - set(verdicts))
+
+
 def acceptance_failures(verdicts: dict[str, dict[str, Any]], joins: bool, acot: bool) -> list[str]:
     """Every walk whose joins (``joins``) or stored ACOT (``acot``) the sweep's acceptance does not allow."""
     failures = []
@@ -107,6 +118,8 @@ def main() -> None:
     summing.add_argument("--require-joins", action="store_true", help="exit 1 unless every join holds")
     summing.add_argument("--require-acot", action="store_true",
                          help="exit 1 unless every stored ACOT is recomputed within its tolerance")
+    summing.add_argument("--store", type=Path, help="exit 1 unless every complete walk of this store (or pack), of "
+                                                    "--strategy, has a verdict in the record")
     args = parser.parse_args()
     if args.command == "add":
         print(f"{args.record}: {add(sys.stdin, args.record)} verdicts added", file=sys.stderr)
@@ -116,6 +129,9 @@ def main() -> None:
         verdicts = {case: v for case, v in verdicts.items() if v["strategy"] == args.strategy}
     print(json.dumps(summary(verdicts), indent=1))
     failures = acceptance_failures(verdicts, args.require_joins, args.require_acot)
+    if args.store is not None:
+        failures += [f"{key}: a complete walk of {args.store} with no verdict in the record"
+                     for key in unrecorded(verdicts, args.store, args.strategy)]
     for failure in failures:
         print(failure, file=sys.stderr)
     if failures:

@@ -510,3 +510,16 @@ def test_the_verification_record_keeps_each_walks_last_verdict_and_checks_joins_
     failures = module.acceptance_failures(latest, joins=True, acot=True)
     assert len(failures) == 1 and failures[0].startswith("c: stored ACOT 0.31")
 
+    from gaitbench.run.store import ResultStore
+
+    store = tmp_path / "store"
+    with ResultStore.create(store) as results:
+        results.start_run({"run_id": "r1", "suite": "s", "started_at": "now"})
+        for key, strategy in (("a", "decrease-and-conquer"), ("b", "decrease-and-conquer"),
+                              ("d", "decrease-and-conquer"), ("e", "one-phase")):
+            results.record_case({"case_key": key, "run_id": "r1", "experiment": "forward", "N": 20,
+                                 "strategy": strategy, "status": "solved", "walk_path": f"cases/{key}/walk.json"},
+                                {"walk.json": b"{}"})
+    assert module.unrecorded(dc, store, "decrease-and-conquer") == ["d"]  # solved, never verified into the record
+    assert module.unrecorded(latest, store, None) == ["d", "e"]
+
