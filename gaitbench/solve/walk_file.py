@@ -321,14 +321,12 @@ def beside(path: Path, name: object) -> Path:
 def read_arrays(npz: Path, fix: str) -> dict[str, np.ndarray]:
     """Every array of the NPZ at ``npz``; a file that is not a whole NPZ of plain arrays (truncated, not a zip,
     pickled objects) is a :class:`WalkFileError` naming it and ``fix``."""
+    if npz.is_file() and not zipfile.is_zipfile(npz):  # else NumPy would read it as a pickle, and advise so
+        raise WalkFileError(f"{npz}: unreadable trajectories (not an NPZ archive); {fix}")
     try:
-        if npz.is_file() and not zipfile.is_zipfile(npz):  # else NumPy would read it as a pickle, and advise so
-            raise WalkFileError(f"{npz}: unreadable trajectories (not an NPZ archive); {fix}")
         with np.load(npz) as stored:
             return {key: stored[key] for key in stored.files}
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-        if isinstance(exc, WalkFileError):
-            raise
         why = "arrays of pickled objects" if "pickled" in str(exc) else f"{type(exc).__name__}: {exc}"
         raise WalkFileError(f"{npz}: unreadable trajectories ({why}); {fix}") from None
 
