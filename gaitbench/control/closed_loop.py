@@ -138,7 +138,8 @@ class _ClosedLoop:
                     states.append(state)
                     torques.append(held if held is not None else self._control(t, state, info))
                 if solution.status == -1:
-                    self.failure = f"step {info.index}: integration failed at t = {solution.t[-1]:.4f} s " \
+                    after = solution.t[-1] if len(solution.t) else a  # no output time reached: after the start
+                    self.failure = f"step {info.index}: integration failed after t = {after:.4f} s " \
                                    f"({solution.message})"
                     break
                 if solution.status == 1:
